@@ -1,0 +1,40 @@
+"""Attitude exclusion zone: the +i_B sensor stays >= FOV/2 + beta away from the sun.
+
+    h_EZ = theta_EZ - FOV/2 - beta      (rad; relative degree 2, enforced as a HOCBF)
+
+theta_EZ = angle(+i_B, r_S). Safest at theta_EZ = pi (sensor anti-sun), where arccos is singular.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from ..model import SENSOR_AXIS_BODY
+from ..params import BarrierGains, Config
+from .base import Array, BarrierValues, Context, second_order_condition
+from .pointing import sun_pointing
+
+
+@dataclass(frozen=True)
+class ExclusionZone:
+    """Sun keep-out cone of the sensor boresight."""
+
+    gains: BarrierGains
+    limit_rad: float
+    """FOV/2 + beta, rad."""
+    name: str = "exclusion_zone"
+    relative_degree: int = 2
+
+    @classmethod
+    def from_config(cls, cfg: Config) -> ExclusionZone:
+        return cls(cfg.barriers["exclusion_zone"], cfg.limits.exclusion_angle_rad)
+
+    def safety_value(self, ctx: Context) -> Array:
+        return sun_pointing(ctx, SENSOR_AXIS_BODY).theta - self.limit_rad
+
+    def evaluate(self, ctx: Context) -> BarrierValues:
+        p = sun_pointing(ctx, SENSOR_AXIS_BODY)
+        h = p.theta - self.limit_rad
+        psi1, drift, gain = second_order_condition(h, p.theta_dot, p.theta_ddot_drift, p.theta_ddot_gain,
+                                                   self.gains)
+        return BarrierValues(h, h, psi1, drift, gain)

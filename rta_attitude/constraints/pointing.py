@@ -1,0 +1,96 @@
+"""Angle between a body-fixed axis and a moving Hill-frame direction, with two time derivatives.
+
+For a body axis e and a unit target r(t) in Hill, r_B = A(q) r is the target in body axes and
+
+    c       = cos(theta) = e . r_B
+    c_dot   = omega . (e x r_B) + e . (A r_dot)
+    c_ddot  = omega_dot . (e x r_B) + omega . (e x (-omega x r_B)) + 2 omega . (e x A r_dot) + e . (A r_ddot)
+    theta   = atan2(|e x r_B|, e . r_B),   s = sin(theta) = |e x r_B|
+    theta_dot  = -c_dot / s
+    theta_ddot = -c_ddot / s - c c_dot^2 / s^3
+
+(using A_dot = -[omega x] A). omega_dot = omega_drift + G u, so c_ddot and theta_ddot split into a
+drift and a gain on u. theta is not differentiable at 0 and pi; there s is floored at
+sin(pole_guard) so every value stays finite (those poles are the safest attitudes of the
+constraints that use them, far from their boundaries).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .base import Context
+
+Array = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class Pointing:
+    """Cosine and angle of one axis-target pair with derivatives (shapes (...) or (..., 3))."""
+
+    cos: Array
+    cos_dot: Array
+    cos_ddot_drift: Array
+    cos_ddot_gain: Array
+    theta: Array
+    theta_dot: Array
+    theta_ddot_drift: Array
+    theta_ddot_gain: Array
+
+
+def _dot(a: Array, b: Array) -> Array:
+    return a[..., 0] * b[..., 0] + a[..., 1] * b[..., 1] + a[..., 2] * b[..., 2]
+
+
+def _cross(a: Array, b: Array) -> Array:
+    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
+    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
+    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
+    out[..., 0] = a1 * b2 - a2 * b1
+    out[..., 1] = a2 * b0 - a0 * b2
+    out[..., 2] = a0 * b1 - a1 * b0
+    return out
+
+
+def pointing(ctx: Context, axis_body: Array, target: Array, target_dot: Array, target_ddot: Array) -> Pointing:
+    """Angle kinematics of body axis `axis_body` (3,) to Hill direction `target` (..., 3) or (3,).
+
+    Args:
+        ctx: evaluation context.
+        axis_body: unit body axis e (3,).
+        target, target_dot, target_ddot: r, r_dot, r_ddot in Hill (..., 3) or (3,), 1, 1/s, 1/s^2.
+    """
+    A, w = ctx.A, ctx.omega
+    r_B = np.einsum("...ij,...j->...i", A, target)
+    rd_B = np.einsum("...ij,...j->...i", A, target_dot)
+    rdd_B = np.einsum("...ij,...j->...i", A, target_ddot)
+    e = np.broadcast_to(axis_body, r_B.shape)
+    m = _cross(e, r_B)
+    c = _dot(e, r_B)
+    c_dot = _dot(w, m) + _dot(e, rd_B)
+    c_dd_drift = (_dot(ctx.omega_drift, m) + _dot(w, _cross(e, -_cross(w, r_B)))
+                  + 2.0 * _dot(w, _cross(e, rd_B)) + _dot(e, rdd_B))
+    c_dd_gain = m * ctx.cfg.spacecraft.control_gain
+    sin_raw = np.sqrt(_dot(m, m))
+    theta = np.arctan2(sin_raw, c)
+    s = np.maximum(sin_raw, np.sin(ctx.cfg.filter.pole_guard_rad))
+    theta_dot = -c_dot / s
+    th_dd_drift = -c_dd_drift / s - c * c_dot**2 / s**3
+    th_dd_gain = -c_dd_gain / s[..., None]
+    return Pointing(c, c_dot, c_dd_drift, c_dd_gain, theta, theta_dot, th_dd_drift, th_dd_gain)
+
+
+def sun_pointing(ctx: Context, axis_body: Array) -> Pointing:
+    """Angle of a body axis to the (moving) sun direction."""
+    return pointing(ctx, axis_body, ctx.sun, ctx.sun_dot, ctx.sun_ddot)
+
+
+def earth_pointing(ctx: Context, axis_body: Array) -> Pointing:
+    """Angle of a body axis to the (fixed) Earth direction -x_Hill."""
+    from ..model import EARTH_DIRECTION_HILL
+
+    zero = np.zeros(3)
+    return pointing(ctx, axis_body, EARTH_DIRECTION_HILL, zero, zero)

@@ -1,0 +1,103 @@
+"""The named state layout: one place that says which entry of the state vector is what.
+
+The state has 19 entries (SPEC.md says 17, but its own list q(4), omega(3), psi(3), T, E,
+theta_S and the 6 Clohessy-Wiltshire entries adds up to 19; see docs/decisions.md):
+
+| entries            | meaning                                        | unit      |
+|--------------------|------------------------------------------------|-----------|
+| q1 q2 q3 q4        | quaternion Hill -> body, vector first          | -         |
+| omega_x/y/z        | body angular rate                              | rad/s     |
+| psi_x/y/z          | reaction-wheel spin rates                      | rad/s     |
+| T                  | temperature of the -j_B face node              | K         |
+| E                  | battery energy                                 | J         |
+| theta_S            | sun angle in the Hill x-y plane                | rad       |
+| x y z              | deputy position relative to the chief (Hill)   | m         |
+| x_dot y_dot z_dot  | deputy velocity relative to the chief (Hill)   | m/s       |
+
+Every function takes a batch `(..., 19)`; a single state is a batch of one.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+STATE_NAMES: tuple[str, ...] = (
+    "q1", "q2", "q3", "q4",
+    "omega_x", "omega_y", "omega_z",
+    "psi_x", "psi_y", "psi_z",
+    "T", "E", "theta_S",
+    "x", "y", "z", "x_dot", "y_dot", "z_dot",
+)  # fmt: skip
+"""Names of the state entries, in order; also JointState.name and table columns."""
+
+STATE_UNITS: tuple[str, ...] = (
+    "-", "-", "-", "-",
+    "rad/s", "rad/s", "rad/s",
+    "rad/s", "rad/s", "rad/s",
+    "K", "J", "rad",
+    "m", "m", "m", "m/s", "m/s", "m/s",
+)  # fmt: skip
+"""Units of the state entries, in the order of STATE_NAMES."""
+
+STATE_SIZE = len(STATE_NAMES)
+CONTROL_SIZE = 3
+"""u = psi_dot, the three wheel accelerations in rad/s^2."""
+
+Q = slice(0, 4)
+OMEGA = slice(4, 7)
+PSI = slice(7, 10)
+TEMP = 10
+ENERGY = 11
+THETA_S = 12
+POS = slice(13, 16)
+VEL = slice(16, 19)
+CW = slice(13, 19)
+
+AXES: tuple[str, ...] = ("x", "y", "z")
+
+
+def make_state(
+    q: ArrayLike,
+    omega_rad_s: ArrayLike = (0.0, 0.0, 0.0),
+    psi_rad_s: ArrayLike = (0.0, 0.0, 0.0),
+    T_K: float = 273.15,
+    E_J: float = 1000.0,
+    theta_S_rad: float = 0.0,
+    cw: ArrayLike = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0),
+) -> NDArray[np.float64]:
+    """Pack one state vector (shape (19,)); the quaternion is normalised.
+
+    Args:
+        q: quaternion Hill -> body, scalar last, shape (4,), any nonzero norm.
+        omega_rad_s: body rates, rad/s, shape (3,).
+        psi_rad_s: wheel speeds, rad/s, shape (3,).
+        T_K: face temperature, K.
+        E_J: battery energy, J.
+        theta_S_rad: sun angle, rad.
+        cw: Clohessy-Wiltshire position (m) and velocity (m/s), shape (6,).
+
+    Returns:
+        The state, shape (19,).
+    """
+    x = np.zeros(STATE_SIZE)
+    qa = np.asarray(q, dtype=float)
+    x[Q] = qa / np.linalg.norm(qa)
+    x[OMEGA] = omega_rad_s
+    x[PSI] = psi_rad_s
+    x[TEMP] = T_K
+    x[ENERGY] = E_J
+    x[THETA_S] = theta_S_rad
+    x[CW] = cw
+    return x
+
+
+def as_dict(x: NDArray[np.float64]) -> dict[str, float]:
+    """One state (19,) as {name: value}, in model units."""
+    return {name: float(v) for name, v in zip(STATE_NAMES, np.asarray(x, dtype=float))}
+
+
+__all__ = [
+    "AXES", "CONTROL_SIZE", "CW", "ENERGY", "OMEGA", "POS", "PSI", "Q", "STATE_NAMES",
+    "STATE_SIZE", "STATE_UNITS", "TEMP", "THETA_S", "VEL", "as_dict", "make_state",
+]  # fmt: skip
