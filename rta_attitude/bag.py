@@ -3,9 +3,9 @@
 Layout of a file written by `BagWriter` (checked against rosbag2_storage_mcap/src/mcap_storage.cpp,
 rosbag2_cpp's local_message_definition_source.cpp and rosbag2_storage's qos.cpp / yaml.hpp):
 
-- MCAP header profile `ros2`; chunked, zstd (else lz4, else none), with message indexes and a summary;
-- one schema per type: name `pkg/msg/Type`, encoding `ros2msg`, data = the type's .msg file text and,
-  for each nested type not yet written (depth first, in sorted order per level), `\\n`, a line of 80
+- MCAP header profile `ros2`; chunked, zstd (else lz4, else none), message indexes and a summary;
+- one schema per type: name `pkg/msg/Type`, encoding `ros2msg`, data = the type's .msg file text
+  and, for each nested type not yet written (depth first, sorted per level), `\\n`, a line of 80
   `=`, `MSG: pkg/Type` and that type's .msg text (`message_definition`);
 - one channel per topic: message encoding `cdr`, metadata `offered_qos_profiles` (YAML as yaml-cpp
   dumps it, metadata version 9 enum names) and `topic_type_hash` (`RIHS01_...`, `type_hash`);
@@ -235,7 +235,7 @@ class _Char(str):
 
 
 def _plain(value: Any) -> Any:
-    """numpy / array.array / tuple -> list, nested messages -> `_Fields`, byte / char -> int-able."""
+    """numpy, array.array, tuple -> list; nested messages -> `_Fields`; byte, char -> int-able."""
     if isinstance(value, bytes) and len(value) == 1:
         return _Byte(value)
     if isinstance(value, str) and len(value) == 1:
@@ -298,12 +298,11 @@ class BagWriter:
         try:
             self._file = open(self.path, "wb" if overwrite else "xb", buffering=0)
         except FileExistsError:
-            raise BagError(
-                f"{self.path}: file exists (pass overwrite=True to replace it)"
-            ) from None
+            raise BagError(f"{self.path}: file exists (pass overwrite=True to replace it)") from None
         except OSError as exc:
             raise BagError(f"{self.path}: cannot create ({exc.strerror})") from None
-        self._writer = Writer(_Sink(self._file), chunk_size=chunk_size, compression=kind)
+        sink: Any = _Sink(self._file)  # not an IO subclass, so mcap does not wrap it in a buffer
+        self._writer = Writer(sink, chunk_size=chunk_size, compression=kind)
         self._writer.start(profile=PROFILE, library=LIBRARY)
         self._ros_distro = ros_distro
         self._schemas: dict[str, int] = {}
@@ -329,27 +328,19 @@ class BagWriter:
         if topic in self._topics:
             if self._topics[topic].type_name != type_name:
                 old = self._topics[topic].type_name
-                raise BagError(
-                    f"{self.path}: topic {topic} already has type {old}, not {type_name}"
-                )
+                raise BagError(f"{self.path}: topic {topic} already has type {old}, not {type_name}")
             return self._topics[topic].channel_id
         if type_name not in self._schemas:
             definition = message_definition(type_name).encode()
-            self._schemas[type_name] = self._writer.register_schema(
-                type_name, SCHEMA_ENCODING, definition
-            )
+            self._schemas[type_name] = self._writer.register_schema(type_name, SCHEMA_ENCODING, definition)
         profiles = [Qos()] if qos is None else [qos] if isinstance(qos, Qos) else list(qos)
         digest = type_hash(type_name)
         metadata = {"offered_qos_profiles": offered_qos_yaml(profiles), "topic_type_hash": digest}
-        channel_id = self._writer.register_channel(
-            topic, MESSAGE_ENCODING, self._schemas[type_name], metadata
-        )
+        channel_id = self._writer.register_channel(topic, MESSAGE_ENCODING, self._schemas[type_name], metadata)
         self._topics[topic] = _Topic(channel_id, type_name, profiles, digest)
         return channel_id
 
-    def write(
-        self, topic: str, data: bytes, log_time_ns: int, publish_time_ns: int | None = None
-    ) -> None:
+    def write(self, topic: str, data: bytes, log_time_ns: int, publish_time_ns: int | None = None) -> None:
         """Write one raw CDR message; times in [ns], publish time defaults to the log time."""
         entry = self._entry(topic)
         publish = log_time_ns if publish_time_ns is None else publish_time_ns
@@ -361,9 +352,7 @@ class BagWriter:
         t0, t1 = self._times or (log_time_ns, log_time_ns)
         self._times = [min(t0, log_time_ns), max(t1, log_time_ns)]
 
-    def write_message(
-        self, topic: str, message: Any, log_time_ns: int, publish_time_ns: int | None = None
-    ) -> None:
+    def write_message(self, topic: str, message: Any, log_time_ns: int, publish_time_ns: int | None = None) -> None:
         """Encode `message` (rclpy message, namespace or dict; missing fields = defaults) to CDR
         with zero padding bytes, so equal messages give equal bytes, and write it; times in [ns]."""
         entry = self._entry(topic)
@@ -380,9 +369,7 @@ class BagWriter:
         try:
             data = encoder(_Fields(message))
         except (ValueError, TypeError, struct.error, NotImplementedError) as exc:
-            raise BagError(
-                f"{self.path}: cannot encode {entry.type_name} on {topic}: {exc}"
-            ) from None
+            raise BagError(f"{self.path}: cannot encode {entry.type_name} on {topic}: {exc}") from None
         self.write(topic, data, log_time_ns, publish_time_ns)
 
     def close(self) -> None:
@@ -584,18 +571,14 @@ def _read(path: Path, only: Iterable[str] | None, decode: bool, keep: bool) -> B
                     value = decoded(channel, record.data) if decode else None
                     type_name = out.topics[channel.topic]
                     times = (record.log_time, record.publish_time)
-                    out.messages.append(
-                        BagMessage(channel.topic, type_name, *times, record.data, value)
-                    )
+                    out.messages.append(BagMessage(channel.topic, type_name, *times, record.data, value))
     if wanted is not None:
         out.topics = {k: v for k, v in out.topics.items() if k in wanted}
         out.counts = {k: v for k, v in out.counts.items() if k in wanted}
     return out
 
 
-def read_bag(
-    path: str | os.PathLike[str], topics: Iterable[str] | None = None, decode: bool = True
-) -> BagContents:
+def read_bag(path: str | os.PathLike[str], topics: Iterable[str] | None = None, decode: bool = True) -> BagContents:
     """Read every message (of `topics`, default all) in file order, decoded unless `decode=False`.
 
     A file without footer (writer killed) gives the messages of all complete chunks and

@@ -26,6 +26,7 @@ BARRIER_GROUPS: tuple[str, ...] = (
 
 PRESETS: tuple[str, ...] = ("robust", "paper")
 FALLBACKS: tuple[str, ...] = ("pass_through", "hold", "soften", "raise")
+BACKUP_SOLVERS: tuple[str, ...] = ("quadprog", "none")
 CONTROLLERS: tuple[str, ...] = ("pd", "none")
 
 
@@ -222,11 +223,13 @@ class FilterOptions:
     eps_primal_inf: float = 1e-12
     eps_dual_inf: float = 1e-12
     check_tolerance: float = 1e-6
-    pole_guard_rad: float = 1e-6
+    pole_guard_rad: float = 1e-3
     soften_weight: float = 1e8
+    backup_solver: str = "quadprog"
 
     def __post_init__(self) -> None:
         _choice("filter.preset", self.preset, PRESETS)
+        _choice("filter.backup_solver", self.backup_solver, BACKUP_SOLVERS)
         _choice("filter.fallback", self.fallback, FALLBACKS)
         _positive("filter.sample_time_s", self.sample_time_s)
         if not 0 <= self.zoh_margin < 1:

@@ -10,9 +10,15 @@ For a body axis e and a unit target r(t) in Hill, r_B = A(q) r is the target in 
     theta_ddot = -c_ddot / s - c c_dot^2 / s^3
 
 (using A_dot = -[omega x] A). omega_dot = omega_drift + G u, so c_ddot and theta_ddot split into a
-drift and a gain on u. theta is not differentiable at 0 and pi; there s is floored at
-sin(pole_guard) so every value stays finite (those poles are the safest attitudes of the
-constraints that use them, far from their boundaries).
+drift and a gain on u.
+
+Poles. theta is not differentiable at 0 and pi: passing through a pole, theta_dot jumps sign, and
+near it theta_ddot ~ -c_ddot / s grows without bound (with the sun moving at n, BC of the
+exclusion zone turns negative within ~1.5e-5 rad of theta_EZ = pi, its *safest* attitude, and the
+filter would demand large torques there). Within `filter.pole_guard_rad` of a pole the angle is
+therefore treated as stationary (theta_dot = theta_ddot = 0, no gain on u), so an HOCBF there
+reduces to k1 k2 h: positive at a safe pole, which is >= 40 deg from every boundary, while one
+1 s sample moves an axis by at most ~1 deg. Every value stays finite; see the pole tests.
 """
 
 from __future__ import annotations
@@ -76,10 +82,12 @@ def pointing(ctx: Context, axis_body: Array, target: Array, target_dot: Array, t
     c_dd_gain = m * ctx.cfg.spacecraft.control_gain
     sin_raw = np.sqrt(_dot(m, m))
     theta = np.arctan2(sin_raw, c)
-    s = np.maximum(sin_raw, np.sin(ctx.cfg.filter.pole_guard_rad))
-    theta_dot = -c_dot / s
-    th_dd_drift = -c_dd_drift / s - c * c_dot**2 / s**3
-    th_dd_gain = -c_dd_gain / s[..., None]
+    guard = np.sin(ctx.cfg.filter.pole_guard_rad)
+    away = sin_raw > guard
+    s = np.where(away, sin_raw, 1.0)
+    theta_dot = np.where(away, -c_dot / s, 0.0)
+    th_dd_drift = np.where(away, -c_dd_drift / s - c * c_dot**2 / s**3, 0.0)
+    th_dd_gain = np.where(away[..., None], -c_dd_gain / s[..., None], 0.0)
     return Pointing(c, c_dot, c_dd_drift, c_dd_gain, theta, theta_dot, th_dd_drift, th_dd_gain)
 
 

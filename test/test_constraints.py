@@ -1,0 +1,189 @@
+"""Barrier values, HOCBF levels and Lie derivatives against central finite differences.
+
+For relative degree 2:  Psi_1 = d/dt Psi_0 + k1 Psi_0  and  BC(u) = d/dt Psi_1 |_(f+gu) + k2 Psi_1 + bias.
+For relative degree 1:  BC(u) = d/dt h |_(f+gu) + k1 h + bias.
+The time derivatives are taken numerically along x_dot = f(x) + g(x) u, at >= 1000 random states
+and random u, independent of the analytic chain rule in rta_attitude.constraints.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from helpers import random_states
+
+from rta_attitude import config, model
+from rta_attitude import quaternion as quat
+from rta_attitude.constraints import ConstraintSet
+from rta_attitude.state import THETA_S
+
+CFG = config.load()
+CS = ConstraintSet.from_config(CFG)
+EPS = 1e-5
+
+
+def _fd(fun, x, xdot, eps=EPS):
+    return (fun(x + eps * xdot) - fun(x - eps * xdot)) / (2 * eps)
+
+
+def _kinks(x):
+    """Distance (rad) of each state to the nearest non-smooth point of any barrier (clamps, poles)."""
+    A = quat.attitude_matrix(x[:, 0:4])
+    sun = model.sun_direction(x[:, THETA_S])
+    d = []
+    for axis, target in ((np.array([0, -1.0, 0]), sun), (np.array([0, -1.0, 0]), model.EARTH_DIRECTION_HILL),
+                         (np.array([0, 0, 1.0]), sun), (np.array([1.0, 0, 0]), sun),
+                         (np.array([0, 1.0, 0]), model.EARTH_DIRECTION_HILL)):
+        th = np.arccos(np.clip(np.sum(np.einsum("i,nij->nj", axis, A) * target, axis=-1), -1, 1))
+        d.append(np.minimum.reduce([th, np.pi - th, np.abs(th - np.pi / 2)]))
+    return np.min(d, axis=0)
+
+
+@pytest.fixture(scope="module")
+def states():
+    rng = np.random.default_rng(20240301)
+    x = random_states(rng, 3000, CFG)
+    x = x[_kinks(x) > 0.02][:1500]
+    u = rng.uniform(-1, 1, (len(x), 3)) * CFG.u_max_rad_s2
+    return x, u
+
+
+def test_enough_states(states):
+    assert len(states[0]) >= 1000
+
+
+def test_psi1_is_derivative_of_psi0(states):
+    x, u = states
+    tab = CS.evaluate(x)
+    xdot = model.state_derivative(x, u, CFG)
+    dpsi0 = _fd(lambda z: CS.evaluate(z).psi0, x, xdot)
+    for i, c in enumerate(CS.constraints):
+        if c.relative_degree != 2:
+            continue
+        expect = dpsi0[:, i] + c.gains.k1 * tab.psi0[:, i]
+        scale = 1e-6 + np.abs(expect)
+        np.testing.assert_array_less(np.abs(tab.psi1[:, i] - expect), 1e-5 * scale + 1e-8, err_msg=c.name)
+
+
+def test_barrier_condition_is_derivative_of_last_level(states):
+    x, u = states
+    tab = CS.evaluate(x)
+    xdot = model.state_derivative(x, u, CFG)
+    level = _fd(lambda z: CS.evaluate(z).psi1, x, xdot)
+    bc = tab.drift + np.einsum("nmk,nk->nm", tab.gain, u)
+    for i, c in enumerate(CS.constraints):
+        k = c.gains.k2 if c.relative_degree == 2 else c.gains.k1
+        expect = level[:, i] + k * tab.psi1[:, i] + c.gains.bias
+        err = np.abs(bc[:, i] - expect)
+        scale = np.abs(expect) + np.abs(tab.drift[:, i]) + 1e-9
+        assert np.quantile(err / scale, 0.99) < 1e-5, c.name
+        assert np.max(err / scale) < 1e-3, c.name
+
+
+def test_gain_is_derivative_in_u(states):
+    """dBC/du: BC is affine in u, so BC(u + e_j) - BC(u) must equal gain_j."""
+    x, _ = states
+    tab = CS.evaluate(x)
+    xdot0 = model.state_derivative(x, np.zeros((len(x), 3)), CFG)
+    base = _fd(lambda z: CS.evaluate(z).psi1, x, xdot0)
+    for j in range(3):
+        du = np.zeros((len(x), 3))
+        du[:, j] = 1.0
+        xdot = model.state_derivative(x, du, CFG)
+        diff = _fd(lambda z: CS.evaluate(z).psi1, x, xdot) - base
+        scale = np.abs(tab.gain[:, :, j]) + 1e-7 * np.abs(tab.drift) + 1e-12
+        assert np.quantile(np.abs(diff - tab.gain[:, :, j]) / scale, 0.99) < 1e-4
+
+
+def test_h_matches_definitions(states):
+    x, _ = states
+    h = CS.safety_values(x)
+    A = quat.attitude_matrix(x[:, 0:4])
+    sensor = A[:, 0, :]
+    antenna = A[:, 1, :]
+    sun = model.sun_direction(x[:, THETA_S])
+    th_ez = np.degrees(np.arccos(np.clip(np.sum(sensor * sun, 1), -1, 1)))
+    th_gs = np.degrees(np.arccos(np.clip(-antenna[:, 0], -1, 1)))
+    np.testing.assert_allclose(np.degrees(h[:, 0]), th_ez - 40.0, atol=1e-9)
+    np.testing.assert_allclose(np.degrees(h[:, 1]), 90.0 - th_gs, atol=1e-9)
+    np.testing.assert_allclose(h[:, 2], 283.15 - x[:, 10])
+    np.testing.assert_allclose(h[:, 3], x[:, 11] - 1000.0)
+    np.testing.assert_allclose(h[:, 4:7], np.radians(1.0) ** 2 - x[:, 4:7] ** 2)
+    np.testing.assert_allclose(h[:, 7:10], 576.0**2 - x[:, 7:10] ** 2)
+
+
+def test_augmented_barriers_never_exceed_h(states):
+    x, _ = states
+    tab = CS.evaluate(x)
+    assert np.all(tab.psi0[:, 2] <= tab.h[:, 2] + 1e-12)
+    assert np.all(tab.psi0[:, 3] <= tab.h[:, 3] + 1e-12)
+
+
+def _state_with_axis_on(axis_body, target_hill, theta_S=0.3, flip=False):
+    """A unit quaternion whose body axis points exactly at (or away from) a Hill direction."""
+    t = np.asarray(target_hill, float) * (-1 if flip else 1)
+    a = np.asarray(axis_body, float)
+    # rotation taking the Hill vector t to the body vector a: A(q) t = a
+    v = np.cross(t, a)
+    c = float(np.dot(t, a))
+    if np.linalg.norm(v) < 1e-12:
+        perp = np.cross(t, [0.0, 0.0, 1.0] if abs(t[2]) < 0.9 else [1.0, 0.0, 0.0])
+        perp /= np.linalg.norm(perp)
+        q_rot = np.r_[perp, 0.0] if c < 0 else np.array([0.0, 0.0, 0.0, 1.0])
+    else:
+        q_rot = np.r_[-v, 1.0 + c]
+    q = quat.normalize(q_rot)
+    x = np.zeros(19)
+    x[0:4] = q
+    x[4:7] = [0.004, -0.006, 0.003]
+    x[10], x[11], x[12] = 270.0, 5000.0, theta_S
+    A = quat.attitude_matrix(q)
+    assert np.allclose(A @ t, a, atol=1e-9)
+    return x
+
+
+@pytest.mark.parametrize("axis_body, target, flip", [
+    ((1, 0, 0), "sun", True),     # exclusion zone at its safest pole, theta_EZ = pi
+    ((1, 0, 0), "sun", False),    # exclusion zone at theta_EZ = 0
+    ((0, 1, 0), "earth", False),  # communication at its safest pole, theta_GS = 0
+    ((0, 1, 0), "earth", True),   # communication at theta_GS = pi
+    ((0, 0, 1), "sun", False),    # battery panel on the sun, theta_SI = 0
+    ((0, -1, 0), "sun", False),   # thermal face on the sun
+])
+def test_poles_are_finite_and_continuous(axis_body, target, flip):
+    theta_S = 0.3
+    tvec = model.sun_direction(np.array(theta_S)) if target == "sun" else model.EARTH_DIRECTION_HILL
+    x = _state_with_axis_on(axis_body, tvec, theta_S, flip)
+    tab = CS.evaluate(x)
+    for arr in (tab.h, tab.psi0, tab.psi1, tab.drift, tab.gain):
+        assert np.all(np.isfinite(arr))
+    # continuity: values a small rotation away from the pole are close to the pole's
+    rot = quat.normalize(np.array([1e-4, 2e-4, -1e-4, 1.0]))
+    x2 = x.copy()
+    x2[0:4] = quat.product(rot, x[0:4])
+    tab2 = CS.evaluate(x2)
+    np.testing.assert_allclose(tab2.h, tab.h, rtol=1e-3, atol=1e-3)
+    np.testing.assert_allclose(tab2.psi0, tab.psi0, rtol=1e-3, atol=1e-3)
+
+
+def test_safe_poles_do_not_make_the_filter_intervene():
+    """At the safest attitudes (sensor anti-sun; antenna on Earth) with u = 0 the rows hold."""
+    from rta_attitude.asif import AsifFilter
+
+    f = AsifFilter(CFG)
+    x = _state_with_axis_on((1, 0, 0), model.sun_direction(np.array(0.3)), 0.3, flip=True)
+    x[4:7] = 0.0
+    r = f.filter(x, np.zeros(3))
+    assert np.all(np.isfinite(r.u))
+    assert r.bc[0] >= 0 and r.h[0] > 2.0
+    assert not r.intervening[0]
+
+
+def test_batch_equals_single():
+    rng = np.random.default_rng(3)
+    x = random_states(rng, 7, CFG)
+    tab = CS.evaluate(x)
+    for k in range(len(x)):
+        one = CS.evaluate(x[k])
+        np.testing.assert_array_equal(one.drift, tab.drift[k])
+        np.testing.assert_array_equal(one.gain, tab.gain[k])
