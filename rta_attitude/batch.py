@@ -47,7 +47,7 @@ from .asif import (
 )
 from .constraints import BarrierTable
 from .params import CONSTRAINT_NAMES, Config
-from .state import ENERGY, OMEGA, PSI, STATE_SIZE, TEMP, THETA_S, Q
+from .state import ENERGY, OMEGA, PSI, STATE_SIZE, TEMP, THETA_S
 
 Array = NDArray[np.float64]
 
@@ -191,8 +191,9 @@ def solve_projection_qp(C: Array, lower: Array, upper: Array, z0: Array,
             iters[run] += 1
             ph1 = run[p[run] < 0]
             if ph1.size:
-                s = _dot_seq(Nn[ph1], z[ph1][:, None, :]) - b[ph1]
-                viol = s < -tol[ph1]
+                Cz = _dot_seq(C[ph1], z[ph1][:, None, :])
+                s = np.concatenate([Cz - lower[ph1], upper[ph1] - Cz], axis=1)
+                viol = (s < -tol[ph1]) & has[ph1]
                 for slot in range(n):
                     a = act[ph1, slot]
                     has_slot = np.flatnonzero(a >= 0)
@@ -256,8 +257,8 @@ def solve_projection_qp(C: Array, lower: Array, upper: Array, z0: Array,
                 zo = zo + w[:, i, None] * Qa[:, i]
         z[ok] = zo
         y[ok] = _solve_upper_t(Ra, w) * used
-        s_ok = _dot_seq(Nn[ok], zo[:, None, :]) - b[ok]
-        viol = s_ok < -tol[ok]
+        Cz = _dot_seq(C[ok], zo[:, None, :])
+        viol = (np.concatenate([Cz - lower[ok], upper[ok] - Cz], axis=1) < -tol[ok]) & has[ok]
         for slot in range(n):
             a_ = act[ok, slot]
             has_slot = np.flatnonzero(a_ >= 0)
@@ -553,18 +554,19 @@ class _Plant:
         """d/dt of Y = [q1 q2 q3 q4 w1 w2 w3 T E] (9, N) as model.state_derivative."""
         q1, q2, q3, q4, w1, w2, w3, T, _E = Y
         K = np.empty_like(Y)
-        K[0] = 0.5 * (q4 * w1 - q3 * w2 + q2 * w3)
-        K[1] = 0.5 * (q3 * w1 + q4 * w2 - q1 * w3)
-        K[2] = 0.5 * (-q2 * w1 + q1 * w2 + q4 * w3)
-        K[3] = -0.5 * (q1 * w1 + q2 * w2 + q3 * w3)
+        mul, add = np.multiply, np.add
+        mul(0.5, q4 * w1 - q3 * w2 + q2 * w3, out=K[0])
+        mul(0.5, q3 * w1 + q4 * w2 - q1 * w3, out=K[1])
+        mul(0.5, -q2 * w1 + q1 * w2 + q4 * w3, out=K[2])
+        mul(-0.5, q1 * w1 + q2 * w2 + q3 * w3, out=K[3])
         J1, J2, J3 = self.J1, self.J2, self.J3
-        K[4] = (J2 - J3) * w2 * w3 / J1 + cgu[0]
-        K[5] = (J3 - J1) * w3 * w1 / J2 + cgu[1]
-        K[6] = (J1 - J2) * w1 * w2 / J3 + cgu[2]
+        add((J2 - J3) * w2 * w3 / J1, cgu[0], out=K[4])
+        add((J3 - J1) * w3 * w1 / J2, cgu[1], out=K[5])
+        add((J1 - J2) * w1 * w2 / J3, cgu[2], out=K[6])
         a10, a11 = 2.0 * (q1 * q2 - q3 * q4), -q1 * q1 + q2 * q2 - q3 * q3 + q4 * q4
         a20, a21 = 2.0 * (q1 * q3 + q2 * q4), 2.0 * (q2 * q3 - q1 * q4)
         cos_sun = -(a10 * cs + a11 * sn)
-        K[7] = model.thermal_fluxes(cos_sun, a10, T, self.cfg) / self.heat_capacity
+        np.divide(model.thermal_fluxes(cos_sun, a10, T, self.cfg), self.heat_capacity, out=K[7])
         K[8] = model.net_power(a20 * cs + a21 * sn, self.cfg)
         return K
 

@@ -19,7 +19,7 @@ from . import quaternion as quat
 from .errors import RtaError
 from .model import ANTENNA_AXIS_BODY, EARTH_DIRECTION_HILL, SENSOR_AXIS_BODY, sun_direction
 from .params import Config
-from .state import ENERGY, OMEGA, PSI, Q, TEMP, THETA_S
+from .state import ENERGY, OMEGA, PSI, TEMP, THETA_S, Q
 
 Array = NDArray[np.float64]
 CELSIUS_OFFSET_K = 273.15

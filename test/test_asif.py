@@ -4,6 +4,8 @@ ones included; fast path exactness; fallback policies; output always finite and 
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import pytest
 import scipy.sparse as sp
@@ -64,8 +66,8 @@ def clarabel_solve(gain, drift, slack_w, lo, hi, u_des):
 @pytest.fixture(scope="module")
 def problems():
     rng = np.random.default_rng(11)
-    x = random_states(rng, 600, CFG)
-    u_des = rng.uniform(-1, 1, (600, 3)) * CFG.limits.wheel_accel_max_rad_s2
+    x = random_states(rng, 400, CFG)
+    u_des = rng.uniform(-1, 1, (400, 3)) * CFG.limits.wheel_accel_max_rad_s2
     return x, u_des
 
 
@@ -78,7 +80,7 @@ def test_filter_matches_independent_solver(problems):
     f = AsifFilter(CFG)
     tab, lo, hi, _ = f.evaluate(x)
     w = f.slack_weights * f.slacked
-    checked = infeasible = 0
+    checked = infeasible = compared_u = 0
     for k in range(len(x)):
         res = f.filter(x[k], u_des[k])
         if res.status != "solved":
@@ -92,9 +94,13 @@ def test_filter_matches_independent_solver(problems):
         ours = _objective(res.u, res.slack, res.u_des, w)
         theirs = _objective(u_ref, d_ref, res.u_des, w)
         assert ours <= theirs * (1 + 1e-5) + 1e-6, (k, ours, theirs)
-        np.testing.assert_allclose(res.u, u_ref, atol=2e-4 * (1 + np.abs(u_ref).max()))
+        if not (np.any(res.slack != 0) or np.any(np.abs(d_ref) > 1e-12)):
+            # without an active slack the QP is well conditioned: the commands agree too (with a
+            # p = 1e12 slack active, the interior-point reference is only accurate in objective)
+            np.testing.assert_allclose(res.u, u_ref, atol=2e-4 * (1 + np.abs(u_ref).max()))
+            compared_u += 1
         checked += 1
-    assert checked > 200
+    assert checked > 150 and compared_u > 50
     assert infeasible == 0  # a QP the filter reports solved is one Clarabel can solve
 
 
@@ -147,11 +153,12 @@ def test_fast_path_is_the_exact_solution():
     assert n_pass > 40
 
 
+@functools.cache
 def _infeasible_case():
     f = AsifFilter(CFG)
     rng = np.random.default_rng(11)
-    x = random_states(rng, 600, CFG)
-    u_des = rng.uniform(-1, 1, (600, 3)) * CFG.limits.wheel_accel_max_rad_s2
+    x = random_states(rng, 100, CFG)
+    u_des = rng.uniform(-1, 1, (100, 3)) * CFG.limits.wheel_accel_max_rad_s2
     b = f.filter_batch(x, u_des)
     k = int(np.flatnonzero(b.status == 2)[0])
     return x[k], u_des[k]
@@ -160,6 +167,7 @@ def _infeasible_case():
 @pytest.mark.parametrize("policy", ["pass_through", "hold", "soften", "raise"])
 def test_fallback_policies(policy):
     x, u_des = _infeasible_case()
+    x, u_des = x.copy(), u_des.copy()
     f = AsifFilter(CFG.with_fallback(policy))
     if policy == "raise":
         with pytest.raises(SolverError, match="QP failed"):

@@ -12,8 +12,8 @@ added to the final condition as the paper's equation writes it (AFRL's framework
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import Protocol
+from dataclasses import dataclass, field
+from typing import Any, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
@@ -43,6 +43,8 @@ class Context:
     sun_dot: Array
     sun_ddot: Array
     """r_S and its first two time derivatives (..., 3) in Hill."""
+    cache: dict[str, Any] = field(default_factory=dict, repr=False, compare=False)
+    """Results shared by several constraints (e.g. the pointing table), filled on first use."""
 
     @classmethod
     def from_state(cls, x: Array, cfg: Config) -> Context:

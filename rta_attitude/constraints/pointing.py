@@ -62,14 +62,21 @@ def _cross(a: Array, b: Array) -> Array:
 
 
 def pointing(ctx: Context, axis_body: Array, target: Array, target_dot: Array, target_ddot: Array) -> Pointing:
-    """Angle kinematics of body axis `axis_body` (3,) to Hill direction `target` (..., 3) or (3,).
+    """Angle kinematics of body axes to Hill directions; broadcasts over leading axes.
 
     Args:
-        ctx: evaluation context.
-        axis_body: unit body axis e (3,).
-        target, target_dot, target_ddot: r, r_dot, r_ddot in Hill (..., 3) or (3,), 1, 1/s, 1/s^2.
+        ctx: evaluation context (its A, omega, omega_drift have batch shape B).
+        axis_body: unit body axes e (K, 3) or (3,).
+        target, target_dot, target_ddot: r, r_dot, r_ddot in Hill, shape B + (K, 3) (or B + (3,)
+            with a (3,) axis), units 1, 1/s, 1/s^2.
+
+    Returns:
+        Pointing with fields of shape B + (K,) (gains B + (K, 3)), or B (B + (3,)) for one axis.
     """
-    A, w = ctx.A, ctx.omega
+    many = np.ndim(axis_body) == 2
+    A = ctx.A[..., None, :, :] if many else ctx.A
+    w = ctx.omega[..., None, :] if many else ctx.omega
+    wd = ctx.omega_drift[..., None, :] if many else ctx.omega_drift
     r_B = np.einsum("...ij,...j->...i", A, target)
     rd_B = np.einsum("...ij,...j->...i", A, target_dot)
     rdd_B = np.einsum("...ij,...j->...i", A, target_ddot)
@@ -77,7 +84,7 @@ def pointing(ctx: Context, axis_body: Array, target: Array, target_dot: Array, t
     m = _cross(e, r_B)
     c = _dot(e, r_B)
     c_dot = _dot(w, m) + _dot(e, rd_B)
-    c_dd_drift = (_dot(ctx.omega_drift, m) + _dot(w, _cross(e, -_cross(w, r_B)))
+    c_dd_drift = (_dot(wd, m) + _dot(w, _cross(e, -_cross(w, r_B)))
                   + 2.0 * _dot(w, _cross(e, rd_B)) + _dot(e, rdd_B))
     c_dd_gain = m * ctx.cfg.spacecraft.control_gain
     sin_raw = np.sqrt(_dot(m, m))
@@ -91,14 +98,44 @@ def pointing(ctx: Context, axis_body: Array, target: Array, target_dot: Array, t
     return Pointing(c, c_dot, c_dd_drift, c_dd_gain, theta, theta_dot, th_dd_drift, th_dd_gain)
 
 
+PAIRS: tuple[tuple[tuple[float, float, float], str], ...] = (
+    ((1.0, 0.0, 0.0), "sun"),     # sensor +i_B (exclusion zone)
+    ((0.0, 1.0, 0.0), "earth"),   # antenna +j_B (communication)
+    ((0.0, -1.0, 0.0), "sun"),    # thermal face -j_B (temperature)
+    ((0.0, -1.0, 0.0), "earth"),  # thermal face -j_B (temperature)
+    ((0.0, 0.0, 1.0), "sun"),     # panel +k_B (battery)
+)
+"""The axis-target pairs the constraints use; evaluated together, once per context."""
+
+
+def _all_pairs(ctx: Context) -> Pointing:
+    from ..model import EARTH_DIRECTION_HILL
+
+    if "pointing" not in ctx.cache:
+        shape = ctx.batch_shape + (len(PAIRS), 3)
+        r, rd, rdd = np.empty(shape), np.empty(shape), np.empty(shape)
+        for k, (_axis, target) in enumerate(PAIRS):
+            if target == "sun":
+                r[..., k, :], rd[..., k, :], rdd[..., k, :] = ctx.sun, ctx.sun_dot, ctx.sun_ddot
+            else:
+                r[..., k, :], rd[..., k, :], rdd[..., k, :] = EARTH_DIRECTION_HILL, 0.0, 0.0
+        ctx.cache["pointing"] = pointing(ctx, np.array([a for a, _ in PAIRS]), r, rd, rdd)
+    return ctx.cache["pointing"]
+
+
+def _pair(ctx: Context, axis_body: Array, target: str) -> Pointing:
+    key = (tuple(float(v) for v in axis_body), target)
+    k = [p for p in PAIRS].index(key)
+    t = _all_pairs(ctx)
+    return Pointing(t.cos[..., k], t.cos_dot[..., k], t.cos_ddot_drift[..., k], t.cos_ddot_gain[..., k, :],
+                    t.theta[..., k], t.theta_dot[..., k], t.theta_ddot_drift[..., k], t.theta_ddot_gain[..., k, :])
+
+
 def sun_pointing(ctx: Context, axis_body: Array) -> Pointing:
-    """Angle of a body axis to the (moving) sun direction."""
-    return pointing(ctx, axis_body, ctx.sun, ctx.sun_dot, ctx.sun_ddot)
+    """Angle of a body axis (one of PAIRS) to the (moving) sun direction."""
+    return _pair(ctx, axis_body, "sun")
 
 
 def earth_pointing(ctx: Context, axis_body: Array) -> Pointing:
-    """Angle of a body axis to the (fixed) Earth direction -x_Hill."""
-    from ..model import EARTH_DIRECTION_HILL
-
-    zero = np.zeros(3)
-    return pointing(ctx, axis_body, EARTH_DIRECTION_HILL, zero, zero)
+    """Angle of a body axis (one of PAIRS) to the (fixed) Earth direction -x_Hill."""
+    return _pair(ctx, axis_body, "earth")

@@ -1,0 +1,112 @@
+"""Configuration errors are one line naming the parameter; the CLI exits non-zero without a
+traceback; the core imports without rclpy; package.xml and setup.py agree."""
+
+from __future__ import annotations
+
+import json
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from rta_attitude import config
+from rta_attitude.errors import ConfigError
+
+ROOT = Path(__file__).resolve().parents[1]
+DEFAULT = ROOT / "config" / "rta_attitude.yaml"
+
+
+def _params():
+    return yaml.safe_load(DEFAULT.read_text())["/**"]["ros__parameters"]
+
+
+def _write(tmp_path, params):
+    p = tmp_path / "bad.yaml"
+    p.write_text(yaml.safe_dump({"/**": {"ros__parameters": params}}))
+    return p
+
+
+@pytest.mark.parametrize("edit, message", [
+    (lambda p: p["filter"].__setitem__("gain", 1), r"parameters\.filter: unknown key 'gain'"),
+    (lambda p: p["thermal"].__setitem__("mass_kg", "two"), r"thermal\.mass_kg must be a finite number, got 'two'"),
+    (lambda p: p["thermal"].__setitem__("mass_kg", -2.0), r"thermal\.mass_kg must be > 0, got -2\.0"),
+    (lambda p: p["filter"].__setitem__("fallback", "pray"), r"filter\.fallback must be one of .*got 'pray'"),
+    (lambda p: p["constraints"]["omega"].__setitem__("k1", 0.0), r"constraints\.omega\.k1 must be > 0"),
+    (lambda p: p["spacecraft"].__setitem__("inertia_kgm2", [1.0, 2.0]), r"inertia_kgm2 must be a list of 3"),
+    (lambda p: p["integrator"].__setitem__("substeps", 2.5), r"integrator\.substeps must be an integer"),
+    (lambda p: p.pop("limits"), r"parameters\.limits is missing"),
+])
+def test_config_errors_name_the_parameter(tmp_path, edit, message):
+    params = _params()
+    edit(params)
+    with pytest.raises(ConfigError, match=message) as exc:
+        config.load(_write(tmp_path, params))
+    assert "\n" not in str(exc.value)
+
+
+def test_missing_file(tmp_path):
+    with pytest.raises(ConfigError, match="does not exist"):
+        config.load(tmp_path / "nope.yaml")
+
+
+def test_units_are_converted_once():
+    cfg = config.load()
+    assert cfg.limits.omega_max_rad_s == pytest.approx(np.radians(1.0))
+    assert cfg.limits.temperature_max_K == pytest.approx(283.15)
+    assert cfg.limits.exclusion_angle_rad == pytest.approx(np.radians(40.0))
+    x0 = cfg.scenario("paper-example").x0
+    assert x0[10] == pytest.approx(281.65) and x0[12] == pytest.approx(np.radians(525.0))
+    assert cfg.scenario("slack-on-exclusion-zone").slack_weights == (("exclusion_zone", 1e12),)
+
+
+def _cli(*args, cwd=None):
+    return subprocess.run([sys.executable, "-m", "rta_attitude.cli", *args], capture_output=True, text=True,
+                          cwd=cwd or ROOT, timeout=300)
+
+
+def test_cli_bad_config_is_one_line_and_exit_1(tmp_path):
+    params = _params()
+    params["filter"]["preset"] = "fastest"
+    r = _cli("check-config", "--config", str(_write(tmp_path, params)))
+    assert r.returncode == 1
+    assert r.stderr.strip().count("\n") == 0 and r.stderr.startswith("ERROR: ")
+    assert "filter.preset must be one of robust, paper, got 'fastest'" in r.stderr
+    assert "Traceback" not in r.stderr
+
+
+def test_cli_unknown_scenario(tmp_path):
+    r = _cli("simulate", "--scenario", "moon-landing", "--out", str(tmp_path))
+    assert r.returncode == 1 and "unknown scenario 'moon-landing'" in r.stderr and "Traceback" not in r.stderr
+
+
+def test_cli_simulate_writes_summary_timeseries_and_figure(tmp_path):
+    r = _cli("simulate", "--scenario", "passed-example", "--duration", "60", "--out", str(tmp_path))
+    assert r.returncode == 0, r.stderr
+    s = json.loads((tmp_path / "summary.json").read_text())
+    assert s["steps"] == 60 and s["scenario"] == "passed_example"
+    assert "exclusion_zone" in s["constraints"] and "intervening_steps" in s
+    data = np.load(tmp_path / "timeseries.npz")
+    assert data["x"].shape == (61, 19) and list(data["state_names"][:4]) == ["q1", "q2", "q3", "q4"]
+    png = (tmp_path / "figure.png").read_bytes()
+    assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 50_000
+    assert "SAFE" in r.stdout or "UNSAFE" in r.stdout
+
+
+def test_core_imports_without_rclpy():
+    code = ("import sys, rta_attitude.simulation, rta_attitude.asif, rta_attitude.metrics, rta_attitude.config;"
+            "print('rclpy' in sys.modules)")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, timeout=120)
+    assert r.stdout.strip() == "False", r.stderr
+
+
+def test_package_xml_and_setup_py_agree():
+    xml = (ROOT / "package.xml").read_text()
+    setup = (ROOT / "setup.py").read_text()
+    v_xml = re.search(r"<version>([^<]+)</version>", xml).group(1)
+    v_setup = re.search(r'version="([^"]+)"', setup).group(1)
+    assert v_xml == v_setup
+    assert re.search(r"<name>rta_attitude</name>", xml)
