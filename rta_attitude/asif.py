@@ -124,6 +124,8 @@ class FilterCounters:
     solver_failures: int = 0
     backup_solves: int = 0
     """Calls in which proxsuite failed and the backup solver was asked."""
+    invalid_states: int = 0
+    """Calls with a non-finite state or a quaternion norm outside (0.5, 1.5): answered u = 0."""
     by_status: dict[str, int] = field(default_factory=dict)
 
 
@@ -186,6 +188,9 @@ class AsifFilter:
         self.slacked = self.enabled & (weights > 0)
         self.slack_weights = weights
         self.counters = FilterCounters()
+        self._safe_placeholder = np.zeros(19)
+        self._safe_placeholder[3] = 1.0
+        self._safe_placeholder[10] = 273.15
         self._workspaces: dict[tuple[int, int], proxsuite.proxqp.dense.QP] = {}
 
     # ---------------------------------------------------------------- bounds and rows
@@ -258,6 +263,7 @@ class AsifFilter:
             s.eps_primal_inf = self.options.eps_primal_inf
             s.eps_dual_inf = self.options.eps_dual_inf
             s.max_iter = self.options.max_iterations
+            s.max_iter_in = self.options.max_inner_iterations
             s.verbose = False
             s.initial_guess = proxsuite.proxqp.InitialGuess.NO_INITIAL_GUESS
             self._workspaces[key] = qp
@@ -339,10 +345,21 @@ class AsifFilter:
         """Filter a batch: x (N, 19), u_des (N, 3). Rows and the fast path are vectorised; states
         that need the QP are solved one by one. `filter` is this with N = 1, so a run inside a
         batch and a single run compute the same numbers."""
-        x = np.asarray(x, dtype=float)
+        x = np.array(x, dtype=float)
         u_des = np.asarray(u_des, dtype=float)
         n, m = x.shape[0], len(self.names)
-        table, lo, hi, _bad = self.evaluate(x)
+        with np.errstate(all="ignore"):
+            q_norm = np.linalg.norm(x[:, 0:4], axis=-1)
+        valid = np.all(np.isfinite(x), axis=-1) & (q_norm > 0.5) & (q_norm < 1.5)
+        x[valid, 0:4] /= q_norm[valid, None]
+        x[~valid] = self._safe_placeholder
+        with np.errstate(all="ignore"):  # absurd but finite states may overflow: caught just below
+            table, lo, hi, _bad = self.evaluate(x)
+        finite_rows = (np.all(np.isfinite(table.drift), axis=-1) & np.all(np.isfinite(table.gain), axis=(-2, -1))
+                       & np.all(np.isfinite(lo), axis=-1) & np.all(np.isfinite(hi), axis=-1))
+        valid &= finite_rows
+        lo[~valid], hi[~valid] = -self.u_max, self.u_max
+        table.drift[~valid], table.gain[~valid] = 0.0, 0.0
         gnorm = np.linalg.norm(table.gain, axis=-1)
         depends = gnorm > MIN_ROW_NORM
         uncontrollable = self.enabled & ~depends & (table.drift < 0)
@@ -352,7 +369,7 @@ class AsifFilter:
         bc0 = table.drift + np.einsum("nmk,nk->nm", table.gain, u0)
         tol = self.options.check_tolerance
         need = self.enabled & depends & (bc0 < -tol * np.maximum(1.0, gnorm))
-        solve = need.any(axis=-1) | ~finite_des
+        solve = (need.any(axis=-1) | ~finite_des) & valid
         u = u0.copy()
         slack = np.zeros((n, m))
         intervening = np.zeros((n, m), dtype=bool)
@@ -366,6 +383,17 @@ class AsifFilter:
             row = BarrierTable(table.h[k], table.psi0[k], table.psi1[k], table.drift[k], table.gain[k])
             u[k], slack[k], intervening[k], status[k], solver_status[k], iterations[k], fallback[k] = (
                 self._solve_state(row, lo[k], hi[k], u_target[k], bool(finite_des[k])))
+        if not valid.all():
+            # a state that is not a state (NaN, inf, no attitude, barrier rows that overflow): no
+            # barrier can be trusted; the wheels hold their speed (u = 0), keeping the body rates
+            bad = ~valid
+            self.counters.fallbacks += int(bad.sum())
+            self.counters.invalid_states += int(bad.sum())
+            lo[bad], hi[bad] = -self.u_max, self.u_max
+            u[bad] = 0.0
+            status[bad] = CODE_FALLBACK
+            fallback[bad] = "invalid_state"
+            table.h[bad] = table.psi0[bad] = table.psi1[bad] = table.drift[bad] = np.nan
         for code, name in enumerate(STATUS_NAMES):
             c = int(np.count_nonzero(status == code))
             if c:

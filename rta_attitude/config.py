@@ -253,7 +253,8 @@ def from_parameters(params: Mapping[str, Any], source: str = "<memory>") -> Conf
     fi = root.section("filter")
     filter_options = FilterOptions(
         preset=fi.text("preset"), sample_time_s=fi.number("sample_time_s"), zoh_margin=fi.number("zoh_margin"),
-        fallback=fi.text("fallback"), max_iterations=fi.integer("max_iterations"), eps_abs=fi.number("eps_abs"),
+        fallback=fi.text("fallback"), max_iterations=fi.integer("max_iterations"),
+        max_inner_iterations=fi.integer("max_inner_iterations"), eps_abs=fi.number("eps_abs"),
         eps_primal_inf=fi.number("eps_primal_inf"), eps_dual_inf=fi.number("eps_dual_inf"),
         check_tolerance=fi.number("check_tolerance"), pole_guard_rad=fi.number("pole_guard_rad"),
         soften_weight=fi.number("soften_weight"), backup_solver=fi.text("backup_solver"))

@@ -218,7 +218,8 @@ class FilterOptions:
     sample_time_s: float = 1.0
     zoh_margin: float = 0.02
     fallback: str = "soften"
-    max_iterations: int = 200
+    max_iterations: int = 50
+    max_inner_iterations: int = 20
     eps_abs: float = 1e-9
     eps_primal_inf: float = 1e-12
     eps_dual_inf: float = 1e-12
@@ -234,8 +235,10 @@ class FilterOptions:
         _positive("filter.sample_time_s", self.sample_time_s)
         if not 0 <= self.zoh_margin < 1:
             raise ConfigError(f"filter.zoh_margin must be in [0, 1), got {self.zoh_margin!r}")
-        if not (isinstance(self.max_iterations, int) and self.max_iterations >= 1):
-            raise ConfigError(f"filter.max_iterations must be an integer >= 1, got {self.max_iterations!r}")
+        for name in ("max_iterations", "max_inner_iterations"):
+            v = getattr(self, name)
+            if not (isinstance(v, int) and 1 <= v <= 100_000):
+                raise ConfigError(f"filter.{name} must be an integer in [1, 100000], got {v!r}")
         for name in ("eps_abs", "eps_primal_inf", "eps_dual_inf", "check_tolerance", "pole_guard_rad",
                      "soften_weight"):
             _positive(f"filter.{name}", getattr(self, name))
