@@ -17,7 +17,8 @@ from rta_attitude.simulation import ClosedLoop
 
 
 def stats(us: np.ndarray) -> str:
-    return f"{len(us):6d} calls  median {np.median(us):8.1f} us  p99 {np.percentile(us, 99):8.1f} us  max {us.max():8.1f} us"
+    p99 = np.percentile(us, 99)
+    return f"{len(us):6d} calls  median {np.median(us):8.1f} us  p99 {p99:8.1f} us  max {us.max():8.1f} us"
 
 
 def main() -> None:

@@ -203,8 +203,8 @@ def test_non_finite_u_des_is_a_counted_fallback():
 def test_paper_preset_has_no_zoh_bounds():
     x = CFG.scenario("paper-example").x0.copy()
     x[5] = 0.9 * CFG.limits.omega_max_rad_s
-    lo_r, hi_r, _ = AsifFilter(CFG.with_preset("robust")).box(x[None])
-    lo_p, hi_p, _ = AsifFilter(CFG.with_preset("paper")).box(x[None])
+    _lo_r, hi_r, _ = AsifFilter(CFG.with_preset("robust")).box(x[None])
+    _lo_p, hi_p, _ = AsifFilter(CFG.with_preset("paper")).box(x[None])
     np.testing.assert_array_equal(hi_p[0], CFG.u_max_rad_s2)
     # robust: the y rate may grow by at most (1 - margin) w_max - 0.9 w_max in one 1 s step
     G = CFG.spacecraft.control_gain[1]

@@ -46,7 +46,7 @@ def test_product_composes_attitude_matrices():
 def test_error_vector_of_the_paper_commands():
     q = quat.normalize(np.array([0.680, -0.151, 0.630, 0.343]))
     np.testing.assert_allclose(quat.error_vector(q, np.array([0, 0, 0, 1.0])), q[:3])
-    q1, q2, q3, q4 = q
+    q1, _q2, q3, q4 = q
     np.testing.assert_allclose(quat.error_vector(q, np.array([0, 1.0, 0, 0])), [-q3, -q4, q1], atol=1e-15)
 
 

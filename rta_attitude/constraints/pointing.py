@@ -112,7 +112,7 @@ def _all_pairs(ctx: Context) -> Pointing:
     from ..model import EARTH_DIRECTION_HILL
 
     if "pointing" not in ctx.cache:
-        shape = ctx.batch_shape + (len(PAIRS), 3)
+        shape = (*ctx.batch_shape, len(PAIRS), 3)
         r, rd, rdd = np.empty(shape), np.empty(shape), np.empty(shape)
         for k, (_axis, target) in enumerate(PAIRS):
             if target == "sun":
