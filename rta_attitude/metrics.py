@@ -73,6 +73,7 @@ def summarize(
         cons[name] = {
             "min_h": min_h, "unit": H_UNITS.get(name, ""), "first_violation_s": first,
             "violated_samples": steps_violated, "slacked": name in slacked,
+            "violated_initially": bool(hi[0] < 0),
         }  # fmt: skip
     out["constraints"] = cons
     out["violated"] = sorted(n for n, c in cons.items() if c["first_violation_s"] is not None and not c["slacked"])
@@ -132,6 +133,8 @@ def format_summary(summary: dict[str, Any]) -> str:
             continue
         fv = "-" if c["first_violation_s"] is None else f"{c['first_violation_s']:.1f} s"
         note = "slacked" if c["slacked"] else ("VIOLATED" if c["first_violation_s"] is not None else "ok")
+        if c.get("violated_initially"):
+            note += " (initial state outside the safe set)"
         lines.append(f"{name:<16}{c['min_h']:>14.5g} {c['unit']:<10}{fv:>16}  {note}")
     for name, a in summary.get("angular_acceleration", {}).items():
         fv = "-" if a["first_exceed_s"] is None else f"{a['first_exceed_s']:.1f} s"
