@@ -372,6 +372,11 @@ class BagWriter:
             raise BagError(f"{self.path}: cannot encode {entry.type_name} on {topic}: {exc}") from None
         self.write(topic, data, log_time_ns, publish_time_ns)
 
+    def add_metadata(self, name: str, data: dict[str, str]) -> None:
+        """Add an MCAP metadata record `name` with string key/values (e.g. run facts)."""
+        self._check_open()
+        self._writer.add_metadata(name, {str(k): str(v) for k, v in data.items()})
+
     def close(self) -> None:
         """Write the rosbag2 metadata record and the MCAP summary, then close the file."""
         if self._closed:

@@ -12,6 +12,8 @@ Batch-first: every function takes states (..., 19) and returns (..., k). u = psi
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numpy.typing import NDArray
 
@@ -97,6 +99,8 @@ def net_power(cos_panel_sun: Array, cfg: Config) -> Array:
 def drift(x: Array, cfg: Config) -> Array:
     """f(x) (..., 19): the state derivative with u = 0."""
     x = np.asarray(x, dtype=float)
+    if x.ndim == 1:
+        return _drift_one(x, cfg)
     q, w = x[..., Q], x[..., OMEGA]
     q1, q2, q3, q4 = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
     f = np.zeros(x.shape)
@@ -123,6 +127,30 @@ def drift(x: Array, cfg: Config) -> Array:
     f[..., CW.start + 4] = -2 * n * cw[..., 3]
     f[..., CW.start + 5] = -(n**2) * cw[..., 2]
     return f
+
+
+def _drift_one(x: Array, cfg: Config) -> Array:
+    """`drift` of one state (19,) on Python floats: the same operations in the same order as the
+    batch version (bit-identical results; `test_batch_equals_single`), ~6x faster for one state,
+    which is what the plant integrates 40 times per step."""
+    q1, q2, q3, q4, w1, w2, w3 = (float(v) for v in x[0:7])
+    J1, J2, J3 = cfg.spacecraft.inertia_kgm2
+    th = float(x[THETA_S])
+    cs, sn = math.cos(th), math.sin(th)
+    a10, a11 = 2.0 * (q1 * q2 - q3 * q4), -q1 * q1 + q2 * q2 - q3 * q3 + q4 * q4
+    a20, a21 = 2.0 * (q1 * q3 + q2 * q4), 2.0 * (q2 * q3 - q1 * q4)
+    heat_capacity = cfg.thermal.mass_kg * cfg.thermal.specific_heat_J_kgK
+    T_dot = float(thermal_fluxes(-(a10 * cs + a11 * sn), a10, float(x[TEMP]), cfg)) / heat_capacity
+    n = cfg.environment.mean_motion_rad_s
+    px, _py, pz, vx, vy, vz = (float(v) for v in x[CW])
+    return np.array([
+        0.5 * (q4 * w1 - q3 * w2 + q2 * w3), 0.5 * (q3 * w1 + q4 * w2 - q1 * w3),
+        0.5 * (-q2 * w1 + q1 * w2 + q4 * w3), -0.5 * (q1 * w1 + q2 * w2 + q3 * w3),
+        (J2 - J3) * w2 * w3 / J1, (J3 - J1) * w3 * w1 / J2, (J1 - J2) * w1 * w2 / J3,
+        0.0, 0.0, 0.0,
+        T_dot, float(net_power(a20 * cs + a21 * sn, cfg)), -n,
+        vx, vy, vz, 3 * n**2 * px + 2 * n * vy, -2 * n * vx, -(n**2) * pz,
+    ])  # fmt: skip
 
 
 def control_matrix(x: Array, cfg: Config) -> Array:

@@ -153,3 +153,10 @@ def test_batch_equals_single():
     batch = model.state_derivative(x, u, CFG)
     for k in range(6):
         np.testing.assert_array_equal(model.state_derivative(x[k], u[k], CFG), batch[k])
+
+
+def test_single_state_drift_is_bit_identical_to_the_batch():
+    x = random_states(RNG, 500, CFG)
+    batch = model.drift(x, CFG)
+    for k in range(len(x)):
+        np.testing.assert_array_equal(model.drift(x[k], CFG), batch[k])
