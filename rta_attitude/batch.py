@@ -7,7 +7,8 @@ One step of N runs (states held column-wise, "structure of arrays", shape (19, N
     fast path u0 = clip(u_des, lo, hi) where it meets every row (`AsifFilter.filter_batch`)
     QP        the others, all at once: an exact dual active-set solver (Goldfarb-Idnani) for the
               projection QP  min 1/2 |z - z0|^2  s.t.  l <= C z <= u,  vectorised over the batch
-    fallback  states whose QP fails go through `AsifFilter._solve_state` one by one (the policy)
+    fallback  failed QPs: the `soften` QPs (built by `AsifFilter.qp`) solved together per shape;
+              other policies through `AsifFilter._solve_state` state by state
     plant     u -> tau -> u, saturation, RK4 with `cfg.substeps` substeps (`simulation.integrate`)
     checks    h of every constraint at every sample and every substep
 
@@ -17,14 +18,18 @@ against whole runs). The QP solver is the one exception a batch cannot share wit
 per-state loop cheaply (proxsuite takes ~100 us per 4-variable QP here, and ~45 % of Monte Carlo
 state-steps need the QP): `ActiveSetFilter` is `AsifFilter` with this solver, so the single-run
 path can use it too, and `solver="proxsuite"` runs the batch through `AsifFilter.filter_batch`
-unchanged (bit-identical with `simulate`, about 10x slower).
+unchanged (bit-identical with `simulate`, several times slower).
 
 Dual active-set method for H = I (Goldfarb & Idnani 1983, Math. Prog. 27): start at z0; add the
 most violated one-sided row p; step along the projection of its normal onto the null space of the
 active normals, dropping a row when its multiplier reaches zero, until p is active; repeat until
-nothing is violated (optimal) or a violated row cannot be reached (infeasible). Small linear systems
-are solved by an explicit Cholesky with sums in index order, so zero-padded rows and variables
-(the batch) give the same numbers as the compact problem of one state (`AsifFilter.qp`).
+nothing is violated (optimal) or a violated row cannot be reached (infeasible). The active rows are
+orthonormalised (modified Gram-Schmidt, twice) rather than put in a Gram matrix: the slacked row
+differs from its barrier row only by a 1e-6 slack column, and normal equations would square that
+conditioning. The optimum is polished on its active set with iterative refinement. Every sum runs in
+index order, so zero-padded rows and variables (the batch) give the same numbers as the compact
+problem of one state (`AsifFilter.qp`); states whose compact QP has another number of variables (a
+slacked row left out) go through the core path.
 """
 
 from __future__ import annotations
@@ -88,19 +93,22 @@ def _dot_seq(a: Array, b: Array) -> Array:
     return out
 
 
-def _active_qr(Nn: Array, act: Array) -> tuple[Array, Array, Array, Array]:
-    """Active normals NA (K, s, n) (zero in empty slots), NA = R Q with Q's rows orthonormal
+def _active_qr(Nn: Array, sel: NDArray[np.int64], act: NDArray[np.int64]
+               ) -> tuple[Array, Array, Array, NDArray[np.bool_]]:
+    """Active normals NA (K, s, n) of the problems sel (zero in empty slots), NA = R Q with Q's rows orthonormal
     (modified Gram-Schmidt, twice) and R (K, s, s) lower triangular (identity on empty slots);
     and the slot mask (K, s). Orthogonalising keeps the conditioning of nearly parallel rows
     (the slacked row differs from its barrier only by the 1/sqrt(p) slack column), which a Gram
     matrix would square."""
-    K, _, n = Nn.shape
+    K, n = sel.size, Nn.shape[2]
     s = act.shape[1]
     used = act >= 0
-    NA = Nn[np.arange(K)[:, None], np.where(used, act, 0)] * used[..., None]
+    NA = Nn[sel[:, None], np.where(used, act, 0)] * used[..., None]
     Q = np.zeros((K, s, n))
     R = np.zeros((K, s, s))
-    for j in range(s):
+    R[:, np.arange(s), np.arange(s)] = 1.0
+    # slots beyond the largest active set hold zero rows: skipping them changes no number
+    for j in range(int(used.sum(axis=1).max(initial=0))):
         v = NA[:, j]
         for _ in range(2):
             for i in range(j):
@@ -114,21 +122,19 @@ def _active_qr(Nn: Array, act: Array) -> tuple[Array, Array, Array, Array]:
     return NA, Q, R, used
 
 
-def _project(v: Array, Q: Array) -> tuple[Array, Array]:
-    """(v minus its components along Q's rows, those components (K, s)); two passes."""
-    s = Q.shape[1]
-    coef = np.zeros((v.shape[0], s))
+def _project(v: Array, Q: Array, s_used: int) -> tuple[Array, Array]:
+    """(v minus its components along Q's first s_used rows, those components (K, s)); two passes."""
+    coef = np.zeros((v.shape[0], Q.shape[1]))
     for _ in range(2):
-        for i in range(s):
+        for i in range(s_used):
             c = _dot_seq(v, Q[:, i])
             coef[:, i] += c
             v = v - c[:, None] * Q[:, i]
     return v, coef
 
 
-def _solve_lower(R: Array, rhs: Array) -> Array:
-    """Forward substitution R w = rhs, R (K, s, s) lower triangular."""
-    s = rhs.shape[1]
+def _solve_lower(R: Array, rhs: Array, s: int) -> Array:
+    """Forward substitution R w = rhs on the first s slots, R (K, s', s') lower triangular."""
     w = np.zeros_like(rhs)
     for j in range(s):
         v = rhs[:, j]
@@ -138,9 +144,8 @@ def _solve_lower(R: Array, rhs: Array) -> Array:
     return w
 
 
-def _solve_upper_t(R: Array, rhs: Array) -> Array:
-    """Back substitution R^T y = rhs, R (K, s, s) lower triangular."""
-    s = rhs.shape[1]
+def _solve_upper_t(R: Array, rhs: Array, s: int) -> Array:
+    """Back substitution R^T y = rhs on the first s slots, R (K, s', s') lower triangular."""
     y = np.zeros_like(rhs)
     for i in range(s - 1, -1, -1):
         v = rhs[:, i]
@@ -151,7 +156,8 @@ def _solve_upper_t(R: Array, rhs: Array) -> Array:
 
 
 def solve_projection_qp(C: Array, lower: Array, upper: Array, z0: Array,
-                        max_iter: int = MAX_ACTIVE_SET_ITER) -> tuple[Array, Array, NDArray[np.int8], NDArray[np.int64]]:
+                        max_iter: int = MAX_ACTIVE_SET_ITER
+                        ) -> tuple[Array, Array, NDArray[np.int8], NDArray[np.int64]]:
     """Exact solution of K projection QPs  min 1/2 |z - z0|^2  s.t.  lower <= C z <= upper.
 
     Bounds at +-`asif.BIG` (or beyond) are absent. Rows should have unit norm (as `AsifFilter.qp`
@@ -182,6 +188,7 @@ def solve_projection_qp(C: Array, lower: Array, upper: Array, z0: Array,
     yp = np.zeros(K)
     code = np.full(K, -1, dtype=np.int8)
     iters = np.zeros(K, dtype=np.int64)
+    pending = np.ones(K, dtype=bool)
     mult = np.zeros((K, m))
     for _round in range(POLISH_ROUNDS):
         for _ in range(max_iter):
@@ -191,9 +198,14 @@ def solve_projection_qp(C: Array, lower: Array, upper: Array, z0: Array,
             iters[run] += 1
             ph1 = run[p[run] < 0]
             if ph1.size:
-                Cz = _dot_seq(C[ph1], z[ph1][:, None, :])
-                s = np.concatenate([Cz - lower[ph1], upper[ph1] - Cz], axis=1)
-                viol = (s < -tol[ph1]) & has[ph1]
+                if ph1.size == K:  # all of them (the first iteration): no copies
+                    Cz = _dot_seq(C, z[:, None, :])
+                    s = np.concatenate([Cz - lower, upper - Cz], axis=1)
+                    viol = (s < -tol) & has
+                else:
+                    Cz = _dot_seq(C[ph1], z[ph1][:, None, :])
+                    s = np.concatenate([Cz - lower[ph1], upper[ph1] - Cz], axis=1)
+                    viol = (s < -tol[ph1]) & has[ph1]
                 for slot in range(n):
                     a = act[ph1, slot]
                     has_slot = np.flatnonzero(a >= 0)
@@ -207,10 +219,11 @@ def solve_projection_qp(C: Array, lower: Array, upper: Array, z0: Array,
             ph2 = run[(code[run] < 0) & (p[run] >= 0)]
             if ph2.size == 0:
                 continue
-            _NA, Qa, Ra, used = _active_qr(Nn[ph2], act[ph2])
+            _NA, Qa, Ra, used = _active_qr(Nn, ph2, act[ph2])
+            s_used = int(used.sum(axis=1).max(initial=0))
             npv = Nn[ph2, p[ph2]]
-            zd, coef = _project(npv, Qa)
-            r = _solve_upper_t(Ra, coef) * used
+            zd, coef = _project(npv, Qa, s_used)
+            r = _solve_upper_t(Ra, coef, s_used) * used
             zz = _dot_seq(zd, zd)
             dep = (zz <= DEPENDENCE_TOL) | np.all(used, axis=1)
             sp = _dot_seq(npv, z[ph2]) - b[ph2, p[ph2]]
@@ -243,20 +256,22 @@ def solve_projection_qp(C: Array, lower: Array, upper: Array, z0: Array,
         code[code < 0] = 2
         # polish the optimal ones on their active set (z = z0 + N_A^T y, N_A z = b_A), with
         # iterative refinement; resume the method where that leaves a row violated
-        ok = np.flatnonzero(code == 0)
+        ok = np.flatnonzero((code == 0) & pending)  # a polished problem keeps its numbers
+        pending[ok] = False
         if ok.size == 0:
             break
-        NA, Qa, Ra, used = _active_qr(Nn[ok], act[ok])
+        NA, Qa, Ra, used = _active_qr(Nn, ok, act[ok])
+        s_used = int(used.sum(axis=1).max(initial=0))
         bA = np.where(used, b[ok[:, None], np.where(used, act[ok], 0)], 0.0)
         w = np.zeros((ok.size, n))
         zo = z0[ok]
-        for _ in range(1 + REFINEMENT_STEPS):
-            w = w + _solve_lower(Ra, bA - _dot_seq(NA, zo[:, None, :])) * used
+        for _ in range(1 + REFINEMENT_STEPS if s_used else 0):
+            w = w + _solve_lower(Ra, bA - _dot_seq(NA, zo[:, None, :]), s_used) * used
             zo = z0[ok]
-            for i in range(n):
+            for i in range(s_used):
                 zo = zo + w[:, i, None] * Qa[:, i]
         z[ok] = zo
-        y[ok] = _solve_upper_t(Ra, w) * used
+        y[ok] = _solve_upper_t(Ra, w, s_used) * used
         Cz = _dot_seq(C[ok], zo[:, None, :])
         viol = (np.concatenate([Cz - lower[ok], upper[ok] - Cz], axis=1) < -tol[ok]) & has[ok]
         for slot in range(n):
@@ -267,6 +282,7 @@ def solve_projection_qp(C: Array, lower: Array, upper: Array, z0: Array,
         if again.size == 0 or _round == POLISH_ROUNDS - 1:
             break
         code[again] = -1
+        pending[again] = True
     ok = np.flatnonzero(code == 0)
     if ok.size:
         rows = np.where(act[ok] >= 0, act[ok], 0)
@@ -343,6 +359,14 @@ def _axis(v: tuple[float, float, float]) -> _Vec:
     return tuple(None if c == 0.0 else float(c) for c in v)  # type: ignore[return-value]
 
 
+def _theta(axis: tuple[float, float, float], r_B: _Vec) -> Array:
+    """Angle between a unit body axis and r_B, as `_Rows.pointing_body` computes it."""
+    e = _axis(axis)
+    m = _cross(e, r_B)
+    like = next(v for v in r_B if v is not None)
+    return np.arctan2(np.sqrt(_z(_dot(m, m), like)), _z(_dot(e, r_B), like))
+
+
 @dataclass
 class _Pointing:
     cos: Array
@@ -408,7 +432,7 @@ class _Rows:
         wxr = _cross(w, r_B)
         c_dd_drift = _sum(_dot(wd, m), _dot(w, _cross(e, (_neg(wxr[0]), _neg(wxr[1]), _neg(wxr[2])))),
                           _mul(2.0, _dot(w, _cross(e, rd_B))), _dot(e, rdd_B))
-        like = w[0]
+        like: Array = w[0]  # type: ignore[assignment]
         c, c_dot, c_dd_drift = _z(c, like), _z(c_dot, like), _z(c_dd_drift, like)
         gain = tuple(_z(_mul(m[i], self.cg[i]), like) for i in range(3))
         sin_raw = np.sqrt(_z(_dot(m, m), like))
@@ -571,8 +595,10 @@ class _Plant:
         return K
 
     def integrate(self, Y: Array, psi: Array, th: Array, u: Array, dt_s: float, substeps: int,
-                  on_substep: Callable[[int, Array, Array, Array], None] | None = None) -> tuple[Array, Array, Array]:
-        """Hold u (3, N) over dt_s; returns (Y, psi, theta_S) at t + dt, calling on_substep(j, Y, psi, th)."""
+                  on_substep: Callable[[int, Array, Array, Array, Array, Array], None] | None = None
+                  ) -> tuple[Array, Array, Array]:
+        """Hold u (3, N) over dt_s; returns (Y, psi, theta_S) at t + dt. After each substep j,
+        on_substep(j, Y, psi, theta_S, cos theta_S, sin theta_S) sees the state."""
         h_s = dt_s / substeps
         cgu = np.stack([self.cg[a] * u[a] for a in range(3)])
         kp = 0.0 + u
@@ -580,10 +606,10 @@ class _Plant:
         kth = -self.n
         half, full = 0.5 * h_s, h_s
         th_inc = (h_s / 6.0) * (kth + 2.0 * kth + 2.0 * kth + kth)
+        c1, s1 = np.cos(th), np.sin(th)
         for j in range(substeps):
             th2 = th + half * kth
             th4 = th + full * kth
-            c1, s1 = np.cos(th), np.sin(th)
             c2, s2 = np.cos(th2), np.sin(th2)
             c4, s4 = np.cos(th4), np.sin(th4)
             k1 = self.derivative(Y, c1, s1, cgu)
@@ -595,8 +621,10 @@ class _Plant:
             Y[0:4] = q / np.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
             psi = psi + psi_inc
             th = th + th_inc
+            if j < substeps - 1 or on_substep is not None:
+                c1, s1 = np.cos(th), np.sin(th)
             if on_substep is not None:
-                on_substep(j, Y, psi, th)
+                on_substep(j, Y, psi, th, c1, s1)
         return Y, psi, th
 
 
@@ -646,40 +674,61 @@ class BatchSimulator:
         self.filter: AsifFilter = ActiveSetFilter(cfg) if solver == "active-set" else AsifFilter(cfg)
         self.rows = _Rows(cfg)
         self.plant = _Plant(cfg)
-        self.enabled = self.filter.enabled
+        self.enabled: NDArray[np.bool_] = self.filter.enabled.astype(bool)
         self.slacked = self.filter.slacked
         self.slack_rows = np.flatnonzero(self.slacked)
         self.n_var = 3 + self.slack_rows.size
         self.slack_scale = np.array([1.0 / np.sqrt(self.filter.slack_weights[i]) for i in self.slack_rows])
 
     # ------------------------------------------------------------------ filter
-    def _filter(self, X: Array) -> tuple[Array, Array, NDArray[np.int8], NDArray[np.bool_], Array]:
-        """u (N, 3) for u_des = 0, h (N, m), status codes, first-QP-failed flags, slack (N, m)."""
+    def _filter(self, X: Array) -> tuple[Array, NDArray[np.int8], NDArray[np.bool_], Array]:
+        """`AsifFilter.filter_batch` for u_des = 0: u (N, 3), status codes, first-QP-failed flags,
+        slack (N, m)."""
         N = X.shape[1]
         if self.solver == "proxsuite":
             res = self.filter.filter_batch(np.ascontiguousarray(X.T), np.zeros((N, 3)))
-            failed = (res.fallback != "") & (res.fallback != "non_finite_u_des")
-            return res.u, res.h, res.status, failed, res.slack
-        ctx = self.rows.context(X)
-        h, drift, gain = self.rows.evaluate(X)
-        lo, hi = self.rows.box(X, ctx, self.filter.u_max, self.filter.robust)
+            failed = (res.fallback != "") & (res.fallback != "non_finite_u_des") & (res.fallback != "invalid_state")
+            return res.u, res.status, failed, res.slack
+        # as filter_batch: states are checked, their quaternion normalised
+        q = X[0:4]
+        with np.errstate(all="ignore"):
+            q_norm = np.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
+        valid = np.all(np.isfinite(X), axis=0) & (q_norm > 0.5) & (q_norm < 1.5)
+        Xf = X.copy()
+        Xf[0:4] = np.where(valid, q / np.where(valid, q_norm, 1.0), 0.0)
+        if not valid.all():
+            Xf[:, ~valid] = self.filter._safe_placeholder[:, None]
+        with np.errstate(all="ignore"):
+            ctx = self.rows.context(Xf)
+            h, drift, gain = self.rows.evaluate(Xf)
+            lo, hi = self.rows.box(Xf, ctx, self.filter.u_max, self.filter.robust)
+        valid &= (np.all(np.isfinite(drift), axis=1) & np.all(np.isfinite(gain), axis=(1, 2))
+                  & np.all(np.isfinite(lo), axis=1) & np.all(np.isfinite(hi), axis=1))
+        if not valid.all():
+            bad = ~valid
+            lo[bad], hi[bad] = -self.filter.u_max, self.filter.u_max
+            drift[bad], gain[bad] = 0.0, 0.0
         gnorm = np.linalg.norm(gain, axis=-1)
         depends = gnorm > MIN_ROW_NORM
-        u0 = np.clip(np.zeros((N, 3)), lo, hi)
+        u_target = np.zeros((N, 3))
+        u0 = np.clip(u_target, lo, hi)
         bc0 = drift + np.einsum("nmk,nk->nm", gain, u0)
         tol = self.filter.options.check_tolerance
         need = self.enabled & depends & (bc0 < -tol * np.maximum(1.0, gnorm))
-        solve = np.flatnonzero(need.any(axis=-1))
+        solve = np.flatnonzero(need.any(axis=-1) & valid)
         u = u0.copy()
         status = np.zeros(N, dtype=np.int8)
         failed = np.zeros(N, dtype=bool)
         slack = np.zeros((N, 10))
         if solve.size:
-            self._solve(solve, drift, gain, gnorm, lo, hi, u0, u, status, failed, slack, h)
-        return u, h, status, failed, slack
+            self._solve(solve, drift, gain, gnorm, lo, hi, u_target, u, status, failed, slack, h)
+        if not valid.all():  # not a state: the wheels hold their speed, as filter_batch
+            u[~valid] = 0.0
+            status[~valid] = CODE_FALLBACK
+        return u, status, failed, slack
 
     def _solve(self, idx: NDArray[np.int64], drift: Array, gain: Array, gnorm: Array, lo: Array, hi: Array,
-               u0: Array, u: Array, status: NDArray[np.int8], failed: NDArray[np.bool_], slack: Array,
+               u_target: Array, u: Array, status: NDArray[np.int8], failed: NDArray[np.bool_], slack: Array,
                h: Array) -> None:
         """Vectorised QPs of the states idx, laid out as `AsifFilter.qp` but zero-padded."""
         K, n = idx.size, self.n_var
@@ -699,30 +748,74 @@ class BatchSimulator:
         C[:, 10:, :3] = np.eye(3)
         lower[:, 10:], upper[:, 10:] = lo[idx], hi[idx]
         z0 = np.zeros((K, n))
-        z0[:, :3] = -(-u0[idx])
-        z, mult, code, _ = solve_projection_qp(C, lower, upper, z0)
+        g = -u_target[idx]  # the QP aims at u_des itself (g = -u_des), not its clip
+        z0[:, :3] = -g
+        z, _mult, code, _ = solve_projection_qp(C, lower, upper, z0)
         ok = (code == 0) & _rows_hold(C, lower, upper, z, self.filter.options.check_tolerance) & regular
         good = idx[ok]
         u[good] = np.clip(z[ok, :3], lo[good], hi[good])
         status[good] = CODE_SOLVED
         for k, i in enumerate(self.slack_rows):
             slack[good, i] = self.slack_scale[k] * z[ok, 3 + k]
-        for j in idx[~ok]:
+        bad = idx[~ok]
+        if bad.size == 0:
+            return
+        if self.filter.options.fallback == "soften":
+            # these QPs failed exactly as AsifFilter.solve would on the same numbers: go straight
+            # to the softened QPs, built by AsifFilter.qp and solved together per shape
+            self._soften(idx[~ok & regular], drift, gain, h, lo, hi, u_target, u, status, failed, slack)
+            bad = idx[~regular]
+        for j in bad:
             # the core path: same QP, same solver, then the fallback policy
             row = BarrierTable(h[j], h[j], h[j], drift[j], gain[j])
             before = self.filter.counters.solver_failures
-            u[j], slack[j], _i, status[j], _s, _it, _f = self.filter._solve_state(row, lo[j], hi[j], u0[j], True)
+            u[j], slack[j], _i, status[j], _s, _it, _f = self.filter._solve_state(row, lo[j], hi[j], u_target[j],
+                                                                                  True)
             failed[j] = self.filter.counters.solver_failures > before
 
+    def _soften(self, idx: NDArray[np.int64], drift: Array, gain: Array, h: Array, lo: Array, hi: Array,
+                u_target: Array, u: Array, status: NDArray[np.int8], failed: NDArray[np.bool_],
+                slack: Array) -> None:
+        """`AsifFilter._solve_state` after a failed QP with the 'soften' policy, for many states."""
+        f = self.filter
+        problems = []
+        for j in idx:
+            row = BarrierTable(h[j], h[j], h[j], drift[j], gain[j])
+            problems.append(f.qp(row, lo[j], hi[j], u_target[j], soften=True))
+        f.counters.solver_failures += idx.size
+        failed[idx] = True
+        status[idx] = CODE_FALLBACK
+        groups: dict[tuple[int, ...], list[int]] = {}
+        for k, pr in enumerate(problems):
+            groups.setdefault(pr.C.shape, []).append(k)
+        for ks in groups.values():
+            C = np.stack([problems[k].C for k in ks])
+            lower = np.stack([problems[k].lower for k in ks])
+            upper = np.stack([problems[k].upper for k in ks])
+            z0 = np.stack([-problems[k].g for k in ks])
+            z, _mult, code, _it = solve_projection_qp(C, lower, upper, z0)
+            ok = (code == 0) & _rows_hold(C, lower, upper, z, f.options.check_tolerance)
+            for k, good, zk in zip(ks, ok, z):
+                j = idx[k]
+                f.counters.fallbacks += 1
+                if not good:
+                    u[j] = np.clip(u_target[j], lo[j], hi[j])
+                    continue
+                pr = problems[k]
+                u[j] = np.clip(zk[:3], lo[j], hi[j])
+                for name in pr.row_names[:-3]:
+                    i = self.filter.names.index(name)
+                    if i in pr.slack_index:
+                        slack[j, i] = pr.slack_scale[pr.slack_index[i]] * zk[pr.slack_index[i]]
+
     # ------------------------------------------------------------------ checks between samples
-    def _substep_h(self, Y: Array, psi: Array, th: Array) -> tuple[NDArray[np.int64], Array]:
+    def _substep_h(self, Y: Array, psi: Array, th: Array, cs: Array, sn: Array) -> tuple[NDArray[np.int64], Array]:
         """Runs that may violate a constraint at a substep state, and their h (k, m), the rows of
         `ConstraintSet.safety_values` computed the same way. A cheap screen (cosines and plain
         comparisons, SCREEN_MARGIN on the safe side) picks the candidates."""
         cfg = self.cfg
         L = cfg.limits
         q1, q2, q3, q4 = Y[0], Y[1], Y[2], Y[3]
-        cs, sn = np.cos(th), np.sin(th)
         c_ez = (q1 * q1 - q2 * q2 - q3 * q3 + q4 * q4) * cs + 2.0 * (q1 * q2 + q3 * q4) * sn  # +i_B . r_S
         c_gs = 2.0 * (q3 * q4 - q1 * q2)  # +j_B . r_E
         near = c_ez > math.cos(L.exclusion_angle_rad) - SCREEN_MARGIN
@@ -740,19 +833,27 @@ class BatchSimulator:
         X[TEMP], X[ENERGY], X[THETA_S] = Y[7, sel], Y[8, sel], th[sel]
         return sel, self.safety_values(X)
 
+    def _sample_h(self, X: Array) -> Array:
+        """h (N, m) at the samples as ClosedLoop records them (safety_values of the plant state)."""
+        if self.solver == "proxsuite":
+            return self.filter.constraints.safety_values(np.ascontiguousarray(X.T))
+        return self.safety_values(X)
+
     def safety_values(self, X: Array) -> Array:
-        """Physical h (N, m) of states X (19, N), as `ConstraintSet.safety_values`."""
-        cfg = self.cfg
-        L = cfg.limits
+        """Physical h (N, m) of states X (19, N), as `ConstraintSet.safety_values` (the angles by
+        the same operations as `_Rows.pointing_body`, without the derivatives)."""
+        L = self.cfg.limits
         h = np.empty((X.shape[1], 10))
-        ctx = self.rows.context(X)
-        A = ctx["A"]
-        zero: _Vec = (None, None, None)
-        p = self.rows.pointing(ctx, tuple(model.SENSOR_AXIS_BODY), ctx["sun"], zero, zero)  # type: ignore[arg-type]
-        r_E: _Vec = (-A[0][0], -A[1][0], -A[2][0])  # type: ignore[index]
-        pc = self.rows.pointing_body(ctx, tuple(model.ANTENNA_AXIS_BODY), r_E, zero, zero)
-        h[:, _EZ] = p.theta - L.exclusion_angle_rad
-        h[:, _COMM] = L.comm_angle_rad - pc.theta
+        q1, q2, q3, q4 = X[0], X[1], X[2], X[3]
+        s11, s22, s33, s44 = q1 * q1, q2 * q2, q3 * q3, q4 * q4
+        A0 = (s11 - s22 - s33 + s44, 2.0 * (q1 * q2 - q3 * q4), 2.0 * (q1 * q3 + q2 * q4))  # column 0
+        A1 = (2.0 * (q1 * q2 + q3 * q4), -s11 + s22 - s33 + s44, 2.0 * (q2 * q3 - q1 * q4))  # column 1
+        th = X[THETA_S]
+        cs, sn = np.cos(th), np.sin(th)
+        r_S: _Vec = tuple(A0[i] * cs + A1[i] * sn for i in range(3))  # type: ignore[assignment]
+        r_E: _Vec = (-A0[0], -A0[1], -A0[2])
+        h[:, _EZ] = _theta(tuple(model.SENSOR_AXIS_BODY), r_S) - L.exclusion_angle_rad  # type: ignore[arg-type]
+        h[:, _COMM] = L.comm_angle_rad - _theta(tuple(model.ANTENNA_AXIS_BODY), r_E)  # type: ignore[arg-type]
         h[:, _TEMP] = L.temperature_max_K - X[TEMP]
         h[:, _BATT] = X[ENERGY] - L.energy_min_J
         for a in range(3):
@@ -818,7 +919,8 @@ class BatchSimulator:
         for k in range(steps):
             t = k * dt
             Xk = state(Y, psi, th)
-            u, h, status, failed, slack = self._filter(Xk)
+            u, status, failed, slack = self._filter(Xk)
+            h = self._sample_h(Xk)
             np.minimum(min_h, h, out=min_h)
             mark(h, t, True)
             qp_steps += status > 0
@@ -830,9 +932,9 @@ class BatchSimulator:
             lim = cfg.limits.wheel_accel_max_rad_s2
             u = np.clip(np.clip(u, -lim, lim), -lim, lim)  # ClosedLoop saturates, integrate saturates again
 
-            def on_sub(j: int, Ys: Array, ps: Array, ts: Array, t: float = t) -> None:
+            def on_sub(j: int, Ys: Array, ps: Array, ts: Array, cs: Array, sn: Array, t: float = t) -> None:
                 if j < cfg.substeps - 1:
-                    sel, hs = self._substep_h(Ys, ps, ts)
+                    sel, hs = self._substep_h(Ys, ps, ts, cs, sn)
                     if sel.size:
                         mark(hs, t + sub_t[j], False, sel)
 
@@ -842,10 +944,7 @@ class BatchSimulator:
             if progress is not None:
                 progress(k + 1)
         Xn = state(Y, psi, th)
-        if self.solver == "proxsuite":
-            h_end = self.filter.constraints.safety_values(Xn.T)
-        else:
-            h_end = self.rows.evaluate(Xn)[0]
+        h_end = self._sample_h(Xn)
         np.minimum(min_h, h_end, out=min_h)
         mark(h_end, steps * dt, True)
         return BatchOutcome(viol_s, viol_sub, first, min_h, qp_steps, fb_steps, qp_fail, max_slack,

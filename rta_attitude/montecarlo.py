@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import itertools
 import json
 import logging
 import math
@@ -42,6 +43,7 @@ from . import config as config_module
 from .batch import SOLVERS, BatchOutcome, BatchSimulator
 from .constraints import ConstraintSet
 from .errors import ConfigError, RtaError
+from .metrics import H_UNITS
 from .params import CONSTRAINT_NAMES, PRESETS, Config
 from .state import ENERGY, OMEGA, PSI, STATE_NAMES, STATE_SIZE, TEMP, THETA_S, Q
 
@@ -109,7 +111,7 @@ def rejected(x: Array, cfg: Config) -> NDArray[np.bool_]:
     """(n,) True where an enabled constraint has h, Psi_0 or Psi_1 < 0 at x (n, 19)."""
     cs = ConstraintSet.from_config(cfg)
     t = cs.evaluate(x)
-    on = cs.enabled
+    on = cs.enabled.astype(bool)
     return np.any(((t.h < 0) | (t.psi0 < 0) | (t.psi1 < 0)) & on, axis=1)
 
 
@@ -197,7 +199,7 @@ def _merge(parts: list[tuple[int, BatchOutcome]]) -> BatchOutcome:
 
 def _split(runs: int, chunks: int) -> list[tuple[int, int]]:
     edges = np.linspace(0, runs, chunks + 1).round().astype(int)
-    return [(int(a), int(b)) for a, b in zip(edges[:-1], edges[1:]) if b > a]
+    return [(int(a), int(b)) for a, b in itertools.pairwise(edges) if b > a]
 
 
 def run_local(cfg: Config, x0: Array, duration_s: float, workers: int, solver: str = "active-set",
@@ -210,7 +212,6 @@ def run_local(cfg: Config, x0: Array, duration_s: float, workers: int, solver: s
     total = runs * steps
     bar = _progress_bar(total, progress)
     if workers <= 1:
-        done = [0]
 
         def tick_for(n: int) -> Callable[[int], None]:
             last = [0]
@@ -221,7 +222,6 @@ def run_local(cfg: Config, x0: Array, duration_s: float, workers: int, solver: s
             return tick
 
         parts = [run_chunk(t, tick_for(t.x0.shape[0])) for t in tasks]
-        del done
         bar.close()
         return _merge(parts)
     ctx = mp.get_context("fork" if sys.platform.startswith("linux") else "spawn")
@@ -252,9 +252,10 @@ def run_dask(cfg: Config, x0: Array, duration_s: float, scheduler: str | Any, so
     except ImportError:  # pragma: no cover - dask is in requirements.txt
         raise RtaError("the dask backend needs the 'distributed' package (pip install 'dask[distributed]')") from None
     runs = x0.shape[0]
-    tasks = [ChunkTask(cfg, solver, x0[a:b], duration_s, a) for a, b in _split(runs, max(1, math.ceil(runs / chunk_runs)))]
+    chunks = _split(runs, max(1, math.ceil(runs / chunk_runs)))
+    tasks = [ChunkTask(cfg, solver, x0[a:b], duration_s, a) for a, b in chunks]
     own = not isinstance(scheduler, Client)
-    client = Client(scheduler) if own else scheduler
+    client: Client = Client(scheduler) if own else scheduler  # type: ignore[assignment]
     try:
         futures = client.map(run_chunk, tasks, pure=False)
         steps = round(duration_s / cfg.filter.sample_time_s)
@@ -376,7 +377,7 @@ def unavoidable(x0: Array, cfg: Config, duration_s: float = math.inf) -> dict[st
     T = x0[:, TEMP].copy()
     T_peak = T.copy()
     horizon = min(math.pi / min(rate, Omega), duration_s)
-    for k in range(int(math.ceil(horizon / CLASSIFY_STEP_S))):
+    for k in range(math.ceil(horizon / CLASSIFY_STEP_S)):
         t = k * CLASSIFY_STEP_S
         q_min = (solar * np.maximum(0.0, np.cos(np.minimum(th_s0 + rate * t, np.pi)))
                  + earth_coeff * env.earth_view_factor * np.maximum(0.0, np.cos(np.minimum(th_e0 + Omega * t, np.pi))))
@@ -461,7 +462,7 @@ class MonteCarloResult:
 
 def _shares(result: MonteCarloResult, substeps: bool) -> dict[str, Any]:
     v = (result.outcome.violated_substeps if substeps else result.outcome.violated_samples) & result.counted
-    failed = v.any(axis=1)
+    failed = np.asarray(v.any(axis=1), dtype=bool)
     nf = int(failed.sum())
     n = len(failed)
     per_run = v[failed].sum(axis=1)
@@ -489,6 +490,8 @@ def summary(result: MonteCarloResult) -> dict[str, Any]:
                              "violated_runs_incl_substeps": int(o.violated_substeps[:, i].sum()),
                              "max_slack_rad": float(o.max_comm_slack.max()) if len(o.max_comm_slack) else 0.0}
     unrec = result.unrecoverable & failed
+    short = failed & ~result.unrecoverable
+    steps = round(result.duration_s / result.cfg.filter.sample_time_s)
     return {
         "paper": PAPER_RESULTS,
         "at_samples": _shares(result, False),
@@ -497,14 +500,20 @@ def summary(result: MonteCarloResult) -> dict[str, Any]:
         "classification": {
             "failed": int(failed.sum()),
             "physically_unrecoverable": int(unrec.sum()),
-            "filter_shortfall": int((failed & ~result.unrecoverable).sum()),
+            "filter_shortfall": int(short.sum()),
+            "shortfall_with_qp_failure": int((short & (o.fallback_steps > 0)).sum()),
+            "shortfall_without_qp_failure": int((short & (o.fallback_steps == 0)).sum()),
+            "worst_violation_without_qp_failure": {
+                name: float(o.min_h_samples[short & (o.fallback_steps == 0), i].min())
+                for i, name in enumerate(CONSTRAINT_NAMES)
+                if result.counted[i] and np.any(o.violated_samples[short & (o.fallback_steps == 0), i])},
+            "worst_violation_units": {name: H_UNITS[name] for name in CONSTRAINT_NAMES},
             "by_rule": {r: int(sum(1 for k in np.flatnonzero(failed) if r in result.rules[k].split(";")))
                         for r in UNRECOVERABLE_RULES},
         },
         "filter": {
             "qp_state_steps": int(o.qp_steps.sum()),
-            "qp_share": float(o.qp_steps.sum() / (len(failed) * round(result.duration_s / result.cfg.filter.sample_time_s)))
-            if len(failed) else 0.0,
+            "qp_share": float(o.qp_steps.sum() / (len(failed) * steps)) if len(failed) else 0.0,
             "fallback_state_steps": int(o.fallback_steps.sum()),
             "runs_with_fallback": int((o.fallback_steps > 0).sum()),
             "qp_failures": int(o.qp_failures.sum()),
@@ -551,6 +560,10 @@ def format_table(s: dict[str, Any]) -> str:
     lines.append(f"failed runs (at samples): {c['failed']} = {c['physically_unrecoverable']} physically unrecoverable "
                  f"+ {c['filter_shortfall']} filter shortfall  (rules: "
                  + ", ".join(f"{k} {v}" for k, v in c["by_rule"].items()) + ")")
+    worst = ", ".join(f"{k} {v:.3g} {c['worst_violation_units'][k]}"
+                      for k, v in c["worst_violation_without_qp_failure"].items())
+    lines.append(f"  shortfalls: {c['shortfall_with_qp_failure']} with an infeasible QP (fallback), "
+                 f"{c['shortfall_without_qp_failure']} with every QP feasible (sampled data; worst h: {worst or '-'})")
     lines.append(f"filter: QP in {f['qp_share']:.1%} of state-steps, {f['qp_failures']} QP failures in "
                  f"{f['runs_with_qp_failure']} runs, {f['fallback_state_steps']} fallback steps "
                  f"({f['fallback_policy']}) in {f['runs_with_fallback']} runs; solver {f['solver']}")
@@ -561,9 +574,14 @@ def write_outputs(result: MonteCarloResult, out: Path, plot: bool = True) -> dic
     """summary.json, runs.csv and (optionally) initial_conditions.png in out. Returns the paths."""
     out.mkdir(parents=True, exist_ok=True)
     s = summary(result)
-    paths = {"json": out / "summary.json", "csv": out / "runs.csv"}
+    paths = {"json": out / "summary.json", "csv": out / "runs.csv", "npz": out / "outcome.npz"}
     paths["json"].write_text(json.dumps(s, indent=2) + "\n")
     o = result.outcome
+    np.savez_compressed(paths["npz"], x0=result.x0, redraws=result.redraws, unrecoverable=result.unrecoverable,
+                        constraint_names=np.array(CONSTRAINT_NAMES), state_names=np.array(STATE_NAMES),
+                        **{k: getattr(o, k) for k in ("violated_samples", "violated_substeps", "first_violation_s",
+                                                      "min_h_samples", "qp_steps", "fallback_steps", "qp_failures",
+                                                      "max_comm_slack", "x_final")})
     failed = result.failed()
     failed_sub = result.failed(substeps=True)
     with paths["csv"].open("w", newline="") as fh:
@@ -577,8 +595,9 @@ def write_outputs(result: MonteCarloResult, out: Path, plot: bool = True) -> dic
             vb = [n for i, n in enumerate(CONSTRAINT_NAMES) if o.violated_substeps[k, i]]
             fv = o.first_violation_s[k][result.counted]
             first = float(np.nanmin(fv)) if np.any(~np.isnan(fv)) else ""
+            rules = result.rules[k] if failed[k] else ""
             w.writerow([k, *[repr(float(v)) for v in result.x0[k, :13]], int(result.redraws[k]), int(failed[k]),
-                        int(failed_sub[k]), int(result.unrecoverable[k] and failed[k]), result.rules[k] if failed[k] else "",
+                        int(failed_sub[k]), int(result.unrecoverable[k] and failed[k]), rules,
                         ";".join(vs), ";".join(vb), first, int(o.qp_steps[k]), int(o.fallback_steps[k]),
                         int(o.qp_failures[k]), repr(float(o.max_comm_slack[k])),
                         *[repr(float(v)) for v in o.min_h_samples[k]]])

@@ -188,6 +188,17 @@ def test_batch_runs_equal_single_runs(cfg: Config, states: np.ndarray) -> None:
         np.testing.assert_array_equal(traj.h_substep_min.min(axis=0) < 0, out.violated_substeps[k])
 
 
+def test_batch_run_through_the_soften_fallback_equals_single_run(cfg: Config) -> None:
+    """Run 710 of seed 1 hits infeasible QPs (soften fallback) within 120 s."""
+    x, _ = montecarlo.sample_initial_states(1000, 1, cfg)
+    x0 = x[[3, 710]]
+    out = batch.BatchSimulator(cfg).run(x0, 120.0, record=True)
+    assert out.fallback_steps[1] > 0 and out.qp_failures[1] == out.fallback_steps[1]
+    traj = _single_run(cfg, x0[1], 120.0, "active-set")
+    assert np.max(np.abs(traj.x - out.trajectory[1])) <= 1e-9
+    assert np.count_nonzero(traj.status == "fallback") == out.fallback_steps[1]
+
+
 def test_full_length_run_equals_single_run(cfg: Config, states: np.ndarray) -> None:
     """One whole 2000 s run inside a small batch against the single-run loop."""
     x0 = states[30:33]
@@ -217,8 +228,10 @@ def test_dask_backend_equals_local_backend(cfg: Config, states: np.ndarray) -> N
     distributed = pytest.importorskip("distributed")
     x0 = states[:10]
     local = montecarlo.run_local(cfg, x0, 40.0, workers=1)
-    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=False, host="127.0.0.1",
-                                  dashboard_address=None) as cluster, distributed.Client(cluster) as client:
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=False, protocol="tcp://",
+                                  host="127.0.0.1", dashboard_address=None) as cluster, \
+            distributed.Client(cluster) as client:
+        assert cluster.scheduler_address.startswith("tcp://127.0.0.1:")
         remote = montecarlo.run_dask(cfg, x0, 40.0, client, chunk_runs=4)
         by_address = montecarlo.run_dask(cfg, x0, 40.0, cluster.scheduler_address, chunk_runs=6)
     for name in ("violated_samples", "violated_substeps", "first_violation_s", "min_h_samples", "qp_steps",

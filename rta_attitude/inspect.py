@@ -1,0 +1,383 @@
+"""Live topic inspection for pip-only installs (no ros2cli): list topics, echo one as YAML.
+
+    rta-attitude topics [--window S] [--no-rates]
+    rta-attitude echo TOPIC [TYPE] [--once | --count N] [--timeout S] [--no-arr] [--full-length]
+
+`topics` prints every topic in the ROS graph (this ROS_DOMAIN_ID) with its type, the number of
+publishers and subscribers (this tool's own endpoints left out) and the rate at which messages
+arrive, measured over a window of wall-clock time with raw (undecoded) best-effort subscriptions:
+best effort never pushes back on a reliable keep-all writer, so inspecting a lockstep run does not
+slow it down.
+
+`echo` prints each message as YAML followed by `---`, in the layout of `ros2 topic echo`
+(rosidl_runtime_py's message_to_yaml, which is not on PyPI, rewritten here from
+`get_fields_and_field_types()`): fields in declaration order, nested messages as mappings, arrays
+as block lists, `byte`/`char` values as one-character strings, strings and arrays longer than
+`--truncate-length` (default 128) cut with `...`. Topic names without a leading `/` are taken from
+the root namespace, as ros2 does (`echo rta/state`, or `echo /rta/state`). The subscription's QoS
+adapts to the publishers as ros2cli's does: reliable if every publisher is, transient-local if every
+publisher is (then the latched history is shown too).
+
+Both stop cleanly on SIGINT/SIGTERM; a topic that does not appear within `--timeout` is one
+`ERROR:` line.
+"""
+
+from __future__ import annotations
+
+import argparse
+import array
+import math
+import os
+import sys
+import time
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+from .errors import RtaError
+from .replay import message_class, ros_node
+
+DEFAULT_TRUNCATE_LENGTH = 128
+"""Longest string or array printed in full by `echo` (ros2 topic echo's default)."""
+DISCOVERY_SETTLE_S = 1.0
+"""`topics`: the graph counts as discovered when it has not changed for this long. Measured here:
+another participant's endpoints appear 0.05-2.5 s after start, and those of several participants
+up to 0.7 s apart."""
+RATE_QOS_DEPTH = 100
+
+
+# ----------------------------------------------------------------------------- message -> YAML
+
+
+def _convert(value: Any, truncate_length: int | None, no_arr: bool) -> Any:
+    if isinstance(value, bytes):  # `byte` fields and uint8[]/byte[] arrays arrive as bytes
+        text = "".join(chr(c) for c in value)
+        if truncate_length is not None and len(value) > truncate_length:
+            text = "".join(chr(c) for c in value[:truncate_length]) + "..."
+        return text
+    if isinstance(value, str):
+        if truncate_length is not None and len(value) > truncate_length:
+            return value[:truncate_length] + "..."
+        return value
+    if hasattr(value, "get_fields_and_field_types"):
+        return message_to_dict(value, truncate_length, no_arr)
+    if isinstance(value, (list, tuple, array.array, np.ndarray)):
+        if no_arr:
+            return f"<sequence, length: {len(value)}>"
+        items = list(value)
+        cut = truncate_length is not None and len(items) > truncate_length
+        if cut:
+            items = items[:truncate_length]
+        out = [_convert(v, truncate_length, no_arr) for v in items]
+        return [*out, "..."] if cut else out
+    if isinstance(value, np.generic):
+        return value.item()
+    return value
+
+
+def message_to_dict(msg: Any, truncate_length: int | None = None, no_arr: bool = False) -> dict[str, Any]:
+    """A generated ROS message as nested dicts/lists of plain Python values, fields in order.
+
+    Args:
+        msg: an instance of a generated message class (has get_fields_and_field_types()).
+        truncate_length: cut longer strings and arrays (None: never).
+        no_arr: replace arrays by '<sequence, length: n>'.
+    """
+    return {name: _convert(getattr(msg, name), truncate_length, no_arr) for name in msg.get_fields_and_field_types()}
+
+
+def message_to_yaml(msg: Any, truncate_length: int | None = None, no_arr: bool = False) -> str:
+    """YAML text of a message as `ros2 topic echo` prints it (without the `---` separator)."""
+    import yaml
+
+    return yaml.safe_dump(message_to_dict(msg, truncate_length, no_arr), allow_unicode=True, width=sys.maxsize,
+                          sort_keys=False, default_flow_style=False)
+
+
+# ----------------------------------------------------------------------------- graph helpers
+
+
+def _node_name() -> str:
+    return f"_rta_attitude_inspect_{os.getpid()}"
+
+
+def _spin_for(executor: Any, context: Any, seconds: float, done: Callable[[], bool] = lambda: False) -> bool:
+    """Spin until `seconds` pass, `done()` is true or the context ends; True unless the context ended."""
+    deadline = time.monotonic() + seconds
+    while context.ok() and not done():
+        left = deadline - time.monotonic()
+        if left <= 0:
+            break
+        executor.spin_once(timeout_sec=min(left, 0.05))
+    return context.ok()
+
+
+def _foreign(infos: list[Any], node: Any) -> list[Any]:
+    """Endpoints that are not this tool's own node."""
+    return [i for i in infos if not (i.node_name == node.get_name() and i.node_namespace == node.get_namespace())]
+
+
+def _graph(node: Any) -> dict[str, tuple[str, int, int]]:
+    """topic -> (type, publishers, subscribers), this node's endpoints left out."""
+    out = {}
+    for topic, types in node.get_topic_names_and_types():
+        pubs = _foreign(node.get_publishers_info_by_topic(topic), node)
+        subs = _foreign(node.get_subscriptions_info_by_topic(topic), node)
+        if pubs or subs:
+            out[topic] = (", ".join(types), len(pubs), len(subs))
+    return out
+
+
+def _settled_graph(node: Any, executor: Any, limit_s: float) -> dict[str, tuple[str, int, int]]:
+    """The graph once another participant's endpoints are seen and have not changed for
+    DISCOVERY_SETTLE_S (at most `limit_s`; an empty graph takes all of it)."""
+    start = time.monotonic()
+    graph, changed = _graph(node), time.monotonic()
+    while node.context.ok() and time.monotonic() - start < limit_s:
+        _spin_for(executor, node.context, 0.05)
+        now = _graph(node)
+        if now != graph:
+            graph, changed = now, time.monotonic()
+        elif graph and time.monotonic() - changed >= DISCOVERY_SETTLE_S:
+            break
+    return graph
+
+
+def _executor(node: Any) -> Any:
+    from rclpy.executors import SingleThreadedExecutor
+
+    executor = SingleThreadedExecutor(context=node.context)
+    executor.add_node(node)
+    return executor
+
+
+def _check_seconds(name: str, value: float, allow_zero: bool = False) -> None:
+    if not (math.isfinite(value) and (value >= 0 if allow_zero else value > 0)):
+        raise RtaError(f"{name} must be a number of seconds {'>=' if allow_zero else '>'} 0, got {value}")
+
+
+# ----------------------------------------------------------------------------- topics
+
+
+def list_topics(node: Any, window_s: float, discovery_s: float, rates: bool) -> list[dict[str, Any]]:
+    """Rows {topic, type, publishers, subscribers, rate_hz, messages} for every topic in the graph.
+
+    rate_hz: messages per wall-clock second received over `window_s` (None: no message, or the type
+    is not installed, then `messages` is None too).
+    """
+    from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+    executor = _executor(node)
+    try:
+        graph = _settled_graph(node, executor, discovery_s)
+        stamps: dict[str, list[float]] = {}
+        if rates:
+            qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=RATE_QOS_DEPTH,
+                             reliability=ReliabilityPolicy.BEST_EFFORT, durability=DurabilityPolicy.VOLATILE)
+            for topic, (type_name, pubs, _) in graph.items():
+                if pubs == 0 or ", " in type_name:
+                    continue
+                try:
+                    cls = message_class(type_name)
+                except RtaError:
+                    continue
+                received: list[float] = []
+                stamps[topic] = received
+                node.create_subscription(cls, topic, lambda _data, r=received: r.append(time.monotonic()), qos,
+                                         raw=True)
+            _spin_for(executor, node.context, window_s)
+    finally:
+        executor.shutdown(timeout_sec=0.5)
+    rows = []
+    for topic, (type_name, pubs, subs) in sorted(graph.items()):
+        got = stamps.get(topic)
+        rate = None
+        if got is not None and len(got) >= 2 and got[-1] > got[0]:
+            rate = (len(got) - 1) / (got[-1] - got[0])
+        rows.append({"topic": topic, "type": type_name, "publishers": pubs, "subscribers": subs,
+                     "rate_hz": rate, "messages": None if got is None else len(got)})
+    return rows
+
+
+def format_topics(rows: list[dict[str, Any]], window_s: float | None) -> str:
+    """Fixed-width table of `list_topics` rows."""
+    tw = max([len("topic"), *(len(r["topic"]) for r in rows)]) + 2
+    yw = max([len("type"), *(len(r["type"]) for r in rows)]) + 2
+    head = f"{'topic':<{tw}}{'type':<{yw}}{'pubs':>5}{'subs':>6}"
+    if window_s is not None:
+        head += f"{'rate':>12}"
+    lines = [head]
+    for r in rows:
+        line = f"{r['topic']:<{tw}}{r['type']:<{yw}}{r['publishers']:>5}{r['subscribers']:>6}"
+        if window_s is not None:
+            if r["rate_hz"] is not None:
+                rate = f"{r['rate_hz']:.3g} Hz"
+            elif r["messages"] is None:
+                rate = "?" if r["publishers"] else "-"
+            else:
+                rate = f"{r['messages']} msg" if r["messages"] else "0 Hz"
+            line += f"{rate:>12}"
+        lines.append(line)
+    if window_s is not None:
+        lines.append(f"(rates: messages per wall-clock second over {window_s:g} s; ? = type not installed)")
+    if not rows:
+        lines.append(f"no topics found (ROS_DOMAIN_ID={os.environ.get('ROS_DOMAIN_ID', '0')})")
+    return "\n".join(lines)
+
+
+def _run_topics(args: argparse.Namespace) -> int:
+    _check_seconds("--window", args.window)
+    _check_seconds("--discovery", args.discovery)
+    try:
+        with ros_node(_node_name()) as node:
+            rows = list_topics(node, args.window, args.discovery, not args.no_rates)
+    except KeyboardInterrupt:
+        return 0
+    print(format_topics(rows, None if args.no_rates else args.window), flush=True)
+    return 0
+
+
+# ----------------------------------------------------------------------------- echo
+
+
+def resolve_topic(name: str) -> str:
+    """A user's topic name as an absolute name (relative names resolve from '/', as in ros2 topic echo).
+
+    Raises:
+        RtaError: an empty or malformed name.
+    """
+    text = name.strip()
+    full = text if text.startswith("/") else "/" + text
+    parts = full[1:].split("/")
+    if not text or not all(p and (p[0].isalpha() or p[0] == "_") and all(c.isalnum() or c == "_" for c in p)
+                           for p in parts):
+        raise RtaError(f"{name!r}: not a valid topic name")
+    return full
+
+
+def _echo_qos(node: Any, topic: str) -> Any:
+    """QoS adapted to the topic's publishers (ros2cli's rule)."""
+    from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+    infos = _foreign(node.get_publishers_info_by_topic(topic), node)
+    reliable = bool(infos) and all(i.qos_profile.reliability == ReliabilityPolicy.RELIABLE for i in infos)
+    latched = bool(infos) and all(i.qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL for i in infos)
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=RATE_QOS_DEPTH,
+                      reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
+                      durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE)
+
+
+def _topic_type(node: Any, executor: Any, topic: str, timeout_s: float) -> str:
+    found: list[str] = []
+
+    def known() -> bool:
+        types = dict(node.get_topic_names_and_types()).get(topic)
+        if types and _foreign(node.get_publishers_info_by_topic(topic), node):
+            found[:] = types
+        return bool(found)
+
+    _spin_for(executor, node.context, timeout_s, known)
+    if not found:
+        if not node.context.ok():
+            raise KeyboardInterrupt
+        live = sorted(t for t, _ in node.get_topic_names_and_types())
+        raise RtaError(f"topic {topic}: no publisher found within {timeout_s:g} s "
+                       f"(live topics: {', '.join(live) or 'none'})")
+    if len(found) > 1:
+        raise RtaError(f"topic {topic} has several types ({', '.join(found)}); pass the type to use")
+    return found[0]
+
+
+def echo(node: Any, topic: str, type_name: str | None, count: int | None, timeout_s: float,
+         truncate_length: int | None, no_arr: bool, out: Any = None) -> int:
+    """Print messages of `topic` as YAML + '---' until `count` are printed (None: until interrupted).
+
+    Returns:
+        The number of messages printed.
+
+    Raises:
+        RtaError: the topic does not appear, or (with a count) no message arrives, within timeout_s.
+    """
+    stream = out if out is not None else sys.stdout
+    executor = _executor(node)
+    printed = 0
+    try:
+        wait_start = time.monotonic()
+        if type_name is None:
+            type_name = _topic_type(node, executor, topic, timeout_s)
+        cls = message_class(type_name)
+
+        def show(msg: Any) -> None:
+            nonlocal printed
+            if count is not None and printed >= count:
+                return
+            stream.write(message_to_yaml(msg, truncate_length, no_arr) + "---\n")
+            stream.flush()
+            printed += 1
+
+        node.create_subscription(cls, topic, show, _echo_qos(node, topic))
+        if count is None:
+            while node.context.ok():
+                executor.spin_once(timeout_sec=0.1)
+        else:
+            left = max(0.0, timeout_s - (time.monotonic() - wait_start))
+            _spin_for(executor, node.context, left, lambda: printed >= count)
+            if printed < count and node.context.ok():
+                raise RtaError(f"topic {topic}: {printed} of {count} messages within {timeout_s:g} s")
+    finally:
+        executor.shutdown(timeout_sec=0.5)
+    return printed
+
+
+def _run_echo(args: argparse.Namespace) -> int:
+    _check_seconds("--timeout", args.timeout)
+    topic = resolve_topic(args.topic)
+    if args.message_type is not None:
+        message_class(args.message_type)  # check the type before starting ROS
+    count = 1 if args.once else args.count
+    if count is not None and count < 1:
+        raise RtaError(f"--count must be >= 1, got {count}")
+    truncate = None if args.full_length else args.truncate_length
+    try:
+        with ros_node(_node_name()) as node:
+            echo(node, topic, args.message_type, count, args.timeout, truncate, args.no_arr)
+    except (KeyboardInterrupt, BrokenPipeError):
+        pass
+    return 0
+
+
+# ----------------------------------------------------------------------------- CLI
+
+
+def add_arguments(parser: argparse.ArgumentParser, command: str) -> None:
+    """Arguments of `rta-attitude topics` and `rta-attitude echo`."""
+    if command == "topics":
+        parser.add_argument("--window", type=float, default=2.0, help="rate measurement window, s (default 2)")
+        parser.add_argument("--discovery", type=float, default=5.0,
+                            help="longest wait for other participants to be discovered, s (default 5)")
+        parser.add_argument("--no-rates", action="store_true", help="list types and counts only (faster)")
+        return
+    parser.add_argument("topic", help="topic name, e.g. /rta/state")
+    parser.add_argument("message_type", nargs="?", default=None,
+                        help="message type, e.g. sensor_msgs/msg/JointState (default: from the publishers)")
+    group = parser.add_mutually_exclusive_group()
+    group.add_argument("--once", action="store_true", help="print one message and exit")
+    group.add_argument("--count", type=int, default=None, help="print this many messages and exit")
+    parser.add_argument("--timeout", type=float, default=10.0,
+                        help="longest wait for the topic to appear and, with --once/--count, for its messages, s")
+    parser.add_argument("--truncate-length", type=int, default=DEFAULT_TRUNCATE_LENGTH,
+                        help=f"cut strings and arrays longer than this (default {DEFAULT_TRUNCATE_LENGTH})")
+    parser.add_argument("--full-length", action="store_true", help="never cut strings and arrays")
+    parser.add_argument("--no-arr", action="store_true", help="print array lengths instead of their contents")
+
+
+def run(args: argparse.Namespace) -> int:
+    """`rta-attitude topics` / `rta-attitude echo`."""
+    return _run_topics(args) if args.command == "topics" else _run_echo(args)
+
+
+__all__ = [
+    "add_arguments", "echo", "format_topics", "list_topics", "message_to_dict", "message_to_yaml",
+    "resolve_topic", "run",
+]  # fmt: skip

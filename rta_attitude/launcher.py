@@ -1,0 +1,415 @@
+"""`rta-attitude launch`: run a scenario as four ROS 2 nodes over DDS, record it, summarize it.
+
+    rta-attitude launch --scenario paper-example [--no-rta] [--preset robust|paper] [--realtime RTF]
+                        --bag run.mcap [--out DIR] [--duration S] [-p KEY=VALUE ...]
+
+Each node is its own OS process (`python -m rta_attitude.nodes.<node>`, so its own DDS
+participant), started with the same parameter file the core reads (`--params-file`) and the run's
+knobs as `-p` overrides; the namespace is set by remapping `__ns`. The launcher itself starts no
+ROS node. Sequence:
+
+1. check the inputs (parameter file, scenario, overrides, bag path) with the core loader;
+2. start the recorder, filter, controller and plant (children in their own sessions; output to
+   log files, `--verbose` shows it);
+3. wait for the plant to finish the scenario (it exits after its final `run_status`) and for the
+   recorder to close the bag (it exits once every expected message is in);
+4. stop the controller and filter with SIGINT (then SIGTERM; SIGKILL only as a last resort, which
+   is reported as an error), check that no child survives and that no Fast DDS file the children
+   used is left in /dev/shm (such files, when no live process maps them any more, are removed and
+   reported as an error);
+5. summary from the recorded bag (`rta_attitude.analysis`: states, commands and filter records as
+   recorded; minima between samples by re-integrating each recorded step), printed with
+   `metrics.format_summary` as `simulate` prints it, and written to `--out/summary.json` with a
+   `launch` section (wall times, deadline misses, state -> torque_cmd latency, exit codes).
+
+Ctrl-C stops the children cleanly. Returns 0 on a complete run, 1 otherwise.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import IO, Any
+
+import yaml
+
+from . import config as config_module
+from .errors import ConfigError, RtaError
+from .nodes import topics
+from .nodes.parameters import flatten, nest
+from .params import PRESETS, Config
+
+SHM_DIR = Path("/dev/shm")
+STOP_TIMEOUT_S = 10.0
+"""After SIGINT (and again after SIGTERM): how long a child may take to exit [s]."""
+POLL_S = 0.05
+SHM_SCAN_S = 0.5
+"""How often the launcher notes which /dev/shm files its children use [s]."""
+START_ORDER = (topics.RECORDER, topics.FILTER, topics.CONTROLLER, topics.PLANT)
+
+
+@dataclass
+class Child:
+    """One node process."""
+
+    role: str
+    proc: subprocess.Popen[bytes]
+    log_path: Path | None
+    log_file: IO[bytes] | None = None
+    signals: list[str] = field(default_factory=list)
+
+    @property
+    def name(self) -> str:
+        return topics.EXECUTABLES[self.role]
+
+
+# ----------------------------------------------------------------------------- arguments
+
+
+def add_arguments(parser: argparse.ArgumentParser, command: str = "launch") -> None:
+    """Arguments of `rta-attitude launch`."""
+    parser.add_argument("--scenario", default="paper-example", help="scenario in the parameter file")
+    parser.add_argument("--no-rta", action="store_true", help="filter node passes torque_des through (no RTA)")
+    parser.add_argument("--preset", choices=PRESETS, default=None, help="filter preset (default: the config's)")
+    parser.add_argument("--realtime", type=float, default=None, metavar="RTF",
+                        help="real-time stepping at this real-time factor (default: lockstep)")
+    parser.add_argument("--bag", type=Path, default=None,
+                        help="MCAP file to record (default: a temporary file, removed after the summary)")
+    parser.add_argument("--overwrite", action="store_true", help="replace an existing --bag file")
+    parser.add_argument("--out", type=Path, default=None, help="directory for summary.json and the node logs")
+    parser.add_argument("--duration", type=float, default=None, help="override the scenario duration, s")
+    parser.add_argument("-p", "--param", action="append", default=[], metavar="KEY=VALUE",
+                        help="override a parameter of the YAML or a node knob (YAML value), e.g. "
+                             "filter.fallback=hold; repeatable")
+    parser.add_argument("--config", type=Path, default=None, help="parameter YAML (default: the package's)")
+    parser.add_argument("--namespace", default=topics.DEFAULT_NAMESPACE, help="namespace of the nodes' topics")
+    parser.add_argument("--timeout", type=float, default=None,
+                        help="give up after this many seconds (default: from the scenario length)")
+    parser.add_argument("--verbose", action="store_true", help="show the nodes' log output")
+
+
+def _overrides(args: argparse.Namespace) -> dict[str, Any]:
+    """KEY=VALUE overrides (YAML-typed), plus --preset and --duration."""
+    out: dict[str, Any] = {}
+    for item in args.param:
+        key, sep, text = item.partition("=")
+        if not sep or not key.strip():
+            raise ConfigError(f"--param {item!r}: expected KEY=VALUE")
+        try:
+            out[key.strip()] = yaml.safe_load(text)
+        except yaml.YAMLError:
+            raise ConfigError(f"--param {item!r}: value is not valid YAML") from None
+    if args.preset is not None:
+        out["filter.preset"] = args.preset
+    return out
+
+
+def _ros_value(value: Any) -> str:
+    """A value as `-p name:=value` text (ROS parses it as YAML)."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, (int, float, list)):
+        return json.dumps(value)
+    return str(value)
+
+
+@dataclass(frozen=True)
+class Plan:
+    """What to run: checked configuration, scenario, and each node's command line."""
+
+    cfg: Config
+    scenario_key: str
+    config_path: Path
+    bag: Path
+    temporary_bag: bool
+    commands: dict[str, list[str]]
+    steps: int
+    timeout_s: float
+
+
+def plan(args: argparse.Namespace) -> Plan:
+    """Check every input and build the node command lines.
+
+    Raises:
+        ConfigError: bad parameter file, scenario, override or bag path.
+    """
+    params, path = config_module.read_parameters(args.config)
+    overrides = _overrides(args)
+    knob_names = {k.name for k in topics.KNOBS}
+    knobs = {k: v for k, v in overrides.items() if k in knob_names}
+    flat = dict(flatten(params))
+    probe = config_module.from_parameters(params, source=str(path))
+    scenario = probe.scenario(args.scenario)
+    key = scenario.name
+    if args.duration is not None:
+        if not args.duration > 0:
+            raise ConfigError(f"--duration must be > 0 s, got {args.duration}")
+        overrides[f"scenarios.{key}.duration_s"] = float(args.duration)
+    core = {k: v for k, v in overrides.items() if k not in knob_names}
+    flat.update(core)
+    cfg = config_module.from_parameters(nest(flat), source=str(path))
+    scenario = cfg.scenario(key)
+    if args.realtime is not None and not args.realtime > 0:
+        raise ConfigError(f"--realtime must be > 0, got {args.realtime}")
+    temporary = args.bag is None
+    bag = Path(tempfile.mkdtemp(prefix="rta_launch_")) / "run.mcap" if temporary else Path(args.bag)
+    if bag.exists() and not args.overwrite:
+        raise ConfigError(f"--bag {bag} exists (pass --overwrite to replace it)")
+    if not bag.parent.is_dir():
+        raise ConfigError(f"--bag {bag}: directory {bag.parent} does not exist")
+    dt = cfg.filter.sample_time_s
+    steps = round(scenario.duration_s / dt)
+    if args.timeout is not None:
+        timeout = float(args.timeout)
+    elif args.realtime is not None:
+        timeout = 60.0 + 1.5 * scenario.duration_s / args.realtime
+    else:
+        timeout = 60.0 + 0.1 * steps
+    rta = not args.no_rta
+    base = ["--ros-args", "--params-file", str(path), "-r", f"__ns:={args.namespace}",
+            "-p", f"config_file:={path}", "-p", f"scenario:={key}", "-p", f"rta:={_ros_value(rta)}",
+            "-p", "record:=true"]  # fmt: skip
+    for name, value in core.items():
+        base += ["-p", f"{name}:={_ros_value(value)}"]
+    per_role: dict[str, dict[str, Any]] = {
+        topics.PLANT: {"stepping": "realtime" if args.realtime is not None else "lockstep",
+                       **({"real_time_factor": float(args.realtime)} if args.realtime is not None else {})},
+        topics.CONTROLLER: {"use_sim_time": True},
+        topics.FILTER: {"use_sim_time": True},
+        topics.RECORDER: {"use_sim_time": True, "bag_path": str(bag), "bag_overwrite": bool(args.overwrite)},
+    }  # fmt: skip
+    commands = {}
+    for role in START_ORDER:
+        extra = dict(per_role[role])
+        extra.update({k: v for k, v in knobs.items() if any(k == kn.name for kn in topics.knobs_for(role))})
+        cmd = [sys.executable, "-m", topics.MODULES[role], *base]
+        for name, value in extra.items():
+            cmd += ["-p", f"{name}:={_ros_value(value)}"]
+        commands[role] = cmd
+    return Plan(cfg, key, path, bag, temporary, commands, steps, timeout)
+
+
+# ----------------------------------------------------------------------------- processes
+
+
+def _shm_files() -> set[str]:
+    try:
+        return {p.name for p in SHM_DIR.iterdir() if "fastrtps" in p.name or "fastdds" in p.name}
+    except OSError:
+        return set()
+
+
+def _mapped_shm(pids: list[int] | None = None) -> set[str]:
+    """Names of /dev/shm files that live processes (default: all) have mapped or open."""
+    names: set[str] = set()
+    for pid in (pids if pids is not None else [int(p) for p in os.listdir("/proc") if p.isdigit()]):
+        try:
+            with open(f"/proc/{pid}/maps") as f:
+                names.update(Path(line.split()[-1]).name for line in f if "/dev/shm/" in line)
+            for fd in os.listdir(f"/proc/{pid}/fd"):
+                target = os.readlink(f"/proc/{pid}/fd/{fd}")
+                if target.startswith("/dev/shm/"):
+                    names.add(Path(target).name)
+        except OSError:
+            continue
+    return names
+
+
+def stale_shm(ours: set[str]) -> list[str]:
+    """Fast DDS files in /dev/shm that the run's processes used and no live process uses now
+    (files of other DDS programs on the machine are never touched)."""
+    left = _shm_files() & ours
+    if not left:
+        return []
+    used = _mapped_shm()
+    return sorted(n for n in left if n not in used)
+
+
+def _start(role: str, cmd: list[str], log_dir: Path | None, env: dict[str, str]) -> Child:
+    log_path = log_dir / f"{topics.EXECUTABLES[role]}.log" if log_dir is not None else None
+    log_file = open(log_path, "wb") if log_path is not None else None  # closed by launch()
+    proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=log_file, stderr=subprocess.STDOUT if log_file
+                            else None, env=env, start_new_session=True)  # fmt: skip
+    return Child(role, proc, log_path, log_file)
+
+
+def _signal(child: Child, sig: signal.Signals) -> None:
+    if child.proc.poll() is None:
+        child.signals.append(sig.name)
+        try:
+            child.proc.send_signal(sig)
+        except ProcessLookupError:
+            pass
+
+
+def stop_children(children: list[Child], timeout_s: float = STOP_TIMEOUT_S) -> list[str]:
+    """SIGINT every live child, then SIGTERM, then SIGKILL; returns problems (one line each)."""
+    problems = []
+    for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGKILL):
+        alive = [c for c in children if c.proc.poll() is None]
+        if not alive:
+            break
+        if sig == signal.SIGKILL:
+            problems += [f"{c.name} ignored SIGINT and SIGTERM: killed (SIGKILL)" for c in alive]
+        for c in alive:
+            _signal(c, sig)
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline and any(c.proc.poll() is None for c in alive):
+            time.sleep(POLL_S)
+    for c in children:
+        try:
+            c.proc.wait(timeout=timeout_s)
+        except subprocess.TimeoutExpired:
+            problems.append(f"{c.name} (pid {c.proc.pid}) is still running")
+    return problems
+
+
+def _tail(child: Child, lines: int = 8) -> str:
+    if child.log_path is None or not child.log_path.exists():
+        return ""
+    text = child.log_path.read_text(errors="replace").strip().splitlines()
+    return "\n".join(f"    {line}" for line in text[-lines:])
+
+
+# ----------------------------------------------------------------------------- run
+
+
+def launch(p: Plan, log_dir: Path | None) -> tuple[list[str], dict[str, Any]]:
+    """Start the nodes, wait for the run, stop them. Returns (problems, facts for the summary)."""
+    env = dict(os.environ)
+    env.setdefault("AMENT_PREFIX_PATH", sys.prefix)
+    env["PYTHONUNBUFFERED"] = "1"
+    env.setdefault("RCUTILS_COLORIZED_OUTPUT", "0")
+    shm_before = _shm_files()
+    ours: set[str] = set()
+    last_scan = 0.0
+    children: list[Child] = []
+    problems: list[str] = []
+    interrupted: list[int] = []
+    previous = {s: signal.signal(s, lambda signum, frame: interrupted.append(signum))
+                for s in (signal.SIGINT, signal.SIGTERM)}
+    t0 = time.monotonic()
+    facts: dict[str, Any] = {}
+    try:
+        for role in START_ORDER:
+            children.append(_start(role, p.commands[role], log_dir, env))
+        by_role = {c.role: c for c in children}
+        plant, recorder = by_role[topics.PLANT], by_role[topics.RECORDER]
+        deadline = t0 + p.timeout_s
+        while True:
+            if interrupted:
+                problems.append("interrupted")
+                break
+            failed = [c for c in children if c.proc.poll() not in (None, 0)]
+            if failed:
+                for c in failed:
+                    problems.append(f"{c.name} exited with code {c.proc.returncode}" +
+                                    (f":\n{_tail(c)}" if _tail(c) else ""))
+                break
+            if plant.proc.poll() == 0 and "plant_s" not in facts:
+                facts["plant_s"] = time.monotonic() - t0
+            if plant.proc.poll() == 0 and recorder.proc.poll() == 0:
+                break
+            if time.monotonic() > deadline:
+                problems.append(f"timed out after {p.timeout_s:g} s")
+                break
+            if time.monotonic() - last_scan > SHM_SCAN_S:  # which Fast DDS files are the run's
+                last_scan = time.monotonic()
+                ours |= (_mapped_shm([c.proc.pid for c in children if c.proc.poll() is None]) - shm_before)
+            time.sleep(POLL_S)
+        facts["run_s"] = time.monotonic() - t0
+    finally:
+        problems += stop_children(children)
+        for s, handler in previous.items():
+            signal.signal(s, handler)
+        for c in children:
+            if c.log_file is not None:
+                c.log_file.close()
+    facts["exit_codes"] = {c.name: c.proc.returncode for c in children}
+    facts["signals"] = {c.name: c.signals for c in children if c.signals}
+    stale = stale_shm(ours)
+    if stale:
+        problems.append(f"Fast DDS files left in /dev/shm (removed): {', '.join(stale)}")
+        for name in stale:
+            try:
+                (SHM_DIR / name).unlink()
+            except OSError:
+                pass
+    facts["shm_clean"] = not stale
+    return problems, facts
+
+
+def run(args: argparse.Namespace) -> int:
+    """`rta-attitude launch`: see the module docstring."""
+    from .analysis import load_run, summarize_run
+    from .bag import read_bag
+    from .metrics import format_summary
+    from .nodes.convert import run_status_from_msg
+
+    p = plan(args)
+    out: Path | None = args.out
+    log_dir = None
+    if out is not None:
+        log_dir = out / "logs"
+        log_dir.mkdir(parents=True, exist_ok=True)
+    elif not args.verbose:
+        log_dir = Path(tempfile.mkdtemp(prefix="rta_launch_logs_"))
+    mode = f"realtime x{args.realtime:g}" if args.realtime is not None else "lockstep"
+    print(f"launch {p.scenario_key}: {p.steps} steps, {mode}, rta={'off' if args.no_rta else 'on'}, "
+          f"namespace {args.namespace}, bag {p.bag}", flush=True)
+    problems, facts = launch(p, log_dir)
+    for line in problems:
+        print(f"ERROR: {line}", file=sys.stderr)
+    if problems and (not p.bag.exists() or facts["exit_codes"].get(topics.EXECUTABLES[topics.PLANT]) != 0):
+        if log_dir is not None:
+            print(f"node logs: {log_dir}", file=sys.stderr)
+        return 1
+    status = read_bag(p.bag, topics=[f"{args.namespace.rstrip('/')}/{topics.RUN_STATUS}"])
+    run_values: dict[str, Any] = {}
+    if status.messages:
+        state, run_values = run_status_from_msg(status.messages[-1].message)
+        run_values = {"run_state": state, **{k: v for k, v in run_values.items()
+                                             if not k.startswith(topics.EXPECTED_PREFIX)}}
+    bag_run = load_run(p.bag, p.cfg, args.namespace, p.scenario_key)
+    summary = summarize_run(bag_run, p.cfg)
+    summary["launch"] = {**facts, "mode": mode, "bag": str(p.bag), "problems": problems, **run_values}
+    print(format_summary(summary))
+    lat = run_values.get("latency_median_s")
+    extra = f", state -> torque_cmd median {lat * 1e3:.2f} ms, p99 {run_values['latency_p99_s'] * 1e3:.2f} ms" \
+        if isinstance(lat, float) else ""
+    loop = run_values.get("wall_time_s")
+    loop_text = f"loop {loop:.1f} s" if isinstance(loop, float) else "loop ?"
+    print(f"DDS run, 4 processes: {loop_text} for {p.steps} steps ({facts['run_s']:.1f} s with start-up and "
+          f"shutdown){extra}; deadline misses {run_values.get('deadline_misses', 0)}; re-integration residual "
+          f"{bag_run.reintegration_residual:.2g}")
+    if out is not None:
+        (out / "summary.json").write_text(json.dumps(summary, indent=2, default=str) + "\n")
+        print(f"wrote {out / 'summary.json'}, bag {p.bag}, logs {log_dir}")
+    if p.temporary_bag:
+        p.bag.unlink(missing_ok=True)
+        p.bag.parent.rmdir()
+    return 1 if problems else 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    """`python -m rta_attitude.launcher ...` (the same as `rta-attitude launch ...`)."""
+    parser = argparse.ArgumentParser(prog="rta-attitude launch", description=__doc__.split("\n")[0])
+    add_arguments(parser)
+    args = parser.parse_args(argv)
+    try:
+        return run(args)
+    except RtaError as exc:
+        print(f"ERROR: {exc}", file=sys.stderr)
+        return 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

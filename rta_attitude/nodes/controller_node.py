@@ -1,0 +1,77 @@
+"""pd_controller_node: state -> torque_des, the paper's primary controller (controller.pd_command).
+
+Reference q_c: the scenario's command schedule (from the parameter file, evaluated at the state's
+stamp, as ClosedLoop does), unless an `attitude_command` arrived: an operator command is in force
+from its stamp on (a stamp in the future waits until sim time reaches it) and replaces the
+schedule from then on. Scenarios with `controller: none` publish zero torque.
+
+The torque crosses DDS: tau_des = model.wheel_accel_to_torque(u_des), stamped with the state's
+stamp.
+"""
+
+from __future__ import annotations
+
+import bisect
+import sys
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from .. import model
+from ..controller import pd_command, zero_command
+from ..errors import MessageError
+from . import convert, topics
+from .spin import RtaNode, run
+
+
+class ControllerNode(RtaNode):
+    """The PD attitude controller; see the module docstring."""
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__(topics.CONTROLLER, **kwargs)
+        self.pd = self.scenario.controller == "pd"
+        self.overrides: list[tuple[int, np.ndarray]] = []  # (stamp ns, q_c), sorted by stamp
+        self.rejected = 0
+        spec = topics.TOPICS[topics.TORQUE_DES]
+        pub = self.create_publisher(topics.msg_class(spec.type_name), spec.name, topics.qos_profile(spec.qos))
+        self.out = self.gate(topics.TORQUE_DES, pub)
+        for name, callback in ((topics.STATE, self._on_state), (topics.ATTITUDE_COMMAND, self._on_command)):
+            spec = topics.TOPICS[name]
+            self.create_subscription(topics.msg_class(spec.type_name), spec.name, callback,
+                                     topics.qos_profile(spec.qos))
+        self.get_logger().info(f"scenario {self.scenario.name}: controller {self.scenario.controller}")
+
+    def reference(self, t_ns: int) -> np.ndarray:
+        """q_c (4,) in force at t: the latest operator command stamped <= t, else the schedule."""
+        i = bisect.bisect_right([s for s, _ in self.overrides], t_ns)
+        if i > 0:
+            return self.overrides[i - 1][1]
+        return self.scenario.command_at(t_ns / convert.NS_PER_S)
+
+    def _on_command(self, msg: Any) -> None:
+        try:
+            t_ns, q = convert.quaternion_from_msg(msg)
+        except MessageError as exc:
+            self.get_logger().warning(f"attitude_command rejected ({exc})", throttle_duration_sec=5.0)
+            return
+        bisect.insort(self.overrides, (t_ns, q), key=lambda item: item[0])
+        self.get_logger().info(f"attitude command {np.round(q, 4).tolist()} from t = {t_ns / convert.NS_PER_S:g} s")
+
+    def _on_state(self, msg: Any) -> None:
+        try:
+            t_ns, x = convert.state_from_msg(msg)
+        except MessageError as exc:
+            self.rejected += 1
+            self.get_logger().warning(f"state rejected ({exc})", throttle_duration_sec=5.0)
+            return
+        u_des = pd_command(x, self.reference(t_ns), self.cfg) if self.pd else zero_command(x)
+        self.out.publish(convert.torque_msg(model.wheel_accel_to_torque(u_des, self.cfg), t_ns))
+
+
+def main(args: Sequence[str] | None = None) -> None:
+    """Console script `pd_controller_node` (`ros2 run rta_attitude pd_controller_node --ros-args ...`)."""
+    sys.exit(run(ControllerNode, args, topics.NODE_NAMES[topics.CONTROLLER]))
+
+if __name__ == "__main__":
+    main()

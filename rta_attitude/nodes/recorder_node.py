@@ -1,0 +1,158 @@
+"""bag_recorder_node: every topic of the run (topics.recorded) into one MCAP file that follows
+rosbag2's conventions (rta_attitude.bag.BagWriter).
+
+Messages are recorded as rosbag2 does, as the serialized CDR bytes received (raw subscriptions, no
+decode and re-encode), with log and publish time = the message's own stamp (sim time), read from the
+leading header stamp of the bytes. Channels carry the writers' offered QoS and the type hash.
+
+At close the recorder adds an MCAP metadata record `rta_attitude` with the run's facts (scenario,
+rta, preset, config, duration_s, dt_s, namespace, and the final run_status values such as stepping
+and deadline misses), which `rta-attitude analyze` reads.
+
+End: after run_status `done` the recorder waits until every topic with a known final count
+(`expected:<topic>` in run_status) has it, and, for topics without one (real-time runs), until no
+message came for `drain_quiet_s`; at most `drain_timeout_s`. Then it closes the bag and, with
+`exit_when_done`, exits. SIGINT/SIGTERM close the bag too (whatever was received is kept).
+"""
+
+from __future__ import annotations
+
+import sys
+from collections.abc import Sequence
+from functools import partial
+from typing import Any
+
+from rclpy.serialization import deserialize_message
+from rclpy.timer import Timer
+
+from ..bag import BagWriter, Qos
+from ..errors import ConfigError, MessageError
+from . import convert, topics
+from .spin import RtaNode, run
+
+DRAIN_POLL_S = 0.02
+METADATA_NAME = "rta_attitude"
+
+
+def add_metadata(bag: BagWriter, name: str, data: dict[str, str]) -> None:
+    """Add an MCAP metadata record (BagWriter.add_metadata when it exists; until then its writer)."""
+    add = getattr(bag, "add_metadata", None)
+    if add is not None:
+        add(name, data)
+    else:  # rta_attitude.bag has no public metadata API yet (see docs/ros_interface.md)
+        bag._writer.add_metadata(name, data)
+
+
+def bag_qos(spec: topics.QosSpec) -> Qos:
+    """The offered QoS profile recorded for `ros2 bag play` (rosbag2 metadata names)."""
+    return Qos(history=spec.history, depth=spec.depth, reliability=spec.reliability, durability=spec.durability)
+
+
+class RecorderNode(RtaNode):
+    """The bag recorder; see the module docstring."""
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__(topics.RECORDER, **kwargs)
+        path = self.knobs["bag_path"]
+        if not path:
+            self.destroy_node()
+            raise ConfigError("parameter bag_path is required (the .mcap file to write)")
+        self.bag: BagWriter | None = None
+        self.counts: dict[str, int] = {}
+        self.expected: dict[str, int] | None = None
+        self.run_values: dict[str, Any] = {}
+        self.rejected = 0
+        self._last_s = self.wall_now_s()
+        self._done_s = 0.0
+        self._drain: Timer | None = None
+        self.status_topic = self.resolve_topic_name(topics.RUN_STATUS)
+        self._status_type = topics.msg_class(topics.TOPICS[topics.RUN_STATUS].type_name)
+        specs = {self.resolve_topic_name(spec.name): spec for spec in topics.recorded(self.rta)}
+        for name, spec in specs.items():
+            self.counts[name] = 0
+            self.create_subscription(topics.msg_class(spec.type_name), spec.name, partial(self._on_message, name),
+                                     topics.qos_profile(spec.qos), raw=True)
+        # the file is created last, so a node that fails to start leaves no half-written bag
+        bag = BagWriter(path, overwrite=self.knobs["bag_overwrite"])
+        for name, spec in specs.items():
+            bag.add_topic(name, spec.type_name, bag_qos(spec.qos))
+        self.bag = bag
+        self.get_logger().info(f"recording {len(self.counts)} topics to {path}")
+
+    def _on_message(self, topic: str, data: bytes) -> None:
+        if self.bag is None:
+            return
+        try:
+            t_ns = convert.cdr_stamp_ns(data)
+        except MessageError as exc:
+            self.rejected += 1
+            self.get_logger().warning(f"{topic}: not recorded ({exc})", throttle_duration_sec=5.0)
+            return
+        self.bag.write(topic, data, t_ns)
+        self.counts[topic] += 1
+        self._last_s = self.wall_now_s()
+        if topic == self.status_topic:
+            self._on_status(data)
+
+    def _on_status(self, data: bytes) -> None:
+        try:
+            state, values = convert.run_status_from_msg(deserialize_message(data, self._status_type))
+        except MessageError as exc:
+            self.get_logger().warning(f"run_status ignored ({exc})")
+            return
+        self.run_values = {"run_state": state, **{k: v for k, v in values.items()
+                                                  if not k.startswith(topics.EXPECTED_PREFIX)}}
+        if state == topics.RUN_RUNNING:
+            return
+        self.expected = {k[len(topics.EXPECTED_PREFIX):]: int(v) for k, v in values.items()
+                         if k.startswith(topics.EXPECTED_PREFIX)}
+        self._done_s = self.wall_now_s()
+        if self._drain is None:
+            self._drain = self.wall_timer(DRAIN_POLL_S, self._check_drained)
+
+    def _check_drained(self) -> None:
+        if self.expected is None:
+            return
+        now = self.wall_now_s()
+        short = {t: (self.counts.get(t, 0), n) for t, n in self.expected.items() if self.counts.get(t, 0) < n}
+        quiet = all(t in self.expected for t in self.counts) or now - self._last_s >= self.knobs["drain_quiet_s"]
+        timed_out = now - self._done_s > self.knobs["drain_timeout_s"]
+        if (short or not quiet) and not timed_out:
+            return
+        if short:
+            self.get_logger().warning("closing with missing messages: " + ", ".join(
+                f"{t} {have}/{want}" for t, (have, want) in sorted(short.items())))
+        self.close()
+        if self.knobs["exit_when_done"]:
+            self.finish()
+
+    def metadata(self) -> dict[str, str]:
+        """The `rta_attitude` metadata record: run facts as strings."""
+        facts: dict[str, Any] = {
+            "scenario": self.scenario.name, "rta": self.rta, "preset": self.cfg.filter.preset,
+            "config": self.cfg.source, "duration_s": float(self.scenario.duration_s),
+            "dt_s": float(self.cfg.filter.sample_time_s), "namespace": self.get_namespace(),
+        }  # fmt: skip
+        facts.update({k: v for k, v in self.run_values.items() if k not in facts})
+        return {k: (str(v).lower() if isinstance(v, bool) else repr(v) if isinstance(v, float) else str(v))
+                for k, v in facts.items()}
+
+    def close(self) -> None:
+        """Finalize the bag (idempotent): metadata record, summary, footer."""
+        if self.bag is None:
+            return
+        bag, self.bag = self.bag, None
+        try:
+            add_metadata(bag, METADATA_NAME, self.metadata())
+        finally:
+            bag.close()
+        total = sum(self.counts.values())
+        self.get_logger().info(f"bag closed: {bag.path} ({total} messages, {self.rejected} rejected)")
+
+
+def main(args: Sequence[str] | None = None) -> None:
+    """Console script `bag_recorder_node` (`ros2 run rta_attitude bag_recorder_node --ros-args ...`)."""
+    sys.exit(run(RecorderNode, args, topics.NODE_NAMES[topics.RECORDER]))
+
+if __name__ == "__main__":
+    main()
