@@ -20,13 +20,14 @@ def _summary(traj, cfg=CFG):
 
 
 @pytest.fixture(scope="module")
-def robust():
-    return simulate(CFG, "paper-example", rta=True, preset="robust")
+def robust(paper_reference):
+    assert CFG.filter.preset == "robust"
+    return paper_reference[True]  # simulate(CFG, "paper-example", rta=True), shared by the session
 
 
 @pytest.fixture(scope="module")
-def no_rta():
-    return simulate(CFG, "paper-example", rta=False)
+def no_rta(paper_reference):
+    return paper_reference[False]
 
 
 def test_robust_rta_keeps_every_hard_constraint_at_every_substep(robust):
