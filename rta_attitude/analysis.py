@@ -530,7 +530,7 @@ def load_run(
     if overridden:
         notes.append(f"steps where the plant applied another torque than torque_cmd: {overridden} (real-time "
                      "deadline misses: held or zero torque); the series use what it applied")
-    from .simulation import integrate, saturate
+    from .simulation import integrate, saturate, substep_minima
 
     u = saturate(model.torque_to_wheel_accel(tau, run_cfg), run_cfg)
     des_missing = sum(c not in rec.torque_des for c in cmd_used)
@@ -558,12 +558,7 @@ def load_run(
         notes.append(f"re-integrating the recorded commands does not reproduce the recorded states (largest "
                      f"relative difference {residual:.3g}): minima between samples are estimates")
     h = constraints.safety_values(x)
-    hs = constraints.safety_values(subs)  # (substeps, N, m)
-    j = np.argmin(hs, axis=0)
-    hs_min = np.take_along_axis(hs, j[None], axis=0)[0]
-    sub_frac = np.arange(1, run_cfg.substeps + 1) / run_cfg.substeps
-    h_min = np.minimum(hs_min, h[:-1])
-    h_arg = np.where(hs_min < h[:-1], t_s[:-1, None] + dt_steps[:, None] * sub_frac[j], t_s[:-1, None])
+    h_min, h_arg = substep_minima(h[:-1], constraints.safety_values(subs), t_s[:-1], dt_steps)
     omega_dot = model.omega_dot(x[:-1], u, run_cfg)
 
     # filter records
@@ -608,10 +603,9 @@ def load_run(
     if rta and preset is None:
         preset = run_cfg.filter.preset
         notes.append(f"filter preset not recorded: taken from the config ({preset})")
-    from .cli import slacked_names
 
     slacked = tuple(c for c in constraints.names if c in slacked_recorded) if slacked_recorded \
-        else slacked_names(run_cfg)
+        else run_cfg.slacked_constraints
     run = BagRun(
         path=file, namespace=ns, names=constraints.names, t_s=t_s, x=x, u_des=u_des, u=u, omega_dot=omega_dot,
         h=h, h_substep_min=h_min, h_substep_argmin_s=h_arg, slack=slack, intervening=inter, box_active=box,

@@ -33,8 +33,8 @@ EXTERNAL_COMMANDS: dict[str, tuple[str, str]] = {
     "montecarlo": ("rta_attitude.montecarlo", "batched Monte Carlo of the filter from Latin-hypercube states"),
     "analyze": ("rta_attitude.analysis", "summary and figure of a recorded MCAP bag"),
     "replay": ("rta_attitude.replay", "republish a bag's messages over DDS with /clock"),
-    "topics": ("rta_attitude.inspect", "list live ROS topics with types, publishers and rates"),
-    "echo": ("rta_attitude.inspect", "print the messages of one live topic as YAML"),
+    "topics": ("rta_attitude.topic_tools", "list live ROS topics with types, publishers and rates"),
+    "echo": ("rta_attitude.topic_tools", "print the messages of one live topic as YAML"),
 }
 """Subcommands that live in their own modules: module, help. Each module has add_arguments(parser,
 command) and run(args) -> int; a missing module simply leaves its subcommand out."""
@@ -58,9 +58,8 @@ def write_trajectory(traj: Any, cfg: Config, out: Path) -> Path:
 
 
 def slacked_names(cfg: Config) -> tuple[str, ...]:
-    """Constraints that carry a slack in this configuration."""
-    return tuple(n for n in ("exclusion_zone", "communication", "temperature", "battery")
-                 if cfg.barriers[n].enabled and cfg.barriers[n].slack_weight > 0)
+    """Constraints that carry a slack in this configuration (Config.slacked_constraints)."""
+    return cfg.slacked_constraints
 
 
 def cmd_simulate(args: argparse.Namespace) -> int:

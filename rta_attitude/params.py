@@ -348,6 +348,12 @@ class Config:
         accel = (J * L.omega_dot_max_rad_s2 - dJ * L.omega_max_rad_s**2) / self.spacecraft.wheel_inertia_kgm2
         return np.minimum(L.wheel_accel_max_rad_s2, accel)
 
+    @property
+    def slacked_constraints(self) -> tuple[str, ...]:
+        """Names of the enabled constraints that carry a slack (reported, not counted as failures)."""
+        return tuple(n for n in ("exclusion_zone", "communication", "temperature", "battery")
+                     if self.barriers[n].enabled and self.barriers[n].slack_weight > 0)
+
     def with_preset(self, preset: str) -> Config:
         """A copy using another filter preset ('robust' or 'paper')."""
         return replace(self, filter=replace(self.filter, preset=preset))

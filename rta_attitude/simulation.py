@@ -54,6 +54,28 @@ def integrate(x: Array, u: Array, dt_s: float, cfg: Config, substeps: int | None
     return x, np.stack(states)
 
 
+def substep_minima(h_start: Array, h_substeps: Array, t_s: Array, dt_s: Array) -> tuple[Array, Array]:
+    """Minimum of h over each step (its start sample and its RK4 substeps) and when it occurs.
+
+    Args:
+        h_start: h at the start of each step (..., m).
+        h_substeps: h at the substeps (substeps, ..., m); the last one is the next sample.
+        t_s: start time of each step (...), s.
+        dt_s: length of each step (...) or a scalar, s.
+
+    Returns:
+        (h_min (..., m), time of the minimum (..., m) in s).
+    """
+    n_sub = h_substeps.shape[0]
+    j = np.argmin(h_substeps, axis=0)
+    hs_min = np.take_along_axis(h_substeps, j[None], axis=0)[0]
+    frac = np.arange(1, n_sub + 1) / n_sub
+    t = np.asarray(t_s, dtype=float)[..., None]
+    dt = np.asarray(dt_s, dtype=float)
+    dt = dt[..., None] if dt.ndim else dt
+    return np.minimum(hs_min, h_start), np.where(hs_min < h_start, t + dt * frac[j], t)
+
+
 @dataclass
 class Trajectory:
     """One run's time series; step arrays have N rows, sample arrays N + 1.
@@ -144,7 +166,6 @@ class ClosedLoop:
         iters = np.zeros(n, dtype=np.int64)
         times = np.zeros(n)
         h[0] = self.constraints.safety_values(x[0])
-        sub_t = dt * np.arange(1, cfg.substeps + 1) / cfg.substeps
         steps = range(n)
         if progress:
             from tqdm import tqdm
@@ -159,9 +180,7 @@ class ClosedLoop:
             arrays["omega_dot"][k] = model.omega_dot(x[k], u, cfg)
             x[k + 1], subs = integrate(x[k], u, dt, cfg)
             hs = self.constraints.safety_values(subs)  # (substeps, m)
-            j = np.argmin(hs, axis=0)
-            h_min[k] = np.minimum(hs[j, np.arange(m)], h[k])
-            h_arg[k] = np.where(hs[j, np.arange(m)] < h[k], t + sub_t[j], t)
+            h_min[k], h_arg[k] = substep_minima(h[k], hs, np.float64(t), dt)
             h[k + 1] = hs[-1]
             if res is not None:
                 bc[k], slack[k], inter[k] = res.bc, res.slack, res.intervening
@@ -194,4 +213,4 @@ def simulate(cfg: Config, scenario: str | Scenario, rta: bool = True, preset: st
     return ClosedLoop(cfg, scen, rta).run(progress=progress)
 
 
-__all__ = ["ClosedLoop", "Trajectory", "integrate", "rk4_step", "saturate", "simulate"]
+__all__ = ["ClosedLoop", "Trajectory", "integrate", "rk4_step", "saturate", "simulate", "substep_minima"]

@@ -1,4 +1,4 @@
-"""rta_attitude.replay and rta_attitude.inspect over real rclpy and Fast DDS (no mocks).
+"""rta_attitude.replay and rta_attitude.topic_tools over real rclpy and Fast DDS (no mocks).
 
 A short in-process run is written as a bag with the nodes' own message builders; `rta-attitude
 replay` republishes it from a subprocess while this process (its own rclpy context) and the CLI
@@ -26,9 +26,9 @@ import yaml
 from rta_attitude import config, model
 from rta_attitude.bag import BagWriter, read_bag
 from rta_attitude.cli import main as cli_main
-from rta_attitude.inspect import echo, list_topics, message_to_dict, message_to_yaml, resolve_topic
 from rta_attitude.replay import ros_node
 from rta_attitude.simulation import ClosedLoop
+from rta_attitude.topic_tools import echo, list_topics, message_to_dict, message_to_yaml, resolve_topic
 
 REPO = Path(__file__).resolve().parents[1]
 ENV = {**os.environ, "PYTHONPATH": str(REPO)}
