@@ -150,6 +150,7 @@ def _barrier(s: _Section, second_order: bool) -> BarrierGains:
         k2=s.number("k2") if second_order else 0.0,
         bias=s.number("bias", 0.0),
         slack_weight=s.number("slack_weight", 0.0),
+        margin=s.number("margin", 0.0) if second_order else 0.0,
     )
     return gains
 

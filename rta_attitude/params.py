@@ -186,12 +186,16 @@ class BarrierGains:
     """sigma, added to the final barrier condition."""
     slack_weight: float = 0.0
     """p > 0 makes the constraint soft, with cost p delta^2; 0 = hard."""
+    margin: float = 0.0
+    """Sampled-data allowance (units of h), `robust` preset only: the HOCBF keeps h >= margin, so
+    that the overshoot of a zero-order-hold step stays on the safe side of h = 0."""
 
     def check(self, where: str) -> None:
         """Raise ConfigError naming `where` if a gain is out of range."""
         _positive(f"{where}.k1", self.k1)
         _nonneg(f"{where}.k2", self.k2)
         _nonneg(f"{where}.slack_weight", self.slack_weight)
+        _nonneg(f"{where}.margin", self.margin)
         if not math.isfinite(self.bias):
             raise ConfigError(f"{where}.bias must be finite, got {self.bias!r}")
 

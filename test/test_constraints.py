@@ -187,3 +187,17 @@ def test_batch_equals_single():
         one = CS.evaluate(x[k])
         np.testing.assert_array_equal(one.drift, tab.drift[k])
         np.testing.assert_array_equal(one.gain, tab.gain[k])
+
+
+def test_sampled_data_margin_only_in_the_robust_preset():
+    import dataclasses
+
+    b = dict(CFG.barriers)
+    b["exclusion_zone"] = dataclasses.replace(b["exclusion_zone"], margin=2e-3)
+    cfg = dataclasses.replace(CFG, barriers=b)
+    x = random_states(np.random.default_rng(2), 50, CFG)
+    robust = ConstraintSet.from_config(cfg.with_preset("robust")).evaluate(x)
+    paper = ConstraintSet.from_config(cfg.with_preset("paper")).evaluate(x)
+    np.testing.assert_array_equal(robust.h, paper.h)
+    np.testing.assert_allclose(paper.psi0[:, 0] - robust.psi0[:, 0], 2e-3, rtol=1e-9)
+    np.testing.assert_array_equal(robust.psi0[:, 1:], paper.psi0[:, 1:])

@@ -97,6 +97,11 @@ class Constraint(Protocol):
         ...
 
 
+def sampled_data_margin(cfg: Config, group: str) -> float:
+    """The margin a relative-degree-2 constraint keeps in the `robust` preset (0 in `paper`)."""
+    return cfg.barriers[group].margin if cfg.filter.preset == "robust" else 0.0
+
+
 def second_order_condition(
     psi0: Array, psi0_dot: Array, psi0_ddot_drift: Array, psi0_ddot_gain: Array, gains: BarrierGains
 ) -> tuple[Array, Array, Array]:

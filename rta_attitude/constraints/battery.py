@@ -15,7 +15,7 @@ from dataclasses import dataclass
 from ..model import PANEL_NORMAL_BODY, net_power
 from ..params import BarrierGains, Config
 from ..state import ENERGY
-from .base import Array, BarrierValues, Context, second_order_condition
+from .base import Array, BarrierValues, Context, sampled_data_margin, second_order_condition
 from .pointing import sun_pointing
 
 
@@ -26,12 +26,15 @@ class Battery:
     gains: BarrierGains
     delta2_J_rad: float
     E_min_J: float
+    margin_J: float = 0.0
+    """Sampled-data margin kept by the barrier (robust preset), J."""
     name: str = "battery"
     relative_degree: int = 2
 
     @classmethod
     def from_config(cls, cfg: Config) -> Battery:
-        return cls(cfg.barriers["battery"], cfg.augmentation.delta2_J_rad, cfg.limits.energy_min_J)
+        return cls(cfg.barriers["battery"], cfg.augmentation.delta2_J_rad, cfg.limits.energy_min_J,
+                   sampled_data_margin(cfg, "battery"))
 
     def safety_value(self, ctx: Context) -> Array:
         return ctx.x[..., ENERGY] - self.E_min_J
@@ -42,7 +45,7 @@ class Battery:
         E_dot = net_power(p.cos, ctx.cfg)
         E_ddot = ctx.cfg.power.peak_W * (p.cos > 0) * p.cos_dot
         d2 = self.delta2_J_rad
-        psi0 = h - d2 * p.theta
+        psi0 = h - self.margin_J - d2 * p.theta
         psi1, drift, gain = second_order_condition(psi0, E_dot - d2 * p.theta_dot, E_ddot - d2 * p.theta_ddot_drift,
                                                    -d2 * p.theta_ddot_gain, self.gains)
         return BarrierValues(h, psi0, psi1, drift, gain)

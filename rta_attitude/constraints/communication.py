@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 from ..model import ANTENNA_AXIS_BODY
 from ..params import BarrierGains, Config
-from .base import Array, BarrierValues, Context, second_order_condition
+from .base import Array, BarrierValues, Context, sampled_data_margin, second_order_condition
 from .pointing import earth_pointing
 
 
@@ -22,12 +22,15 @@ class Communication:
     gains: BarrierGains
     limit_rad: float
     """FOV/2, rad."""
+    margin_rad: float = 0.0
+    """Sampled-data margin kept by the barrier (robust preset), rad."""
     name: str = "communication"
     relative_degree: int = 2
 
     @classmethod
     def from_config(cls, cfg: Config) -> Communication:
-        return cls(cfg.barriers["communication"], cfg.limits.comm_angle_rad)
+        return cls(cfg.barriers["communication"], cfg.limits.comm_angle_rad,
+                   sampled_data_margin(cfg, "communication"))
 
     def safety_value(self, ctx: Context) -> Array:
         return self.limit_rad - earth_pointing(ctx, ANTENNA_AXIS_BODY).theta
@@ -35,6 +38,7 @@ class Communication:
     def evaluate(self, ctx: Context) -> BarrierValues:
         p = earth_pointing(ctx, ANTENNA_AXIS_BODY)
         h = self.limit_rad - p.theta
-        psi1, drift, gain = second_order_condition(h, -p.theta_dot, -p.theta_ddot_drift, -p.theta_ddot_gain,
+        psi0 = h - self.margin_rad
+        psi1, drift, gain = second_order_condition(psi0, -p.theta_dot, -p.theta_ddot_drift, -p.theta_ddot_gain,
                                                    self.gains)
-        return BarrierValues(h, h, psi1, drift, gain)
+        return BarrierValues(h, psi0, psi1, drift, gain)

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 from ..model import SENSOR_AXIS_BODY
 from ..params import BarrierGains, Config
-from .base import Array, BarrierValues, Context, second_order_condition
+from .base import Array, BarrierValues, Context, sampled_data_margin, second_order_condition
 from .pointing import sun_pointing
 
 
@@ -22,12 +22,15 @@ class ExclusionZone:
     gains: BarrierGains
     limit_rad: float
     """FOV/2 + beta, rad."""
+    margin_rad: float = 0.0
+    """Sampled-data margin kept by the barrier (robust preset), rad."""
     name: str = "exclusion_zone"
     relative_degree: int = 2
 
     @classmethod
     def from_config(cls, cfg: Config) -> ExclusionZone:
-        return cls(cfg.barriers["exclusion_zone"], cfg.limits.exclusion_angle_rad)
+        return cls(cfg.barriers["exclusion_zone"], cfg.limits.exclusion_angle_rad,
+                   sampled_data_margin(cfg, "exclusion_zone"))
 
     def safety_value(self, ctx: Context) -> Array:
         return sun_pointing(ctx, SENSOR_AXIS_BODY).theta - self.limit_rad
@@ -35,6 +38,7 @@ class ExclusionZone:
     def evaluate(self, ctx: Context) -> BarrierValues:
         p = sun_pointing(ctx, SENSOR_AXIS_BODY)
         h = p.theta - self.limit_rad
-        psi1, drift, gain = second_order_condition(h, p.theta_dot, p.theta_ddot_drift, p.theta_ddot_gain,
+        psi0 = h - self.margin_rad
+        psi1, drift, gain = second_order_condition(psi0, p.theta_dot, p.theta_ddot_drift, p.theta_ddot_gain,
                                                    self.gains)
-        return BarrierValues(h, h, psi1, drift, gain)
+        return BarrierValues(h, psi0, psi1, drift, gain)

@@ -22,7 +22,7 @@ import numpy as np
 from ..model import THERMAL_FACE_NORMAL_BODY, thermal_fluxes
 from ..params import Augmentation, BarrierGains, Config
 from ..state import TEMP
-from .base import Array, BarrierValues, Context, second_order_condition
+from .base import Array, BarrierValues, Context, sampled_data_margin, second_order_condition
 from .pointing import earth_pointing, sun_pointing
 
 
@@ -33,12 +33,15 @@ class Temperature:
     gains: BarrierGains
     augmentation: Augmentation
     T_max_K: float
+    margin_K: float = 0.0
+    """Sampled-data margin kept by the barrier (robust preset), K."""
     name: str = "temperature"
     relative_degree: int = 2
 
     @classmethod
     def from_config(cls, cfg: Config) -> Temperature:
-        return cls(cfg.barriers["temperature"], cfg.augmentation, cfg.limits.temperature_max_K)
+        return cls(cfg.barriers["temperature"], cfg.augmentation, cfg.limits.temperature_max_K,
+                   sampled_data_margin(cfg, "temperature"))
 
     def safety_value(self, ctx: Context) -> Array:
         return self.T_max_K - ctx.x[..., TEMP]
@@ -63,7 +66,8 @@ class Temperature:
         sun_on = sun.theta < np.pi / 2
         earth_in = earth.theta < np.pi / 2
         h = self.T_max_K - T
-        psi0 = h - d0 * np.maximum(0.0, np.pi / 2 - sun.theta) - d1 * np.maximum(0.0, np.pi / 2 - earth.theta)
+        psi0 = (h - self.margin_K - d0 * np.maximum(0.0, np.pi / 2 - sun.theta)
+                - d1 * np.maximum(0.0, np.pi / 2 - earth.theta))
         psi0_dot = -T_dot + d0 * sun_on * sun.theta_dot + d1 * earth_in * earth.theta_dot
         psi0_ddot_drift = -T_ddot + d0 * sun_on * sun.theta_ddot_drift + d1 * earth_in * earth.theta_ddot_drift
         psi0_ddot_gain = (d0 * sun_on[..., None] * sun.theta_ddot_gain
