@@ -71,7 +71,9 @@ def main() -> int:
         rec = {
             "preset": preset, "runs": args.runs, "duration_s": args.duration, "seed": args.seed,
             "workers": args.workers, "cores": os.cpu_count(), "wall_s": round(result.wall_s, 2),
-            "wall_incl_sampling_s": round(total, 2), "state_steps_per_s": round(steps / result.wall_s),
+            "wall_incl_sampling_s": round(total, 2), "cpu_s": round(result.cpu_s, 1),
+            "idle_machine_wall_estimate_s": round(result.cpu_s / min(args.workers, os.cpu_count() or 1), 1),
+            "state_steps_per_s": round(steps / result.wall_s),
             "us_per_state_step_per_core": round(result.wall_s * args.workers / steps * 1e6, 2),
             "load_average_before": [round(v, 2) for v in load_before],
             "load_average_after": [round(v, 2) for v in os.getloadavg()],

@@ -276,6 +276,10 @@ class AsifFilter:
         Multipliers follow proxsuite's sign convention: > 0 at an active upper bound, < 0 at an
         active lower bound, 0 for inactive rows.
         """
+        if self.options.solver == "active_set":
+            from .batch import ActiveSetFilter
+
+            return ActiveSetFilter.solve(self, problem)  # type: ignore[arg-type]
         n, n_in = problem.C.shape[1], problem.C.shape[0]
         qp = self._workspace(n, n_in)
         qp.init(problem.H, problem.g, None, None, problem.C, problem.lower, problem.upper)

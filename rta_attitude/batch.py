@@ -463,18 +463,24 @@ class _Rows:
             for a in range(3):
                 gain[:, i, a] = g[a]
 
+        def margin(group: str) -> float:
+            # constraints.base.sampled_data_margin: HOCBFs keep h >= margin in the robust preset
+            return float(getattr(cfg.barriers[group], "margin", 0.0)) if cfg.filter.preset == "robust" else 0.0
+
         sun, sun_dot, sun_ddot = ctx["sun"], ctx["sun_dot"], ctx["sun_ddot"]
         # exclusion zone: +i_B to the sun
         p = self.pointing(ctx, tuple(model.SENSOR_AXIS_BODY), sun, sun_dot, sun_ddot)  # type: ignore[arg-type]
         hz = p.theta - cfg.limits.exclusion_angle_rad
         h[:, _EZ] = hz
-        second(_EZ, hz, p.theta_dot, p.theta_ddot_drift, p.theta_ddot_gain, "exclusion_zone")
+        second(_EZ, hz - margin("exclusion_zone"), p.theta_dot, p.theta_ddot_drift, p.theta_ddot_gain,
+               "exclusion_zone")
         # communication: +j_B to the Earth [-1, 0, 0] (A r_E = -A[:, 0], exactly)
         r_E: _Vec = (-A[0][0], -A[1][0], -A[2][0])  # type: ignore[index]
         pc = self.pointing_body(ctx, tuple(model.ANTENNA_AXIS_BODY), r_E, zero, zero)
         hc = cfg.limits.comm_angle_rad - pc.theta
         h[:, _COMM] = hc
-        second(_COMM, hc, -pc.theta_dot, -pc.theta_ddot_drift, tuple(-g for g in pc.theta_ddot_gain),  # type: ignore[arg-type]
+        g_c = tuple(-g for g in pc.theta_ddot_gain)
+        second(_COMM, hc - margin("communication"), -pc.theta_dot, -pc.theta_ddot_drift, g_c,  # type: ignore[arg-type]
                "communication")
         # temperature: -j_B face, sun and Earth incidence
         th, env = cfg.thermal, cfg.environment
@@ -496,7 +502,8 @@ class _Rows:
         earth_in = pe.theta < np.pi / 2
         ht = cfg.limits.temperature_max_K - T
         h[:, _TEMP] = ht
-        psi0 = ht - d0 * np.maximum(0.0, np.pi / 2 - ps.theta) - d1 * np.maximum(0.0, np.pi / 2 - pe.theta)
+        psi0 = (ht - margin("temperature") - d0 * np.maximum(0.0, np.pi / 2 - ps.theta)
+                - d1 * np.maximum(0.0, np.pi / 2 - pe.theta))
         psi0_dot = -T_dot + d0 * sun_on * ps.theta_dot + d1 * earth_in * pe.theta_dot
         psi0_dd = -T_ddot + d0 * sun_on * ps.theta_ddot_drift + d1 * earth_in * pe.theta_ddot_drift
         g_t = tuple(d0 * sun_on * ps.theta_ddot_gain[a] + d1 * earth_in * pe.theta_ddot_gain[a] for a in range(3))
@@ -508,8 +515,9 @@ class _Rows:
         E_dot = model.net_power(pb.cos, cfg)
         E_ddot = cfg.power.peak_W * (pb.cos > 0) * pb.cos_dot
         d2 = aug.delta2_J_rad
-        second(_BATT, hb - d2 * pb.theta, E_dot - d2 * pb.theta_dot, E_ddot - d2 * pb.theta_ddot_drift,
-               tuple(-d2 * g for g in pb.theta_ddot_gain), "battery")  # type: ignore[arg-type]
+        second(_BATT, hb - margin("battery") - d2 * pb.theta, E_dot - d2 * pb.theta_dot,
+               E_ddot - d2 * pb.theta_ddot_drift, tuple(-d2 * g for g in pb.theta_ddot_gain),  # type: ignore[arg-type]
+               "battery")
         # angular rate and wheel speed (relative degree 1)
         go, gp = cfg.barriers["omega"], cfg.barriers["psi"]
         w_max2 = cfg.limits.omega_max_rad_s**2
@@ -809,21 +817,23 @@ class BatchSimulator:
                         slack[j, i] = pr.slack_scale[pr.slack_index[i]] * zk[pr.slack_index[i]]
 
     # ------------------------------------------------------------------ checks between samples
-    def _substep_h(self, Y: Array, psi: Array, th: Array, cs: Array, sn: Array) -> tuple[NDArray[np.int64], Array]:
-        """Runs that may violate a constraint at a substep state, and their h (k, m), the rows of
-        `ConstraintSet.safety_values` computed the same way. A cheap screen (cosines and plain
-        comparisons, SCREEN_MARGIN on the safe side) picks the candidates."""
+    def _substep_h(self, Y: Array, psi: Array, th: Array, cs: Array, sn: Array,
+                   flagged: NDArray[np.bool_]) -> tuple[NDArray[np.int64], Array]:
+        """Runs that may newly violate a constraint at a substep state, and their h (k, m), the rows
+        of `ConstraintSet.safety_values` computed the same way. A cheap screen (cosines and plain
+        comparisons, SCREEN_MARGIN on the safe side) picks the candidates; constraints already
+        flagged in a run (flagged (N, m)) need no second look."""
         cfg = self.cfg
         L = cfg.limits
         q1, q2, q3, q4 = Y[0], Y[1], Y[2], Y[3]
         c_ez = (q1 * q1 - q2 * q2 - q3 * q3 + q4 * q4) * cs + 2.0 * (q1 * q2 + q3 * q4) * sn  # +i_B . r_S
         c_gs = 2.0 * (q3 * q4 - q1 * q2)  # +j_B . r_E
-        near = c_ez > math.cos(L.exclusion_angle_rad) - SCREEN_MARGIN
-        near |= c_gs < math.cos(L.comm_angle_rad) + SCREEN_MARGIN
-        near |= Y[7] > L.temperature_max_K - SCREEN_MARGIN
-        near |= Y[8] < L.energy_min_J + SCREEN_MARGIN
-        near |= np.any(np.abs(Y[4:7]) > L.omega_max_rad_s * (1.0 - SCREEN_MARGIN), axis=0)
-        near |= np.any(np.abs(psi) > L.psi_max_rad_s * (1.0 - SCREEN_MARGIN), axis=0)
+        near = (c_ez > math.cos(L.exclusion_angle_rad) - SCREEN_MARGIN) & ~flagged[:, _EZ]
+        near |= (c_gs < math.cos(L.comm_angle_rad) + SCREEN_MARGIN) & ~flagged[:, _COMM]
+        near |= (Y[7] > L.temperature_max_K - SCREEN_MARGIN) & ~flagged[:, _TEMP]
+        near |= (Y[8] < L.energy_min_J + SCREEN_MARGIN) & ~flagged[:, _BATT]
+        near |= np.any((np.abs(Y[4:7]) > L.omega_max_rad_s * (1.0 - SCREEN_MARGIN)) & ~flagged[:, 4:7].T, axis=0)
+        near |= np.any((np.abs(psi) > L.psi_max_rad_s * (1.0 - SCREEN_MARGIN)) & ~flagged[:, 7:10].T, axis=0)
         sel = np.flatnonzero(near)
         if sel.size == 0:
             return sel, np.zeros((0, 10))
@@ -934,7 +944,7 @@ class BatchSimulator:
 
             def on_sub(j: int, Ys: Array, ps: Array, ts: Array, cs: Array, sn: Array, t: float = t) -> None:
                 if j < cfg.substeps - 1:
-                    sel, hs = self._substep_h(Ys, ps, ts, cs, sn)
+                    sel, hs = self._substep_h(Ys, ps, ts, cs, sn, viol_sub)
                     if sel.size:
                         mark(hs, t + sub_t[j], False, sel)
 

@@ -23,7 +23,7 @@ import numpy as np
 
 from . import config as config_module
 from .errors import RtaError
-from .params import PRESETS, Config
+from .params import PRESETS, SOLVERS, Config
 from .state import STATE_NAMES
 
 log = logging.getLogger("rta_attitude")
@@ -67,6 +67,8 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     from .simulation import ClosedLoop
 
     cfg = config_module.load(args.config, preset=args.preset)
+    if args.solver is not None:
+        cfg = cfg.with_solver(args.solver)
     scenario = cfg.scenario(args.scenario)
     if args.duration is not None:
         if not args.duration > 0:
@@ -118,6 +120,8 @@ def build_parser() -> tuple[argparse.ArgumentParser, dict[str, Any]]:
     p.add_argument("--no-rta", action="store_true", help="pass u_des straight to the plant (no filter)")
     p.add_argument("--preset", choices=PRESETS, default=None, help="filter preset (default: the config's)")
     p.add_argument("--duration", type=float, default=None, help="override the scenario duration, s")
+    p.add_argument("--solver", choices=SOLVERS, default=None,
+                   help="QP solver (default: the config's; active_set = the Monte Carlo's)")
     p.add_argument("--out", type=Path, default=Path("out/simulate"), help="output directory")
     p.add_argument("--no-plot", action="store_true", help="skip the PNG figure")
     _add_config(p)

@@ -5,9 +5,9 @@
 
 Initial states: Latin hypercube (scipy.stats.qmc) over 12 dimensions: q uniform on the unit
 quaternions through Shoemake's map (3), omega (3), psi (3), T, E, theta_S, in the ranges below;
-a state where any enabled constraint has h, Psi_0 or Psi_1 < 0 is re-drawn (a fresh hypercube for
-the rejected ones, from the same seeded stream) until none is. The filter preset plays no part in
-that test, so one seed gives the same initial states for `robust` and `paper`.
+a state where any enabled constraint has h, Psi_0 or Psi_1 < 0 (under either filter preset) is
+re-drawn (a fresh hypercube for the rejected ones, from the same seeded stream) until none is, so
+one seed gives the same initial states for `robust` and `paper`.
 
 Runs advance in lockstep (`rta_attitude.batch.BatchSimulator`), in chunks spread over worker
 processes (`local`) or over a Dask cluster (`dask`); a run's numbers do not depend on the chunk it
@@ -108,11 +108,16 @@ def _to_states(u: Array, cfg: Config) -> Array:
 
 
 def rejected(x: Array, cfg: Config) -> NDArray[np.bool_]:
-    """(n,) True where an enabled constraint has h, Psi_0 or Psi_1 < 0 at x (n, 19)."""
-    cs = ConstraintSet.from_config(cfg)
-    t = cs.evaluate(x)
-    on = cs.enabled.astype(bool)
-    return np.any(((t.h < 0) | (t.psi0 < 0) | (t.psi1 < 0)) & on, axis=1)
+    """(n,) True where an enabled constraint has h, Psi_0 or Psi_1 < 0 at x (n, 19) under any filter
+    preset (the robust preset may keep a sampled-data margin in Psi_0): one test for all presets, so
+    a seed gives the same initial states whichever preset runs them."""
+    out = np.zeros(len(x), dtype=bool)
+    for preset in PRESETS:
+        cs = ConstraintSet.from_config(cfg.with_preset(preset))
+        t = cs.evaluate(x)
+        on = cs.enabled.astype(bool)
+        out |= np.any(((t.h < 0) | (t.psi0 < 0) | (t.psi1 < 0)) & on, axis=1)
+    return out
 
 
 def sample_initial_states(runs: int, seed: int, cfg: Config) -> tuple[Array, NDArray[np.int64]]:
@@ -272,6 +277,14 @@ def run_dask(cfg: Config, x0: Array, duration_s: float, scheduler: str | Any, so
     return _merge(parts)
 
 
+def _cpu_s() -> float:
+    """User + system CPU seconds of this process and its reaped children."""
+    import resource
+
+    me, kids = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return me.ru_utime + me.ru_stime + kids.ru_utime + kids.ru_stime
+
+
 class _NoBar:
     def update(self, n: int) -> None:
         pass
@@ -390,7 +403,8 @@ def unavoidable(x0: Array, cfg: Config, duration_s: float = math.inf) -> dict[st
 
     table = ConstraintSet.from_config(cfg).evaluate(x0)
     h_ez = table.h[:, col["exclusion_zone"]]
-    theta_dot = table.psi1[:, col["exclusion_zone"]] - cfg.barriers["exclusion_zone"].k1 * h_ez
+    k1_ez = cfg.barriers["exclusion_zone"].k1
+    theta_dot = table.psi1[:, col["exclusion_zone"]] - k1_ez * table.psi0[:, col["exclusion_zone"]]
     a_max = (math.sqrt(3.0) * L.omega_dot_max_rad_s2 + 2.0 * rate**2 / math.sin(L.exclusion_angle_rad)
              + n_orb**2)
     reach = h_ez - np.where(theta_dot < 0, theta_dot**2 / (2.0 * a_max), 0.0)
@@ -446,6 +460,8 @@ class MonteCarloResult:
     backend: str
     workers: int
     solver: str
+    cpu_s: float = math.nan
+    """CPU time of this process and its finished worker processes during the runs (local backend), s."""
     unrecoverable: NDArray[np.bool_] = field(default_factory=lambda: np.zeros(0, dtype=bool))
     rules: list[str] = field(default_factory=list)
 
@@ -526,6 +542,7 @@ def summary(result: MonteCarloResult) -> dict[str, Any]:
             "preset": result.cfg.filter.preset, "dt_s": result.cfg.filter.sample_time_s,
             "substeps": result.cfg.substeps, "config": result.cfg.source, "backend": result.backend,
             "workers": result.workers, "wall_s": result.wall_s,
+            "cpu_s": None if math.isnan(result.cpu_s) else result.cpu_s,
             "redraws_total": int(result.redraws.sum()),
             "constraints_counted": [n for i, n in enumerate(cs.names) if result.counted[i]],
             "slacked": list(result.slacked),
@@ -537,8 +554,10 @@ def format_table(s: dict[str, Any]) -> str:
     """The paper's table beside ours (shares of failed runs), for a terminal."""
     a, b, p = s["at_samples"], s["incl_substeps"], s["paper"]
     setup = s["setup"]
+    cpu = f", {setup['cpu_s']:.0f} s CPU" if setup.get("cpu_s") is not None else ""
     lines = [f"Monte Carlo: {setup['runs']} runs x {setup['duration_s']:.0f} s, preset {setup['preset']}, "
-             f"seed {setup['seed']}, {setup['wall_s']:.1f} s wall ({setup['backend']}, {setup['workers']} workers)",
+             f"seed {setup['seed']}, {setup['wall_s']:.1f} s wall{cpu} "
+             f"({setup['backend']}, {setup['workers']} workers)",
              f"{'':<28}{'paper':>10}{'at samples':>14}{'incl. substeps':>16}",
              f"{'success rate':<28}{p['success_rate']:>10.2%}{a['success_rate']:>14.2%}{b['success_rate']:>16.2%}",
              f"{'failed runs':<28}{'84':>10}{a['failed']:>14d}{b['failed']:>16d}",
@@ -629,14 +648,17 @@ def montecarlo(cfg: Config, runs: int, duration_s: float, seed: int, workers: in
         raise ConfigError("the dask backend needs --scheduler ADDRESS (e.g. tcp://127.0.0.1:8786)")
     x0, redraws = sample_initial_states(runs, seed, cfg)
     t0 = time.perf_counter()
+    cpu0 = _cpu_s()
     if backend == "local":
         outcome = run_local(cfg, x0, duration_s, workers, solver, chunk_runs, progress)
     else:
         outcome = run_dask(cfg, x0, duration_s, scheduler, solver, chunk_runs or DEFAULT_CHUNK_RUNS, progress)
     wall = time.perf_counter() - t0
+    cpu = _cpu_s() - cpu0
     cs = ConstraintSet.from_config(cfg)
     slacked = tuple(n for i, n in enumerate(cs.names) if cs.enabled[i] and cs.slack_weights[i] > 0)
-    result = MonteCarloResult(cfg, seed, duration_s, x0, redraws, outcome, slacked, wall, backend, workers, solver)
+    result = MonteCarloResult(cfg, seed, duration_s, x0, redraws, outcome, slacked, wall, backend, workers, solver,
+                              cpu_s=cpu if backend == "local" else math.nan)
     result.unrecoverable, result.rules = classify(x0, outcome.violated_samples & result.counted, cfg, duration_s)
     return result
 
@@ -656,7 +678,7 @@ def add_arguments(parser: argparse.ArgumentParser, command: str = "montecarlo") 
                         help=f"runs per chunk (default: one chunk per local worker; {DEFAULT_CHUNK_RUNS} on dask)")
     parser.add_argument("--solver", choices=SOLVERS, default="active-set",
                         help="QP solver: the vectorised exact active-set method (default) or proxsuite per state "
-                             "(bit-identical with `simulate`, ~10x slower)")
+                             "(bit-identical with `simulate`, several times slower)")
     parser.add_argument("--out", type=Path, default=Path("out/montecarlo"), help="output directory")
     parser.add_argument("--no-plot", action="store_true", help="skip the PNG figure")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")

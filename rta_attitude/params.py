@@ -27,6 +27,7 @@ BARRIER_GROUPS: tuple[str, ...] = (
 PRESETS: tuple[str, ...] = ("robust", "paper")
 FALLBACKS: tuple[str, ...] = ("pass_through", "hold", "soften", "raise")
 BACKUP_SOLVERS: tuple[str, ...] = ("quadprog", "none")
+SOLVERS: tuple[str, ...] = ("proxsuite", "active_set")
 CONTROLLERS: tuple[str, ...] = ("pd", "none")
 
 
@@ -231,8 +232,10 @@ class FilterOptions:
     pole_guard_rad: float = 1e-3
     soften_weight: float = 1e8
     backup_solver: str = "quadprog"
+    solver: str = "proxsuite"
 
     def __post_init__(self) -> None:
+        _choice("filter.solver", self.solver, SOLVERS)
         _choice("filter.preset", self.preset, PRESETS)
         _choice("filter.backup_solver", self.backup_solver, BACKUP_SOLVERS)
         _choice("filter.fallback", self.fallback, FALLBACKS)
@@ -361,6 +364,10 @@ class Config:
     def with_preset(self, preset: str) -> Config:
         """A copy using another filter preset ('robust' or 'paper')."""
         return replace(self, filter=replace(self.filter, preset=preset))
+
+    def with_solver(self, solver: str) -> Config:
+        """A copy using another QP solver ('proxsuite' or 'active_set')."""
+        return replace(self, filter=replace(self.filter, solver=solver))
 
     def with_fallback(self, fallback: str) -> Config:
         """A copy using another fallback policy."""

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import dataclasses
 import json
 import math
 
@@ -12,7 +13,7 @@ import pytest
 from rta_attitude import batch, config, montecarlo, simulation
 from rta_attitude.asif import AsifFilter
 from rta_attitude.constraints import ConstraintSet
-from rta_attitude.params import CONSTRAINT_NAMES, Config, Scenario
+from rta_attitude.params import CONSTRAINT_NAMES, BarrierGains, Config, Scenario
 from rta_attitude.state import ENERGY, OMEGA, PSI, TEMP, THETA_S, Q
 
 
@@ -39,6 +40,8 @@ def _single_run(cfg: Config, x0: np.ndarray, duration_s: float, solver: str) -> 
 def test_sampling_is_reproducible_and_independent_of_preset(cfg: Config) -> None:
     a, ra = montecarlo.sample_initial_states(64, 3, cfg)
     b, rb = montecarlo.sample_initial_states(64, 3, cfg.with_preset("paper"))
+    t = ConstraintSet.from_config(cfg.with_preset("robust")).evaluate(a)  # Psi of either preset >= 0
+    assert np.all(t.psi0 >= 0) and np.all(t.psi1 >= 0)
     c, _ = montecarlo.sample_initial_states(64, 3, cfg.with_preset("robust"))
     d, _ = montecarlo.sample_initial_states(64, 4, cfg)
     np.testing.assert_array_equal(a, b)
@@ -81,9 +84,18 @@ def _pole_states(states: np.ndarray) -> np.ndarray:
     return np.concatenate([states, x])
 
 
-@pytest.mark.parametrize("preset", ["robust", "paper"])
+def _with_margins(cfg: Config) -> Config:
+    """The config with a sampled-data margin on every HOCBF (skips where the core has none)."""
+    if "margin" not in {f.name for f in dataclasses.fields(BarrierGains)}:
+        pytest.skip("this core has no sampled-data margins")
+    margins = {"exclusion_zone": 1e-3, "communication": 2e-3, "temperature": 0.1, "battery": 20.0}
+    barriers = {k: dataclasses.replace(v, margin=margins[k]) if k in margins else v for k, v in cfg.barriers.items()}
+    return dataclasses.replace(cfg, barriers=barriers)
+
+
+@pytest.mark.parametrize("preset", ["robust", "paper", "robust-with-margins"])
 def test_rows_and_box_equal_the_core_bit_for_bit(cfg: Config, states: np.ndarray, preset: str) -> None:
-    c = cfg.with_preset(preset)
+    c = _with_margins(cfg.with_preset("robust")) if preset == "robust-with-margins" else cfg.with_preset(preset)
     x = _pole_states(states)
     table = ConstraintSet.from_config(c).evaluate(x)
     f = AsifFilter(c)

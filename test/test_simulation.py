@@ -88,3 +88,21 @@ def test_summary_has_the_contracted_fields(robust):
         assert set(s["constraints"][name]) >= {"min_h", "first_violation_s"}
     for key in ("intervening_steps", "slack_active_steps", "fallbacks"):
         assert isinstance(s[key], int)
+
+
+def test_active_set_solver_option_is_the_monte_carlo_filter():
+    """`filter.solver: active_set` makes `simulate` use the Monte Carlo batch's exact QP solver, so a
+    single run and a run inside the batch (test_montecarlo) are the same computation."""
+    from dataclasses import replace
+
+    from rta_attitude.batch import ActiveSetFilter
+    from rta_attitude.simulation import ClosedLoop
+
+    short = replace(CFG.scenario("paper-example"), duration_s=120.0)
+    a = simulate(CFG.with_solver("active_set"), short)
+    loop = ClosedLoop(CFG, short)
+    loop.filter = ActiveSetFilter(loop.cfg)
+    b = loop.run()
+    assert np.abs(a.x - b.x).max() == 0.0
+    c = simulate(CFG, short)  # proxsuite: the same decisions, answers within its tolerance
+    assert np.abs(a.u - c.u).max() < 1e-4
