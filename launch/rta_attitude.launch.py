@@ -9,16 +9,19 @@ use_sim_time (except the plant, which publishes /clock). The launch shuts down w
 closed the bag and exited (the plant exits after the scenario, the recorder once every message is
 in); with record:=false, when the plant exits. Same behaviour as `rta-attitude launch`, which needs
 no ROS launch installation and also prints the run summary.
+
+Isolation, as `rta-attitude launch`: the nodes run with ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
+(`discovery_range:=SUBNET` lifts it) on `domain_id` (default: $ROS_DOMAIN_ID, else 0).
 """
 
 import os
 
 from ament_index_python.packages import get_package_share_directory
-from launch.actions import DeclareLaunchArgument, EmitEvent, RegisterEventHandler
+from launch.actions import DeclareLaunchArgument, EmitEvent, RegisterEventHandler, SetEnvironmentVariable
 from launch.conditions import IfCondition, UnlessCondition
 from launch.event_handlers import OnProcessExit
 from launch.events import Shutdown
-from launch.substitutions import LaunchConfiguration
+from launch.substitutions import EnvironmentVariable, LaunchConfiguration
 from launch_ros.actions import Node
 from launch_ros.parameter_descriptions import ParameterValue
 
@@ -38,6 +41,8 @@ def generate_launch_description() -> LaunchDescription:
         "bag_overwrite": ("false", "replace an existing bag file"),
         "stepping": ("lockstep", "lockstep or realtime"),
         "real_time_factor": ("1.0", "realtime stepping: sim seconds per wall second"),
+        "domain_id": (EnvironmentVariable("ROS_DOMAIN_ID", default_value="0"), "ROS_DOMAIN_ID of the nodes"),
+        "discovery_range": ("LOCALHOST", "ROS_AUTOMATIC_DISCOVERY_RANGE of the nodes (LOCALHOST, SUBNET, OFF)"),
     }
     cfg = {name: LaunchConfiguration(name) for name in args}
     params_file = cfg["params_file"]
@@ -65,6 +70,9 @@ def generate_launch_description() -> LaunchDescription:
     return LaunchDescription([
         *(DeclareLaunchArgument(name, default_value=default, description=text)
           for name, (default, text) in args.items()),
+        SetEnvironmentVariable("ROS_DOMAIN_ID", cfg["domain_id"]),
+        SetEnvironmentVariable("ROS_AUTOMATIC_DISCOVERY_RANGE", cfg["discovery_range"]),
+        SetEnvironmentVariable("ROS_STATIC_PEERS", ""),
         recorder,
         node("asif_filter_node", {}),
         node("pd_controller_node", {}),

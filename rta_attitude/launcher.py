@@ -23,6 +23,12 @@ ROS node. Sequence:
    `launch` section (wall times, deadline misses, state -> torque_cmd latency, exit codes).
 
 Ctrl-C stops the children cleanly. Returns 0 on a complete run, 1 otherwise.
+
+Isolation: the children run with `ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST` (no traffic leaves the
+machine; `--discovery subnet` lifts it) on `--domain-id` (default: $ROS_DOMAIN_ID, else
+DEFAULT_DOMAIN_ID), and without ROS_STATIC_PEERS, so a run never talks to another robot on the network.
+Node-only parameters given with `-p` are checked like the core's (type, choices, range) before any
+process starts.
 """
 
 from __future__ import annotations
@@ -44,7 +50,7 @@ import yaml
 from . import config as config_module
 from .errors import ConfigError, RtaError
 from .nodes import topics
-from .nodes.parameters import flatten, nest
+from .nodes.parameters import check_knob, flatten, nest
 from .params import PRESETS, Config
 
 SHM_DIR = Path("/dev/shm")
@@ -54,6 +60,12 @@ POLL_S = 0.05
 SHM_SCAN_S = 0.5
 """How often the launcher notes which /dev/shm files its children use [s]."""
 START_ORDER = (topics.RECORDER, topics.FILTER, topics.CONTROLLER, topics.PLANT)
+DEFAULT_DOMAIN_ID = 0
+"""ROS_DOMAIN_ID of the nodes when neither --domain-id nor $ROS_DOMAIN_ID says otherwise."""
+DOMAIN_ID_RANGE = (0, 232)
+"""Valid DDS domain ids for ROS 2 on Linux (0..101 and 215..232 avoid ephemeral ports; all <= 232 work)."""
+DISCOVERY_RANGES = {"localhost": "LOCALHOST", "subnet": "SUBNET", "off": "OFF"}
+"""--discovery -> ROS_AUTOMATIC_DISCOVERY_RANGE."""
 
 
 @dataclass
@@ -93,6 +105,11 @@ def add_arguments(parser: argparse.ArgumentParser, command: str = "launch") -> N
     parser.add_argument("--namespace", default=topics.DEFAULT_NAMESPACE, help="namespace of the nodes' topics")
     parser.add_argument("--timeout", type=float, default=None,
                         help="give up after this many seconds (default: from the scenario length)")
+    parser.add_argument("--domain-id", type=int, default=None,
+                        help=f"ROS_DOMAIN_ID of the nodes (default: $ROS_DOMAIN_ID, else {DEFAULT_DOMAIN_ID})")
+    parser.add_argument("--discovery", choices=tuple(DISCOVERY_RANGES), default="localhost",
+                        help="ROS_AUTOMATIC_DISCOVERY_RANGE of the nodes (default localhost: nothing leaves the "
+                             "machine)")
     parser.add_argument("--verbose", action="store_true", help="show the nodes' log output")
 
 
@@ -133,6 +150,8 @@ class Plan:
     commands: dict[str, list[str]]
     steps: int
     timeout_s: float
+    env: dict[str, str] = field(default_factory=dict)
+    """ROS environment of the children (domain id, discovery range)."""
 
 
 def plan(args: argparse.Namespace) -> Plan:
@@ -143,8 +162,9 @@ def plan(args: argparse.Namespace) -> Plan:
     """
     params, path = config_module.read_parameters(args.config)
     overrides = _overrides(args)
-    knob_names = {k.name for k in topics.KNOBS}
-    knobs = {k: v for k, v in overrides.items() if k in knob_names}
+    knob_by_name = {k.name: k for k in topics.KNOBS}
+    knob_names = set(knob_by_name)
+    knobs = {k: check_knob(knob_by_name[k], v) for k, v in overrides.items() if k in knob_names}
     flat = dict(flatten(params))
     probe = config_module.from_parameters(params, source=str(path))
     scenario = probe.scenario(args.scenario)
@@ -186,6 +206,7 @@ def plan(args: argparse.Namespace) -> Plan:
         topics.FILTER: {"use_sim_time": True},
         topics.RECORDER: {"use_sim_time": True, "bag_path": str(bag), "bag_overwrite": bool(args.overwrite)},
     }  # fmt: skip
+    env = _environment(args)
     commands = {}
     for role in START_ORDER:
         extra = dict(per_role[role])
@@ -194,7 +215,28 @@ def plan(args: argparse.Namespace) -> Plan:
         for name, value in extra.items():
             cmd += ["-p", f"{name}:={_ros_value(value)}"]
         commands[role] = cmd
-    return Plan(cfg, key, path, bag, temporary, commands, steps, timeout)
+    return Plan(cfg, key, path, bag, temporary, commands, steps, timeout, env)
+
+
+def _environment(args: argparse.Namespace) -> dict[str, str]:
+    """The ROS environment of the children: domain id, discovery range, no static peers.
+
+    Raises:
+        ConfigError: a domain id outside DOMAIN_ID_RANGE (from --domain-id or $ROS_DOMAIN_ID).
+    """
+    if args.domain_id is not None:
+        domain, source = args.domain_id, "--domain-id"
+    else:
+        text = os.environ.get("ROS_DOMAIN_ID", "").strip()
+        source = "$ROS_DOMAIN_ID"
+        try:
+            domain = int(text) if text else DEFAULT_DOMAIN_ID
+        except ValueError:
+            raise ConfigError(f"$ROS_DOMAIN_ID must be an integer in {DOMAIN_ID_RANGE[0]}..{DOMAIN_ID_RANGE[1]}, "
+                              f"got {text!r}") from None
+    if not DOMAIN_ID_RANGE[0] <= domain <= DOMAIN_ID_RANGE[1]:
+        raise ConfigError(f"{source} must be in {DOMAIN_ID_RANGE[0]}..{DOMAIN_ID_RANGE[1]}, got {domain}")
+    return {"ROS_DOMAIN_ID": str(domain), "ROS_AUTOMATIC_DISCOVERY_RANGE": DISCOVERY_RANGES[args.discovery]}
 
 
 # ----------------------------------------------------------------------------- processes
@@ -202,7 +244,8 @@ def plan(args: argparse.Namespace) -> Plan:
 
 def _shm_files() -> set[str]:
     try:
-        return {p.name for p in SHM_DIR.iterdir() if "fastrtps" in p.name or "fastdds" in p.name}
+        return {p.name for p in SHM_DIR.iterdir() if "fastrtps" in p.name or "fastdds" in p.name
+                or "fast_datasharing" in p.name}
     except OSError:
         return set()
 
@@ -223,6 +266,26 @@ def _mapped_shm(pids: list[int] | None = None) -> set[str]:
     return names
 
 
+def fastdds_files(pids: list[int]) -> set[str]:
+    """The Fast DDS files in /dev/shm that processes `pids` use now, with their companions.
+
+    Fast DDS names its shared-memory files (measured with rmw_fastrtps 8.4 / Fast DDS 2.14):
+    `fastrtps_<16 hex>` (a participant's segment; random name, not the PID), `fastrtps_port<N>` (the
+    ring buffer of a listening port, shared by every writer to it), `fast_datasharing_<guid>` (data
+    sharing), each with a `<name>_el` file that its owner keeps locked while alive, and a named
+    semaphore `sem.fastrtps_port<N>_mutex` per port, opened only briefly. Names carry no PID, so
+    ownership is read from /proc/<pid>/maps and fd while the process lives; the `_el` and `sem.` names
+    are added here because they are not always mapped.
+    """
+    names = {n for n in _mapped_shm(pids) if "fastrtps" in n or "fastdds" in n or "fast_datasharing" in n}
+    for n in list(names):
+        if not n.endswith("_el") and not n.startswith("sem."):
+            names.add(n + "_el")
+        if n.startswith("fastrtps_port") and not n.endswith("_el"):
+            names.add(f"sem.{n}_mutex")
+    return names
+
+
 def stale_shm(ours: set[str]) -> list[str]:
     """Fast DDS files in /dev/shm that the run's processes used and no live process uses now
     (files of other DDS programs on the machine are never touched)."""
@@ -230,7 +293,25 @@ def stale_shm(ours: set[str]) -> list[str]:
     if not left:
         return []
     used = _mapped_shm()
-    return sorted(n for n in left if n not in used)
+
+    def base(name: str) -> str:  # the file a companion belongs to: X_el -> X, sem.X_mutex -> X
+        if name.startswith("sem.") and name.endswith("_mutex"):
+            return name[len("sem."):-len("_mutex")]
+        return name[:-len("_el")] if name.endswith("_el") else name
+
+    # a companion (lock file, port semaphore) goes only with its file: another program may share a port
+    return sorted(n for n in left if n not in used and base(n) not in used)
+
+
+def remove_stale_shm(ours: set[str]) -> list[str]:
+    """Remove `stale_shm(ours)` (e.g. after a SIGKILL, which leaves Fast DDS files behind); returns them."""
+    stale = stale_shm(ours)
+    for name in stale:
+        try:
+            (SHM_DIR / name).unlink()
+        except OSError:
+            pass
+    return stale
 
 
 def _start(role: str, cmd: list[str], log_dir: Path | None, env: dict[str, str]) -> Child:
@@ -285,6 +366,9 @@ def _tail(child: Child, lines: int = 8) -> str:
 def launch(p: Plan, log_dir: Path | None) -> tuple[list[str], dict[str, Any]]:
     """Start the nodes, wait for the run, stop them. Returns (problems, facts for the summary)."""
     env = dict(os.environ)
+    env.update(p.env)
+    if p.env.get("ROS_AUTOMATIC_DISCOVERY_RANGE") == "LOCALHOST":
+        env.pop("ROS_STATIC_PEERS", None)
     env.setdefault("AMENT_PREFIX_PATH", sys.prefix)
     env["PYTHONUNBUFFERED"] = "1"
     env.setdefault("RCUTILS_COLORIZED_OUTPUT", "0")
@@ -323,7 +407,7 @@ def launch(p: Plan, log_dir: Path | None) -> tuple[list[str], dict[str, Any]]:
                 break
             if time.monotonic() - last_scan > SHM_SCAN_S:  # which Fast DDS files are the run's
                 last_scan = time.monotonic()
-                ours |= (_mapped_shm([c.proc.pid for c in children if c.proc.poll() is None]) - shm_before)
+                ours |= (fastdds_files([c.proc.pid for c in children if c.proc.poll() is None]) - shm_before)
             time.sleep(POLL_S)
         facts["run_s"] = time.monotonic() - t0
     finally:
@@ -335,14 +419,9 @@ def launch(p: Plan, log_dir: Path | None) -> tuple[list[str], dict[str, Any]]:
                 c.log_file.close()
     facts["exit_codes"] = {c.name: c.proc.returncode for c in children}
     facts["signals"] = {c.name: c.signals for c in children if c.signals}
-    stale = stale_shm(ours)
+    stale = remove_stale_shm(ours)
     if stale:
         problems.append(f"Fast DDS files left in /dev/shm (removed): {', '.join(stale)}")
-        for name in stale:
-            try:
-                (SHM_DIR / name).unlink()
-            except OSError:
-                pass
     facts["shm_clean"] = not stale
     return problems, facts
 
@@ -364,7 +443,8 @@ def run(args: argparse.Namespace) -> int:
         log_dir = Path(tempfile.mkdtemp(prefix="rta_launch_logs_"))
     mode = f"realtime x{args.realtime:g}" if args.realtime is not None else "lockstep"
     print(f"launch {p.scenario_key}: {p.steps} steps, {mode}, rta={'off' if args.no_rta else 'on'}, "
-          f"namespace {args.namespace}, bag {p.bag}", flush=True)
+          f"namespace {args.namespace}, domain {p.env['ROS_DOMAIN_ID']} "
+          f"({p.env['ROS_AUTOMATIC_DISCOVERY_RANGE'].lower()}), bag {p.bag}", flush=True)
     problems, facts = launch(p, log_dir)
     for line in problems:
         print(f"ERROR: {line}", file=sys.stderr)
@@ -390,6 +470,9 @@ def run(args: argparse.Namespace) -> int:
     print(f"DDS run, 4 processes: {loop_text} for {p.steps} steps ({facts['run_s']:.1f} s with start-up and "
           f"shutdown){extra}; deadline misses {run_values.get('deadline_misses', 0)}; re-integration residual "
           f"{bag_run.reintegration_residual:.2g}")
+    counters = {k: run_values[k] for k in topics.PLANT_COUNTERS if k != "commands" and run_values.get(k)}
+    if counters:
+        print("plant counters: " + ", ".join(f"{k} {v}" for k, v in counters.items()))
     if out is not None:
         (out / "summary.json").write_text(json.dumps(summary, indent=2, default=str) + "\n")
         print(f"wrote {out / 'summary.json'}, bag {p.bag}, logs {log_dir}")

@@ -2,9 +2,11 @@
 
 Before any test module imports rclpy, every test session gets its own DDS domain and stays on
 this machine: ROS_DOMAIN_ID is a random value in 40..100 (the range whose ports are safe on Linux
-and clear of the usual defaults), ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST. Child processes (the
-launcher's nodes, colcon) inherit both. AMENT_PREFIX_PATH defaults to sys.prefix, where the
-pip-installed Jazzy wheels put share/ (message definitions, the ament index).
+and clear of the usual defaults; set RTA_TEST_DOMAIN_ID to choose one), and
+ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST. Child processes (the launcher's nodes, colcon) inherit
+both, and the launcher keeps them (its --domain-id defaults to $ROS_DOMAIN_ID). AMENT_PREFIX_PATH
+defaults to sys.prefix, where the pip-installed Jazzy wheels put share/ (message definitions, the
+ament index).
 
 Also: the in-process reference runs of `paper-example` (ClosedLoop.run, with and without RTA),
 computed once per session for the tests that compare DDS runs against them.
@@ -20,7 +22,8 @@ from typing import Any
 import pytest
 
 DOMAIN_RANGE = (40, 100)
-os.environ["ROS_DOMAIN_ID"] = str(random.SystemRandom().randint(*DOMAIN_RANGE))
+os.environ["ROS_DOMAIN_ID"] = (os.environ.get("RTA_TEST_DOMAIN_ID")
+                               or str(random.SystemRandom().randint(*DOMAIN_RANGE)))
 os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
 os.environ.pop("ROS_STATIC_PEERS", None)
 os.environ.setdefault("AMENT_PREFIX_PATH", sys.prefix)

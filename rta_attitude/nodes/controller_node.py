@@ -7,6 +7,14 @@ schedule from then on. Scenarios with `controller: none` publish zero torque.
 
 The torque crosses DDS: tau_des = model.wheel_accel_to_torque(u_des), stamped with the state's
 stamp.
+
+Bad input (each kind counted, logged once per episode; the counts are in the node's exit line):
+a state with an invalid stamp, a duplicate or older stamp, or (use_sim_time) older than the /clock
+time by more than `max_state_age_s` is dropped (not answered); a state whose values are unusable
+(NaN/inf, wrong length or names, quaternion norm off by more than `quaternion_tolerance`) is
+answered with zero torque, so the filter is not left waiting (it sees the same bad state and answers
+with its invalid-state fallback); a quaternion off by less is renormalised. An attitude_command that
+is not a unit quaternion within `quaternion_tolerance` is rejected.
 """
 
 from __future__ import annotations
@@ -22,6 +30,7 @@ from .. import model
 from ..controller import pd_command, zero_command
 from ..errors import MessageError
 from . import convert, topics
+from .faults import StampOrder
 from .spin import RtaNode, run
 
 
@@ -32,7 +41,7 @@ class ControllerNode(RtaNode):
         super().__init__(topics.CONTROLLER, **kwargs)
         self.pd = self.scenario.controller == "pd"
         self.overrides: list[tuple[int, np.ndarray]] = []  # (stamp ns, q_c), sorted by stamp
-        self.rejected = 0
+        self.order = StampOrder()
         spec = topics.TOPICS[topics.TORQUE_DES]
         pub = self.create_publisher(topics.msg_class(spec.type_name), spec.name, topics.qos_profile(spec.qos))
         self.out = self.gate(topics.TORQUE_DES, pub)
@@ -51,20 +60,48 @@ class ControllerNode(RtaNode):
 
     def _on_command(self, msg: Any) -> None:
         try:
-            t_ns, q = convert.quaternion_from_msg(msg)
+            t_ns, q = convert.quaternion_from_msg(msg, self.knobs["quaternion_tolerance"])
         except MessageError as exc:
-            self.get_logger().warning(f"attitude_command rejected ({exc})", throttle_duration_sec=5.0)
+            self.faults.fault("attitude_command_rejected", str(exc))
             return
+        self.faults.clear("attitude_command_rejected")
         bisect.insort(self.overrides, (t_ns, q), key=lambda item: item[0])
         self.get_logger().info(f"attitude command {np.round(q, 4).tolist()} from t = {t_ns / convert.NS_PER_S:g} s")
 
     def _on_state(self, msg: Any) -> None:
-        try:
-            t_ns, x = convert.state_from_msg(msg)
-        except MessageError as exc:
-            self.rejected += 1
-            self.get_logger().warning(f"state rejected ({exc})", throttle_duration_sec=5.0)
+        if self.stopping:
             return
+        try:
+            t_ns = convert.stamp_ns(msg.header.stamp)
+        except MessageError as exc:
+            self.faults.fault("state_rejected", f"{exc}; dropped")
+            return
+        order = self.order.check(t_ns)
+        if order:
+            self.faults.fault(f"state_{order}", f"stamp {t_ns / convert.NS_PER_S:g} s; dropped")
+            return
+        max_age = self.knobs["max_state_age_s"]
+        if max_age > 0 and self.uses_sim_time():
+            age = (self.get_clock().now().nanoseconds - t_ns) / convert.NS_PER_S
+            if age > max_age:
+                self.faults.fault("state_stale", f"state of t = {t_ns / convert.NS_PER_S:g} s is {age:g} s old; "
+                                  "dropped")
+                return
+        self.order.take(t_ns)
+        self.faults.clear("state_duplicate", "state_out_of_order", "state_stale")
+        try:
+            _, x = convert.state_from_msg(msg)
+            x, renormalised = convert.unit_attitude(x, self.knobs["quaternion_tolerance"])
+        except MessageError as exc:
+            self.faults.fault("state_rejected", f"{exc}; answered with zero torque")
+            self.out.publish(convert.torque_msg(np.zeros(3), t_ns))
+            return
+        self.faults.clear("state_rejected")
+        if renormalised:
+            self.faults.fault("state_renormalised", f"state quaternion of t = {t_ns / convert.NS_PER_S:g} s "
+                              "renormalised")
+        else:
+            self.faults.clear("state_renormalised")
         u_des = pd_command(x, self.reference(t_ns), self.cfg) if self.pd else zero_command(x)
         self.out.publish(convert.torque_msg(model.wheel_accel_to_torque(u_des, self.cfg), t_ns))
 
@@ -72,6 +109,7 @@ class ControllerNode(RtaNode):
 def main(args: Sequence[str] | None = None) -> None:
     """Console script `pd_controller_node` (`ros2 run rta_attitude pd_controller_node --ros-args ...`)."""
     sys.exit(run(ControllerNode, args, topics.NODE_NAMES[topics.CONTROLLER]))
+
 
 if __name__ == "__main__":
     main()

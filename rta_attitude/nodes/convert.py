@@ -35,6 +35,11 @@ from . import topics
 
 Array = NDArray[np.float64]
 NS_PER_S = 1_000_000_000
+UNIT_NORM_EPS = 1e-12
+"""A quaternion whose norm is this close to 1 counts as unit and is left unchanged (the plant renormalises
+after every RK4 substep, so its states are within a few ulp; dividing again would change bits and break the
+lockstep identity with the in-process run). Further off, within the nodes' `quaternion_tolerance`, it is
+renormalised and counted."""
 _STATE_NAME_LIST = list(STATE_NAMES)
 
 # ----------------------------------------------------------------------------- time
@@ -124,13 +129,36 @@ def torque_from_msg(msg: Any) -> tuple[int, Array]:
     return t_ns, tau
 
 
-def quaternion_from_msg(msg: Any) -> tuple[int, Array]:
-    """(stamp [ns], unit quaternion (4,) scalar last) of a QuaternionStamped; norm must be ~1."""
+def unit_quaternion(q: Array, tolerance: float, what: str = "quaternion") -> tuple[Array, bool]:
+    """A quaternion (4,) checked for unit norm: (q, False) if | |q| - 1 | <= UNIT_NORM_EPS (unchanged),
+    (q / |q|, True) if it is off by up to `tolerance`; MessageError beyond (or not finite)."""
+    with np.errstate(over="ignore"):  # a huge but finite q: norm inf, rejected below
+        norm = float(np.linalg.norm(q)) if np.all(np.isfinite(q)) else math.nan
+    if not abs(norm - 1.0) <= tolerance:
+        raise MessageError(f"{what} must be a unit quaternion (| |q| - 1 | <= {tolerance:g}), got norm {norm:.6g}")
+    if abs(norm - 1.0) <= UNIT_NORM_EPS:
+        return q, False
+    return q / norm, True
+
+
+def unit_attitude(x: Array, tolerance: float) -> tuple[Array, bool]:
+    """A state (19,) with its quaternion checked by `unit_quaternion`: (x, renormalised?)."""
+    q, renormalised = unit_quaternion(x[Q], tolerance, "state quaternion")
+    if renormalised:
+        x = x.copy()
+        x[Q] = q
+    return x, renormalised
+
+
+def quaternion_from_msg(msg: Any, tolerance: float = 0.5) -> tuple[int, Array]:
+    """(stamp [ns], unit quaternion (4,) scalar last) of a QuaternionStamped; | |q| - 1 | must be within
+    `tolerance` (then q is renormalised), else MessageError."""
     t_ns = stamp_ns(msg.header.stamp)
     q = np.array([msg.quaternion.x, msg.quaternion.y, msg.quaternion.z, msg.quaternion.w], dtype=float)
     norm = float(np.linalg.norm(q)) if np.all(np.isfinite(q)) else math.nan
-    if not 0.5 < norm < 1.5:
-        raise MessageError(f"attitude command must be a unit quaternion, got norm {norm:.3g}")
+    if not abs(norm - 1.0) < tolerance:
+        raise MessageError(f"attitude command must be a unit quaternion (| |q| - 1 | < {tolerance:g}), "
+                           f"got norm {norm:.6g}")
     return t_ns, q / norm
 
 
@@ -212,9 +240,16 @@ def _status(name: str, level: bytes, message: str, values: Sequence[tuple[str, A
 
 
 def filter_status_msg(res: FilterResult, t_ns: int, counters: FilterCounters, preset: str,
-                      slacked: Sequence[str]) -> DiagnosticArray:
+                      slacked: Sequence[str], inputs: Mapping[str, int] | None = None,
+                      source: str = "torque_des") -> DiagnosticArray:
     """filter_status: the `filter` entry (level OK pass, WARN solved, ERROR fallback), then one entry
-    per constraint named like it (OK, WARN intervening, ERROR violated: h < 0)."""
+    per constraint named like it (OK, WARN intervening, ERROR violated: h < 0).
+
+    Args:
+        inputs: the node's input counters (topics.INPUT_COUNTERS; missing ones are 0).
+        source: where u_des came from ('torque_des', or 'missing': u_des = 0 after a timeout).
+    """
+    inputs = inputs or {}
     msg = DiagnosticArray()
     msg.header.stamp = stamp(t_ns)
     level = {"pass": DiagnosticStatus.OK, "solved": DiagnosticStatus.WARN}.get(res.status, DiagnosticStatus.ERROR)
@@ -226,6 +261,8 @@ def filter_status_msg(res: FilterResult, t_ns: int, counters: FilterCounters, pr
         *((f"box_active_{a}", bool(res.box_active[i])) for i, a in enumerate(AXES)),
         ("calls", counters.calls), ("fast_path", counters.fast_path), ("solved", counters.solved),
         ("fallbacks", counters.fallbacks), ("solver_failures", counters.solver_failures),
+        ("backup_solves", counters.backup_solves), ("invalid_states", counters.invalid_states),
+        (topics.INPUT_SOURCE_KEY, source), *((k, inputs.get(k, 0)) for k in topics.INPUT_COUNTERS),
     ]  # fmt: skip
     statuses = [_status(topics.QP_STATUS_NAME, level, res.status + (f" ({res.fallback})" if res.fallback else ""), qp)]
     for i, name in enumerate(res.names):
@@ -317,8 +354,8 @@ def run_status_from_msg(msg: Any) -> tuple[str, dict[str, Any]]:
 
 
 __all__ = [
-    "NS_PER_S", "battery_msg", "cdr_stamp_ns", "clock_msg", "diagnostic_values", "filter_record",
+    "NS_PER_S", "UNIT_NORM_EPS", "battery_msg", "cdr_stamp_ns", "clock_msg", "diagnostic_values", "filter_record",
     "filter_status_msg", "odometry_msg", "quaternion_from_msg", "run_status_from_msg", "run_status_msg",
     "seconds_to_ns", "stamp", "stamp_ns", "state_from_msg", "state_msg", "sun_vector_msg", "temperature_msg",
-    "torque_from_msg", "torque_msg", "vector_msg",
+    "torque_from_msg", "torque_msg", "unit_attitude", "unit_quaternion", "vector_msg",
 ]  # fmt: skip

@@ -18,6 +18,7 @@ Parameters are read once: later `ros2 param set` calls on them are refused with 
 from __future__ import annotations
 
 import array
+import math
 from collections.abc import Iterator, Mapping, Sequence
 from typing import TYPE_CHECKING, Any
 
@@ -78,18 +79,30 @@ def _declare(node: Node, name: str, value: Any, description: str = "") -> None:
         raise ConfigError(f"parameter {name}={value!r} cannot be a ROS parameter ({exc})") from None
 
 
-def _knob_value(node: Node, knob: Knob) -> Any:
-    value = _plain(node.get_parameter(knob.name).value)
+def check_knob(knob: Knob, value: Any) -> Any:
+    """A knob's value checked against its type, choices and range (ROS-free; the launcher uses it too).
+
+    Returns:
+        The value (an int where a float is expected becomes a float).
+
+    Raises:
+        ConfigError: one line naming the parameter, the value and what is allowed.
+    """
+    value = _plain(value)
     want = type(knob.default)
     if want is float and isinstance(value, int) and not isinstance(value, bool):
         value = float(value)
-    if not isinstance(value, want) or (want is int and isinstance(value, bool)):
-        raise ConfigError(f"parameter {knob.name} must be a {want.__name__}, got {value!r}")
-    if knob.choices and value not in knob.choices:
-        raise ConfigError(f"parameter {knob.name} must be one of {', '.join(knob.choices)}, got {value!r}")
-    if want in (int, float) and value < 0:
-        raise ConfigError(f"parameter {knob.name} must be >= 0, got {value!r}")
+    bad_type = not isinstance(value, want) or (want is int and isinstance(value, bool))
+    bad_number = not bad_type and want in (int, float) and (
+        not math.isfinite(value) or value < knob.minimum or (knob.positive and value <= knob.minimum)
+        or (knob.maximum is not None and value >= knob.maximum))
+    if bad_type or bad_number or (knob.choices and value not in knob.choices):
+        raise ConfigError(f"parameter {knob.name} must be {knob.allowed}, got {value!r}")
     return value
+
+
+def _knob_value(node: Node, knob: Knob) -> Any:
+    return check_knob(knob, node.get_parameter(knob.name).value)
 
 
 def load(node: Node, knobs: Sequence[Knob]) -> tuple[Config, dict[str, Any]]:
@@ -130,4 +143,4 @@ def load(node: Node, knobs: Sequence[Knob]) -> tuple[Config, dict[str, Any]]:
     return cfg, values
 
 
-__all__ = ["flatten", "load", "nest"]
+__all__ = ["check_knob", "flatten", "load", "nest"]

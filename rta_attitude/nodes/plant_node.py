@@ -6,15 +6,28 @@ Stepping (`stepping` parameter):
 - lockstep (default): publish state(t_k), wait for the command stamped t_k, integrate to t_k+1,
   repeat; a run over DDS equals `ClosedLoop.run()` of the same scenario. After the final state
   the plant also waits for the chain's answer to it, so every message count of the run is known
-  and goes into the final `run_status`. No command within `step_timeout_s` fails the run.
+  and goes into the final `run_status`. No command within `command_timeout_s` (wall) is a deadline
+  miss: the plant applies `deadline_fallback` for that step and goes on (a dead filter never stalls
+  the loop; the first command of the run may take `startup_timeout_s`, and if none ever comes the
+  run fails). In a run without faults the timeout never fires, so lockstep stays deterministic.
 - realtime: a steady wall-clock timer with period dt / real_time_factor. At tick k+1 the plant
   applies the command stamped t_k if it has arrived (zero-order hold over [t_k, t_k+1)), else it
-  counts a deadline miss and applies `deadline_fallback` (hold the last applied torque, or zero).
-  Commands for an older step are counted as late and dropped. The loop never waits.
+  counts a deadline miss and applies `deadline_fallback`. The loop never waits.
+
+`deadline_fallback`: `hold` repeats the last applied torque for up to `hold_max_steps` consecutive
+misses, then applies zero; `zero` applies zero at once.
+
+Commands are validated (topics.PLANT_COUNTERS, in run_status; each kind logged once per episode):
+not finite or wrong frame: rejected; stamp older than the current step: late, equal to the last
+applied: duplicate, newer: future; all dropped. A command outside the admissible set U is counted
+(`outside_u`; the plant is the spacecraft and applies it: without RTA the paper's PD law does exceed
+U); one beyond the actuator limit is applied saturated, as simulation.integrate does (`saturated`).
+When a fault episode starts or ends the plant republishes run_status (`running`, with the counters).
 
 Start: the first state is published only after every writer of the plant matched the run's
-readers (topics.expected_readers). End: run_status `done` (or `failed: reason`), wait until all
-readers acknowledged, exit when `exit_when_done`.
+readers (topics.expected_readers). End: run_status `done` (or `failed: reason`, or
+`interrupted: SIGINT` on a signal), wait until all readers acknowledged, exit when `exit_when_done`
+(always after a signal).
 """
 
 from __future__ import annotations
@@ -24,17 +37,20 @@ from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
-from rclpy.duration import Duration
 
 from .. import model, simulation
-from ..errors import ConfigError, MessageError
+from ..errors import MessageError
 from . import convert, topics
 from .spin import RtaNode, run
 
-ACK_TIMEOUT_S = 5.0
-"""At the end: longest wait for readers to acknowledge the last messages [s]."""
 STARTUP_POLL_S = 0.005
 WATCHDOG_PERIOD_S = 0.1
+"""Longest period of the lockstep command watchdog (shorter for a short command_timeout_s) [s]."""
+LIMIT_RTOL = 1e-9
+"""A command counts as beyond a limit when |u_i| > limit (1 + LIMIT_RTOL) (tau = D u and back rounds)."""
+QUIET_KINDS = ("outside_u", "saturated")
+"""Counted and logged once per episode, but do not republish run_status: without RTA they happen in
+fault-free runs (the paper's PD law exceeds U), and saturation is the actuator's normal behaviour."""
 
 
 class PlantNode(RtaNode):
@@ -42,16 +58,18 @@ class PlantNode(RtaNode):
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__(topics.PLANT, **kwargs)
+        self.counts.update({k: 0 for k in topics.PLANT_COUNTERS})
         self.dt_s = self.cfg.filter.sample_time_s
         self.steps = round(self.scenario.duration_s / self.dt_s)
         self.lockstep = self.knobs["stepping"] == "lockstep"
-        if not self.lockstep and self.knobs["real_time_factor"] <= 0:
-            raise ConfigError(f"real_time_factor must be > 0, got {self.knobs['real_time_factor']!r}")
+        self.u_admissible = self.cfg.u_max_rad_s2  # U (3,): the box the filter keeps u in
+        self.u_actuator = self.cfg.limits.wheel_accel_max_rad_s2  # where the wheels saturate
         self.x = self.scenario.x0.copy()
         self.k = 0
         self.held_tau = np.zeros(3)
+        self.misses_in_a_row = 0
+        self.last_command_ns = -1
         self.pending: tuple[int, np.ndarray] | None = None
-        self.counts = {"commands": 0, "rejected": 0, "unexpected": 0, "deadline_misses": 0, "late": 0}
         self.latency_s: list[float] = []
         self.published: dict[str, int] = {}
         self.pubs = {name: self.create_publisher(topics.msg_class(spec.type_name), spec.name,
@@ -64,6 +82,7 @@ class PlantNode(RtaNode):
         self._sent_s = 0.0
         self._progress_s = self.wall_now_s()
         self._ended = False
+        self._running = False
         self._started_s = 0.0
         self._startup = self.wall_timer(STARTUP_POLL_S, self._check_ready)
         self.get_logger().info(f"scenario {self.scenario.name}: {self.steps} steps of {self.dt_s:g} s, "
@@ -85,9 +104,11 @@ class PlantNode(RtaNode):
         self._started_s = self.wall_now_s()
         self._publish(topics.RUN_STATUS, convert.run_status_msg(0, topics.RUN_RUNNING, self._status_values()))
         self.get_logger().info("readers matched; running")
+        self._running = True
         self._publish_sample()
         if self.lockstep:
-            self._watchdog = self.wall_timer(WATCHDOG_PERIOD_S, self._check_stall)
+            period = min(WATCHDOG_PERIOD_S, self.knobs["command_timeout_s"] / 4)
+            self._watchdog = self.wall_timer(period, self._check_stall)
         else:
             self._ticker = self.wall_timer(self.dt_s / self.knobs["real_time_factor"], self._tick)
 
@@ -117,59 +138,111 @@ class PlantNode(RtaNode):
         u = model.torque_to_wheel_accel(tau_Nm, self.cfg)
         x_next, _ = simulation.integrate(self.x, u, self.dt_s, self.cfg)
         t_ns = self._t_ns(self.k)
+        self.held_tau = tau_Nm
         self.k += 1
         self.x = x_next
         self._publish_sample()
         self._publish(topics.TORQUE_APPLIED, convert.torque_msg(tau_Nm, t_ns))
 
     def _on_command(self, msg: Any) -> None:
-        if self._ended:
+        if self._ended or not self._running:
             return
         self.counts["commands"] += 1
         try:
             t_ns, tau = convert.torque_from_msg(msg)
         except MessageError as exc:
-            self.counts["rejected"] += 1
-            self.get_logger().warning(f"{self.command_topic}: rejected ({exc})", throttle_duration_sec=5.0)
+            self.faults.fault("rejected", f"{self.command_topic}: {exc}; dropped")
             return
+        self.faults.clear("rejected")
         expected = self._t_ns(self.k)
-        if not self.lockstep:
-            if t_ns == expected:
-                self.pending = (t_ns, tau)
+        if t_ns != expected or (self.pending is not None and self.pending[0] == t_ns):
+            if t_ns == self.last_command_ns or t_ns == expected:  # (== expected here: already pending)
+                kind = "duplicate"
             else:
-                self.counts["late"] += 1
+                kind = "late" if t_ns < expected else "future"
+            self.faults.fault(kind, f"{self.command_topic} stamped {t_ns / convert.NS_PER_S:g} s at step "
+                              f"t = {expected / convert.NS_PER_S:g} s; dropped")
             return
-        if t_ns != expected:
-            self.counts["unexpected"] += 1
-            self.get_logger().warning(f"{self.command_topic}: stamp {t_ns} ns, expected {expected} ns; ignored",
-                                      throttle_duration_sec=5.0)
+        self.faults.clear("duplicate", "late", "future")
+        u = np.abs(model.torque_to_wheel_accel(tau, self.cfg))
+        where = f"{self.command_topic} at t = {t_ns / convert.NS_PER_S:g} s (|u| = {np.round(u, 3).tolist()} rad/s^2)"
+        for kind, limit, what in (("outside_u", self.u_admissible, "is outside U; applied"),
+                                  ("saturated", self.u_actuator, "is beyond the actuator limit; saturated")):
+            if np.any(u > limit * (1 + LIMIT_RTOL)):
+                self.faults.fault(kind, f"{where} {what}")
+            else:
+                self.faults.clear(kind)
+        if not self.lockstep:
+            self.pending = (t_ns, tau)
             return
+        self.last_command_ns = t_ns
         self.latency_s.append(self.wall_now_s() - self._sent_s)
+        self._in_time()
         if self.k == self.steps:  # the chain's answer to the final state: counts are now known
             self._end(topics.RUN_DONE)
         else:
             self._step(tau)
 
+    def _in_time(self) -> None:
+        self.misses_in_a_row = 0
+        self.faults.clear("deadline_misses")
+
+    def _fallback(self, why: str) -> np.ndarray:
+        """A deadline miss: count it and return the torque `deadline_fallback` applies."""
+        self.misses_in_a_row += 1
+        hold = self.knobs["deadline_fallback"] == "hold" and self.misses_in_a_row <= self.knobs["hold_max_steps"]
+        self.counts["fallback_hold" if hold else "fallback_zero"] += 1
+        self.faults.fault("deadline_misses", f"no {self.command_topic} for t = {self.k * self.dt_s:g} s {why}; "
+                          f"applying {'the last torque' if hold else 'zero torque'} "
+                          f"({self.knobs['deadline_fallback']} fallback)")
+        return self.held_tau if hold else np.zeros(3)
+
     def _tick(self) -> None:
+        if self._ended:
+            return
         expected = self._t_ns(self.k)
         if self.pending is not None and self.pending[0] == expected:
             tau = self.pending[1]
+            self.last_command_ns = expected
             self.latency_s.append(0.0)
+            self._in_time()
         else:
-            self.counts["deadline_misses"] += 1
-            tau = self.held_tau if self.knobs["deadline_fallback"] == "hold" else np.zeros(3)
+            tau = self._fallback("by the next tick")
         self.pending = None
-        self.held_tau = tau
         self._step(tau)
         if self.k == self.steps:
             self.destroy_timer(self._ticker)
             self._end(topics.RUN_DONE)
 
     def _check_stall(self) -> None:
+        if self._ended:
+            return
         waited = self.wall_now_s() - self._progress_s
-        if not self._ended and waited > self.knobs["step_timeout_s"]:
-            self._end(topics.RUN_FAILED + f": no {self.command_topic} for t = {self.k * self.dt_s:g} s "
-                      f"within {self.knobs['step_timeout_s']:g} s")
+        if self.counts["commands"] == 0:  # the chain has not answered yet: it may still be starting
+            if waited > self.knobs["startup_timeout_s"]:
+                self._end(topics.RUN_FAILED + f": no {self.command_topic} for t = {self.k * self.dt_s:g} s "
+                          f"within {self.knobs['startup_timeout_s']:g} s (startup_timeout_s)")
+            return
+        timeout = self.knobs["command_timeout_s"]
+        if waited <= timeout:
+            return
+        tau = self._fallback(f"within {timeout:g} s")
+        if self.k == self.steps:  # no answer to the final state: nothing left to apply
+            self._end(topics.RUN_DONE)
+        else:
+            self._step(tau)
+
+    def on_fault_change(self, kind: str, active: bool) -> None:
+        if self._running and not self._ended and kind not in QUIET_KINDS:
+            self._publish(topics.RUN_STATUS, convert.run_status_msg(self._t_ns(self.k), topics.RUN_RUNNING,
+                                                                    self._status_values()))
+
+    def on_stop(self) -> None:
+        """SIGINT/SIGTERM: end the run as `interrupted` (final run_status with this node's counts), then exit."""
+        if self._ended:  # the run had ended already (exit_when_done false, or a stop while flushing)
+            self.finish()
+            return
+        self._end(f"{topics.RUN_INTERRUPTED}: {self.stopping}")
 
     # ------------------------------------------------------------------ end
     def _status_values(self) -> dict[str, Any]:
@@ -193,29 +266,37 @@ class PlantNode(RtaNode):
         values = self._status_values()
         counts = dict(self.published)
         counts[topics.RUN_STATUS] = counts.get(topics.RUN_STATUS, 0) + 1
-        if self.lockstep and state == topics.RUN_DONE:
-            # the filter answers every torque_des with one torque_cmd (and, with RTA, one filter_status)
+        faults = sum(self.counts[k] for k in ("rejected", "late", "duplicate", "future", "deadline_misses"))
+        if self.lockstep and state == topics.RUN_DONE and not faults:
+            # the filter answers every torque_des with one torque_cmd (and, with RTA, one filter_status);
+            # after a fault these counts are not known here, and the recorder waits for quiet instead
             counts[topics.TORQUE_CMD] = counts[topics.TORQUE_DES] = self.counts["commands"]
             if self.rta:
                 counts[topics.FILTER_STATUS] = self.counts["commands"]
         for topic, n in counts.items():
             values[topics.EXPECTED_PREFIX + self.resolve_topic_name(topic)] = n
         self._publish(topics.RUN_STATUS, convert.run_status_msg(self._t_ns(self.k), state, values))
-        if self.knobs["exit_when_done"]:
-            for pub in self.pubs.values():
-                pub.wait_for_all_acked(Duration(seconds=ACK_TIMEOUT_S))
+        interrupted = state.startswith(topics.RUN_INTERRUPTED)
+        if self.knobs["exit_when_done"] or interrupted:
+            self.flush(self.knobs["stop_timeout_s"])
         if state.startswith(topics.RUN_FAILED):
             self.fail(f"run failed at step {self.k}: {state[len(topics.RUN_FAILED) + 2:]}")
             return
-        self.get_logger().info(f"run done: {self.k} steps; deadline misses {self.counts['deadline_misses']}, "
-                               f"rejected {self.counts['rejected']}, unexpected {self.counts['unexpected']}")
-        if self.knobs["exit_when_done"]:
+        self.get_logger().info(f"run {state}: {self.k} steps; counters: {self.faults.summary()}")
+        if self.knobs["exit_when_done"] or interrupted:
             self.finish()
+
+    def published_counts(self) -> dict[str, int]:
+        return dict(self.published)
+
+    def own_publishers(self) -> list[Any]:
+        return list(self.pubs.values())
 
 
 def main(args: Sequence[str] | None = None) -> None:
     """Console script `plant_node` (`ros2 run rta_attitude plant_node --ros-args ...`)."""
     sys.exit(run(PlantNode, args, topics.NODE_NAMES[topics.PLANT]))
+
 
 if __name__ == "__main__":
     main()

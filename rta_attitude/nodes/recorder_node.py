@@ -9,10 +9,22 @@ At close the recorder adds an MCAP metadata record `rta_attitude` with the run's
 rta, preset, config, duration_s, dt_s, namespace, and the final run_status values such as stepping
 and deadline misses), which `rta-attitude analyze` reads.
 
-End: after run_status `done` the recorder waits until every topic with a known final count
-(`expected:<topic>` in run_status) has it, and, for topics without one (real-time runs), until no
-message came for `drain_quiet_s`; at most `drain_timeout_s`. Then it closes the bag and, with
-`exit_when_done`, exits. SIGINT/SIGTERM close the bag too (whatever was received is kept).
+End: after the plant's final run_status (`done`, `failed: ...` or `interrupted: ...`) the recorder
+waits until every topic with a known final count (`expected:<topic>` in run_status) has it, and,
+for topics without one (real-time runs, runs with faults), until no message came for
+`drain_quiet_s`; a topic whose publisher has gone (a killed node) is not waited for beyond that
+quiet time; at most `drain_timeout_s` in all. Then it closes the bag and, with `exit_when_done`,
+exits.
+
+SIGINT/SIGTERM: the recorder does not close at once, which would lose the messages published just
+before the signal and still in flight. It drains the same way (the plant, stopped too, publishes an
+`interrupted` run_status with its counts), for at most `stop_timeout_s`, then closes the bag
+(footer, summary and the metadata record: the file is complete) and exits 0.
+
+SIGKILL (nothing can run): the file has no footer. The writer flushes each MCAP chunk to the OS as
+it completes (`bag_chunk_kb`), so the bag is readable up to its last complete chunk;
+`rta_attitude.bag.read_bag` reports it `truncated` and `rta-attitude analyze` says where the data
+ends.
 """
 
 from __future__ import annotations
@@ -58,26 +70,27 @@ class RecorderNode(RtaNode):
             self.destroy_node()
             raise ConfigError("parameter bag_path is required (the .mcap file to write)")
         self.bag: BagWriter | None = None
-        self.counts: dict[str, int] = {}
+        self.received: dict[str, int] = {}
+        """Messages written per topic (absolute name)."""
         self.expected: dict[str, int] | None = None
         self.run_values: dict[str, Any] = {}
-        self.rejected = 0
         self._last_s = self.wall_now_s()
         self._done_s = 0.0
         self._drain: Timer | None = None
+        self._terminal = False
         self.status_topic = self.resolve_topic_name(topics.RUN_STATUS)
         self._status_type = topics.msg_class(topics.TOPICS[topics.RUN_STATUS].type_name)
         specs = {self.resolve_topic_name(spec.name): spec for spec in topics.recorded(self.rta)}
         for name, spec in specs.items():
-            self.counts[name] = 0
+            self.received[name] = 0
             self.create_subscription(topics.msg_class(spec.type_name), spec.name, partial(self._on_message, name),
                                      topics.qos_profile(spec.qos), raw=True)
         # the file is created last, so a node that fails to start leaves no half-written bag
-        bag = BagWriter(path, overwrite=self.knobs["bag_overwrite"])
+        bag = BagWriter(path, overwrite=self.knobs["bag_overwrite"], chunk_size=self.knobs["bag_chunk_kb"] * 1024)
         for name, spec in specs.items():
             bag.add_topic(name, spec.type_name, bag_qos(spec.qos))
         self.bag = bag
-        self.get_logger().info(f"recording {len(self.counts)} topics to {path}")
+        self.get_logger().info(f"recording {len(self.received)} topics to {path}")
 
     def _on_message(self, topic: str, data: bytes) -> None:
         if self.bag is None:
@@ -85,11 +98,11 @@ class RecorderNode(RtaNode):
         try:
             t_ns = convert.cdr_stamp_ns(data)
         except MessageError as exc:
-            self.rejected += 1
-            self.get_logger().warning(f"{topic}: not recorded ({exc})", throttle_duration_sec=5.0)
+            self.faults.fault("not_recorded", f"{topic}: {exc}")
             return
+        self.faults.clear("not_recorded")
         self.bag.write(topic, data, t_ns)
-        self.counts[topic] += 1
+        self.received[topic] += 1
         self._last_s = self.wall_now_s()
         if topic == self.status_topic:
             self._on_status(data)
@@ -104,26 +117,45 @@ class RecorderNode(RtaNode):
                                                   if not k.startswith(topics.EXPECTED_PREFIX)}}
         if state == topics.RUN_RUNNING:
             return
+        self._terminal = True
         self.expected = {k[len(topics.EXPECTED_PREFIX):]: int(v) for k, v in values.items()
                          if k.startswith(topics.EXPECTED_PREFIX)}
-        self._done_s = self.wall_now_s()
+        self._start_drain()
+
+    def _start_drain(self) -> None:
         if self._drain is None:
+            self._done_s = self.wall_now_s()
             self._drain = self.wall_timer(DRAIN_POLL_S, self._check_drained)
 
+    def on_stop(self) -> None:
+        """SIGINT/SIGTERM: drain (at most stop_timeout_s), close the bag, finish."""
+        if self.bag is None:  # closed already (exit_when_done false)
+            self.finish()
+            return
+        self._start_drain()
+
     def _check_drained(self) -> None:
-        if self.expected is None:
+        if self.bag is None:
             return
         now = self.wall_now_s()
-        short = {t: (self.counts.get(t, 0), n) for t, n in self.expected.items() if self.counts.get(t, 0) < n}
-        quiet = all(t in self.expected for t in self.counts) or now - self._last_s >= self.knobs["drain_quiet_s"]
-        timed_out = now - self._done_s > self.knobs["drain_timeout_s"]
-        if (short or not quiet) and not timed_out:
+        expected = self.expected or {}
+        short = {t: (self.received.get(t, 0), n) for t, n in expected.items() if self.received.get(t, 0) < n}
+        # a short topic whose publisher has left cannot deliver more (a killed node): no waiting for it
+        waiting = [t for t in short if self.count_publishers(t) > 0]
+        unknown = any(t not in expected for t in self.received)
+        settled = now - self._last_s >= self.knobs["drain_quiet_s"]
+        if self.stopping and not self._terminal:
+            # stopped before the plant's final run_status: wait for it while the plant is still there
+            waiting += [self.status_topic] if self.count_publishers(self.status_topic) > 0 else []
+        limit = self.knobs["stop_timeout_s"] if self.stopping else self.knobs["drain_timeout_s"]
+        timed_out = now - self._done_s > limit
+        if not timed_out and (waiting or not (settled or (not short and not unknown))):
             return
         if short:
             self.get_logger().warning("closing with missing messages: " + ", ".join(
                 f"{t} {have}/{want}" for t, (have, want) in sorted(short.items())))
         self.close()
-        if self.knobs["exit_when_done"]:
+        if self.knobs["exit_when_done"] or self.stopping:
             self.finish()
 
     def metadata(self) -> dict[str, str]:
@@ -146,13 +178,18 @@ class RecorderNode(RtaNode):
             add_metadata(bag, METADATA_NAME, self.metadata())
         finally:
             bag.close()
-        total = sum(self.counts.values())
-        self.get_logger().info(f"bag closed: {bag.path} ({total} messages, {self.rejected} rejected)")
+        total = sum(self.received.values())
+        self.get_logger().info(f"bag closed: {bag.path} ({total} messages, {self.counts.get('not_recorded', 0)} "
+                               "not recorded)")
+
+    def published_counts(self) -> dict[str, int]:
+        return {}
 
 
 def main(args: Sequence[str] | None = None) -> None:
     """Console script `bag_recorder_node` (`ros2 run rta_attitude bag_recorder_node --ros-args ...`)."""
     sys.exit(run(RecorderNode, args, topics.NODE_NAMES[topics.RECORDER]))
+
 
 if __name__ == "__main__":
     main()

@@ -1,9 +1,17 @@
 """What every node shares: the base node class, the startup gate and `main`.
 
-`run(factory, args)` is each console script's body: rclpy.init (SIGINT and SIGTERM handlers),
-build the node, spin until it finishes or a signal arrives, then `close()`, destroy_node and
-try_shutdown. A configuration or runtime error of ours is one log line and exit code 1; Ctrl-C is a
-clean exit 0 (no traceback).
+`run(factory, args)` is each console script's body: check the `--params-file` files, rclpy.init
+(without rclpy's own signal handlers), build the node, spin until it finishes or a signal arrives,
+then `close()`, destroy_node and try_shutdown. A configuration or runtime error of ours is one log
+line and exit code 1, no traceback (a missing or unreadable `--params-file` too, which rcl would
+otherwise report with a traceback from rclpy.init).
+
+Signals: SIGINT and SIGTERM do not tear the context down at once (rclpy's default), which would lose
+what the node published but its readers have not acknowledged yet. The first one asks the node to
+stop (`RtaNode.request_stop`): the plant ends the run as `interrupted` and publishes its final
+run_status, the recorder takes the last messages in flight and closes the bag, controller and filter
+wait (at most `stop_timeout_s`) until their readers acknowledged everything they published; then the
+node finishes and exits 0. A second signal, or `stop_timeout_s` + STOP_MARGIN_S, stops at once.
 
 Startup gate: a writer whose readers have not matched yet would lose its first messages (volatile
 durability). `PublishGate` holds messages until the publisher has matched the run's expected
@@ -14,27 +22,34 @@ topic and the counts.
 
 from __future__ import annotations
 
+import signal
 import sys
 from collections.abc import Callable, Sequence
+from pathlib import Path
 from typing import Any
 
 import rclpy
 from rclpy.clock import Clock, ClockType
 from rclpy.context import Context
+from rclpy.duration import Duration
 from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.publisher import Publisher
+from rclpy.signals import SignalHandlerOptions
 from rclpy.task import Future
 from rclpy.timer import Timer
 
-from ..errors import RtaError
+from ..errors import ConfigError, RtaError
 from . import parameters, topics
+from .faults import FaultLog
 
 GATE_POLL_S = 0.005
+"""How often a closed gate checks its publisher's matches [s]."""
 SPIN_TIMEOUT_S = 0.1
 """spin_once timeout of main's loop: a signal is noticed within this time [s] (the EventsExecutor's
 own spin() does not return on SIGINT in rclpy 7.1)."""
-"""How often a closed gate checks its publisher's matches [s]."""
+STOP_MARGIN_S = 2.0
+"""After a stop request, main gives the node stop_timeout_s + this before it stops spinning anyway [s]."""
 
 
 class RtaNode(Node):
@@ -64,6 +79,12 @@ class RtaNode(Node):
         self.cfg = self.cfg.for_scenario(self.scenario)
         self.rta: bool = self.knobs["rta"]
         self.record: bool = self.knobs["record"]
+        self.stopping = ""
+        """The signal name once a stop was requested ('' before)."""
+        self.counts: dict[str, int] = {}
+        """Fault counters by kind (FaultLog increments them; nodes publish or log them)."""
+        self.faults = FaultLog(self.get_logger(), self.counts, self.on_fault_change)
+        self.gates: dict[str, PublishGate] = {}
 
     def wall_timer(self, period_s: float, callback: Callable[[], None]) -> Timer:
         """A timer on the steady clock (independent of use_sim_time)."""
@@ -76,7 +97,48 @@ class RtaNode(Node):
     def gate(self, topic: str, publisher: Publisher) -> PublishGate:
         """A PublishGate for one of this node's publishers, expecting the run's readers of `topic`."""
         expected = topics.expected_readers(topic, self.rta, self.record)
-        return PublishGate(self, publisher, expected, self.knobs["startup_timeout_s"])
+        self.gates[topic] = PublishGate(self, publisher, expected, self.knobs["startup_timeout_s"])
+        return self.gates[topic]
+
+    def on_fault_change(self, kind: str, active: bool) -> None:
+        """A fault episode of `kind` started (active) or ended; the plant republishes run_status."""
+
+    def uses_sim_time(self) -> bool:
+        """True when the node's clock follows /clock (use_sim_time) and /clock has been heard."""
+        clock = self.get_clock()
+        return bool(self.get_parameter("use_sim_time").value) and bool(getattr(clock, "ros_time_is_active", False))
+
+    def flush(self, timeout_s: float) -> bool:
+        """Wait until every reader acknowledged what this node's publishers sent (at most timeout_s in
+        total). Returns True if all did."""
+        deadline = self.wall_now_s() + timeout_s
+        ok = True
+        for pub in self.own_publishers():
+            left = max(deadline - self.wall_now_s(), 0.0)
+            ok = pub.wait_for_all_acked(Duration(nanoseconds=int(left * 1e9))) and ok
+        return ok
+
+    def own_publishers(self) -> list[Publisher]:
+        """The run's publishers of this node (not rclpy's /rosout and /parameter_events)."""
+        return [gate.publisher for gate in self.gates.values()]
+
+    def request_stop(self, reason: str) -> None:
+        """SIGINT/SIGTERM: stop cleanly (idempotent): log, then `on_stop`."""
+        if self.stopping:
+            return
+        self.stopping = reason
+        self.get_logger().info(f"{reason}: stopping")
+        self.on_stop()
+
+    def on_stop(self) -> None:
+        """What a stop request does (after `stopping` is set). Default: wait (at most stop_timeout_s) until
+        the readers acknowledged what this node published, then finish. Nodes override it."""
+        self.flush(self.knobs["stop_timeout_s"])
+        self.finish()
+
+    def published_counts(self) -> dict[str, int]:
+        """Messages published per topic (relative name) through this node's gates."""
+        return {topic: gate.sent for topic, gate in self.gates.items()}
 
     def fail(self, reason: str) -> None:
         """Log one error line, set exit code 1 and finish."""
@@ -90,7 +152,10 @@ class RtaNode(Node):
             self.finished.set_result(self.exit_code)
 
     def close(self) -> None:
-        """Release resources before destroy_node (the recorder closes its bag here)."""
+        """Release resources before destroy_node (the recorder closes its bag here). Logs one line with
+        what the node published and its fault counters."""
+        sent = ", ".join(f"{t} {n}" for t, n in sorted(self.published_counts().items()))
+        self.get_logger().info(f"published: {sent or 'nothing'}; counters: {self.faults.summary()}")
 
 
 class PublishGate:
@@ -106,6 +171,8 @@ class PublishGate:
         self._queue: list[Any] = []
         self._timer: Timer | None = None
         self._since = 0.0
+        self.sent = 0
+        """Messages handed to the publisher (not counting those still held)."""
 
     def matched(self) -> bool:
         """True (and open from now on) once the expected readers are matched."""
@@ -116,6 +183,7 @@ class PublishGate:
     def publish(self, msg: Any) -> None:
         if self.is_open or self.matched():
             self.publisher.publish(msg)
+            self.sent += 1
             return
         self._queue.append(msg)
         if self._timer is None:
@@ -126,6 +194,7 @@ class PublishGate:
         if self.matched():
             for msg in self._queue:
                 self.publisher.publish(msg)
+            self.sent += len(self._queue)
             self._queue.clear()
         elif self.node.wall_now_s() - self._since > self.timeout_s:
             have = self.publisher.get_subscription_count()
@@ -148,8 +217,42 @@ def make_executor(kind: str, context: Context | None = None) -> Executor:
     return SingleThreadedExecutor(context=context)
 
 
+def check_params_files(args: Sequence[str]) -> None:
+    """Check every `--params-file FILE` of a ROS command line before rcl reads it: the file must exist
+    and be YAML. (rcl would report either with a traceback from rclpy.init.)
+
+    Raises:
+        ConfigError: one line naming the file and what is wrong.
+    """
+    import yaml
+
+    args = list(args)
+    for i, arg in enumerate(args):
+        if arg != "--params-file":
+            continue
+        if i + 1 >= len(args):
+            raise ConfigError("--params-file needs a file name")
+        path = Path(args[i + 1])
+        if not path.is_file():
+            raise ConfigError(f"--params-file {str(path)!r} does not exist (a YAML parameter file is required)")
+        try:
+            yaml.safe_load(path.read_text())
+        except yaml.YAMLError as exc:
+            line = getattr(getattr(exc, "problem_mark", None), "line", None)
+            where = f" at line {line + 1}" if line is not None else ""
+            raise ConfigError(f"--params-file {str(path)!r} is not valid YAML{where}") from None
+        except OSError as exc:
+            raise ConfigError(f"--params-file {str(path)!r} cannot be read ({exc.strerror})") from None
+
+
+def _error(name: str, text: str) -> None:
+    """One error line on stderr in rclpy's format, for errors before or without a node."""
+    print(f"[ERROR] [{name}]: {text}", file=sys.stderr, flush=True)
+
+
 def run(factory: Callable[[], RtaNode], args: Sequence[str] | None = None, name: str = "rta_attitude") -> int:
-    """Init rclpy, build the node, spin until it finishes or SIGINT/SIGTERM, shut down cleanly.
+    """Check the command line, init rclpy, build the node, spin until it finishes or is stopped by
+    SIGINT/SIGTERM (see the module docstring), shut down cleanly.
 
     Args:
         factory: builds the node (after rclpy.init).
@@ -159,26 +262,50 @@ def run(factory: Callable[[], RtaNode], args: Sequence[str] | None = None, name:
     Returns:
         Exit code: 0, or 1 after a configuration or runtime error (logged as one line).
     """
-    rclpy.init(args=list(args) if args is not None else sys.argv)
+    from rclpy._rclpy_pybind11 import RCLError
+
+    argv = list(args) if args is not None else list(sys.argv)
+    received: list[int] = []
+    previous = {s: signal.signal(s, lambda signum, frame: received.append(signum))
+                for s in (signal.SIGINT, signal.SIGTERM)}
     node: RtaNode | None = None
     executor: Executor | None = None
     code = 0
     try:
+        check_params_files(argv)
+        rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
+    except ConfigError as exc:
+        _error(name, str(exc))
+        _restore(previous)
+        return 1
+    except RCLError as exc:
+        _error(name, f"ROS arguments rejected: {str(exc).splitlines()[0]}")
+        _restore(previous)
+        return 1
+    try:
         node = factory()
         executor = make_executor(node.knobs["executor"])
         executor.add_node(node)
+        hard_stop = float("inf")
         while rclpy.ok() and not node.finished.done():
+            if received and not node.stopping:
+                node.request_stop(signal.Signals(received[0]).name)
+                hard_stop = node.wall_now_s() + node.knobs["stop_timeout_s"] + STOP_MARGIN_S
+                continue
+            if len(received) > 1 or node.wall_now_s() > hard_stop:
+                node.get_logger().warning("stopped before the node finished (second signal or stop timeout)")
+                break
             executor.spin_once(timeout_sec=SPIN_TIMEOUT_S)
         code = node.exit_code
     except (KeyboardInterrupt, ExternalShutdownException):
         code = node.exit_code if node is not None else 0
     except RtaError as exc:
-        rclpy.logging.get_logger(node.get_name() if node is not None else name).error(str(exc))
+        (node.get_logger() if node is not None else rclpy.logging.get_logger(name)).error(str(exc))
         code = 1
     except Exception:
-        if rclpy.ok():
+        if rclpy.ok() and not received:
             raise
-        code = node.exit_code if node is not None else 0  # SIGINT/SIGTERM while starting: a clean stop
+        code = node.exit_code if node is not None else 0  # a signal while starting: a clean stop
     finally:
         if executor is not None:
             executor.shutdown()
@@ -190,7 +317,14 @@ def run(factory: Callable[[], RtaNode], args: Sequence[str] | None = None, name:
                 code = 1
             node.destroy_node()
         rclpy.try_shutdown()
+        _restore(previous)
     return code
 
 
-__all__ = ["GATE_POLL_S", "SPIN_TIMEOUT_S", "PublishGate", "RtaNode", "make_executor", "run"]
+def _restore(previous: dict[signal.Signals, Any]) -> None:
+    for s, handler in previous.items():
+        signal.signal(s, handler)
+
+
+__all__ = ["GATE_POLL_S", "SPIN_TIMEOUT_S", "STOP_MARGIN_S", "PublishGate", "RtaNode", "check_params_files",
+           "make_executor", "run"]

@@ -204,20 +204,62 @@ QP_STATUS_NAME = "filter"
 per constraint follows, named like the constraint (params.CONSTRAINT_NAMES). rta_attitude.analysis
 reads this layout."""
 CONSTRAINT_STATUS_PREFIX = ""
+INPUT_COUNTERS: tuple[str, ...] = (
+    "state_rejected", "state_renormalised", "state_stale", "state_duplicate", "state_out_of_order",
+    "torque_des_rejected", "torque_des_duplicate", "torque_des_out_of_order", "torque_des_late",
+    "torque_des_missing", "unpaired_dropped", "output_guard",
+)  # fmt: skip
+"""The filter node's input counters (running totals, in every filter_status):
+
+- `state_rejected`: a state whose values are unusable (NaN/inf, wrong length or names, quaternion norm
+  beyond `quaternion_tolerance`) but whose stamp is valid: filtered as an invalid state (the core's
+  `invalid_state` fallback, u = 0), so the plant still gets a command for that step;
+- `state_renormalised`: quaternion norm off 1 by more than UNIT_NORM_EPS, within `quaternion_tolerance`;
+- `state_stale`: older than the /clock time by more than `max_state_age_s` (dropped, not answered);
+- `state_duplicate` / `state_out_of_order`: stamp equal to / older than the newest state taken (dropped);
+- `torque_des_rejected`: NaN/inf or wrong frame with a valid stamp: filtered as non-finite u_des (the core's
+  `non_finite_u_des` fallback);
+- `torque_des_duplicate` / `torque_des_out_of_order`: stamp equal to / older than the newest taken (dropped);
+- `torque_des_late`: arrived for a state already answered without it (dropped);
+- `torque_des_missing`: a state answered with u_des = 0 because no torque_des came (`desired_timeout_s`,
+  or at once when the controller's publisher is gone);
+- `unpaired_dropped`: unpaired messages dropped beyond MAX_PENDING per topic; messages whose stamp
+  itself is invalid are counted as `*_rejected` and dropped;
+- `output_guard`: a filter output that was not finite or not inside U, replaced by u = 0 (never expected).
+"""
+INPUT_SOURCE_KEY = "u_des_source"
+"""filter_status key: where this call's u_des came from: `torque_des`, or `missing` (u_des = 0 after a
+timeout or with the controller gone)."""
 QP_KEYS: tuple[str, ...] = (
     "status", "solver_status", "iterations", "fallback", "solve_time_s", "preset",
     "u_des_x", "u_des_y", "u_des_z", "u_x", "u_y", "u_z", "box_active_x", "box_active_y", "box_active_z",
-    "calls", "fast_path", "solved", "fallbacks", "solver_failures",
+    "calls", "fast_path", "solved", "fallbacks", "solver_failures", "backup_solves", "invalid_states",
+    INPUT_SOURCE_KEY, *INPUT_COUNTERS,
 )  # fmt: skip
 """Keys of the `filter` entry: status ('pass', 'solved', 'fallback'), proxsuite status, iterations,
 fallback policy applied ('none' if none), solve time [s], preset, u_des and u [rad/s^2], box flags,
-and the filter's running counters."""
+the filter's running counters (core: calls .. invalid_states), the source of u_des and the node's
+input counters (INPUT_COUNTERS)."""
 NO_FALLBACK = "none"
 CONSTRAINT_KEYS: tuple[str, ...] = ("h", "psi0", "psi1", "bc", "slack", "intervening", "uncontrollable", "slacked")
 """Keys of each constraint entry (floats as repr, exact; flags 'true'/'false')."""
 
 RUN_STATUS_NAME = "plant/run"
-RUN_RUNNING, RUN_DONE, RUN_FAILED = "running", "done", "failed"
+RUN_RUNNING, RUN_DONE, RUN_FAILED, RUN_INTERRUPTED = "running", "done", "failed", "interrupted"
+"""run_status states: `running` (at the start, and again when a plant fault episode starts or ends),
+then one final `done`, `failed: reason` or `interrupted: SIGINT|SIGTERM`."""
+PLANT_COUNTERS: tuple[str, ...] = (
+    "commands", "rejected", "late", "duplicate", "future", "outside_u", "saturated", "deadline_misses",
+    "fallback_zero", "fallback_hold",
+)  # fmt: skip
+"""The plant's counters in run_status: commands received; `rejected` (NaN/inf or wrong frame, not
+applied); `late` (stamp older than the current step: answered after a deadline miss); `duplicate` (a
+second command for a step already applied); `future` (stamp newer than the current step);
+`outside_u` (a command outside the admissible set U, |u_i| > u_max,i: applied as it is, which only
+happens without RTA or with a broken filter); `saturated` (beyond the actuator limit psi_dot_max:
+the wheels saturate it, as `simulation.integrate` does); `deadline_misses` (no command for t_k in
+time: realtime by t_k+1, lockstep within `command_timeout_s`) and the fallback applied each time
+(`fallback_zero`, `fallback_hold`)."""
 EXPECTED_PREFIX = "expected:"
 """run_status keys `expected:<topic>` give the final message count of a topic, when known."""
 
@@ -226,13 +268,30 @@ EXPECTED_PREFIX = "expected:"
 
 @dataclass(frozen=True)
 class Knob:
-    """A node-only parameter (not part of the core YAML)."""
+    """A node-only parameter (not part of the core YAML).
+
+    Numbers must lie in [minimum, maximum] (`positive`: > minimum); `check_knob` enforces it.
+    """
 
     name: str
     default: Any
     roles: tuple[str, ...]
     description: str
     choices: tuple[str, ...] = ()
+    minimum: float = 0.0
+    positive: bool = False
+    maximum: float | None = None
+
+    @property
+    def allowed(self) -> str:
+        """The allowed values in words, for error messages and docs."""
+        if self.choices:
+            return "one of " + ", ".join(self.choices)
+        kind = {bool: "true or false", int: "an integer", float: "a float", str: "a string"}[type(self.default)]
+        if not isinstance(self.default, (int, float)) or isinstance(self.default, bool):
+            return kind
+        low = f"{'>' if self.positive else '>='} {self.minimum:g}"
+        return f"{kind} {low}" + (f" and < {self.maximum:g}" if self.maximum is not None else "")
 
 
 _EVERY = (PLANT, CONTROLLER, FILTER, RECORDER)
@@ -241,21 +300,39 @@ KNOBS: tuple[Knob, ...] = (
     Knob("scenario", "paper_example", _EVERY, "scenario name from the parameter file"),
     Knob("rta", True, _EVERY, "true: the filter runs; false: the plant applies torque_des"),
     Knob("record", True, _EVERY, "a bag_recorder_node takes part (writers wait for its subscriptions)"),
-    Knob("startup_timeout_s", 30.0, _EVERY, "wall time to wait for the run's readers to match [s]"),
+    Knob("startup_timeout_s", 30.0, _EVERY, "wall time to wait for the run's readers to match [s]", positive=True),
+    Knob("stop_timeout_s", 3.0, _EVERY,
+         "after SIGINT/SIGTERM (plant: also at the end of the run): longest wait for readers to acknowledge "
+         "what the node published (recorder: for the last messages) [s]"),
     Knob("executor", "events", _EVERY, "events: rclpy's C++ EventsExecutor; single: SingleThreadedExecutor",
          ("events", "single")),
+    Knob("quaternion_tolerance", 0.01, (CONTROLLER, FILTER),
+         "state and attitude_command: | |q| - 1 | up to this is renormalised (counted), beyond it rejected",
+         positive=True, maximum=0.5),
+    Knob("max_state_age_s", 2.0, (CONTROLLER, FILTER),
+         "with use_sim_time: a state older than the /clock time by more than this is stale (dropped); 0 = off"),
+    Knob("desired_timeout_s", 1.0, (FILTER,),
+         "a state without torque_des this long (wall) is filtered with u_des = 0 (at once if the controller "
+         "is gone) [s]", positive=True),
     Knob("stepping", "lockstep", (PLANT,), "lockstep (deterministic) or realtime (wall-clock timer)",
          ("lockstep", "realtime")),
-    Knob("real_time_factor", 1.0, (PLANT,), "realtime: sim seconds per wall second"),
+    Knob("real_time_factor", 1.0, (PLANT,), "realtime: sim seconds per wall second", positive=True),
+    Knob("command_timeout_s", 5.0, (PLANT,),
+         "lockstep: wall time to wait for the command of a step before a deadline miss (the first command "
+         "of the run may take startup_timeout_s) [s]", positive=True),
     Knob("deadline_fallback", "hold", (PLANT,),
-         "realtime, no command for t_k at t_k+1: hold the last applied torque, or apply zero",
+         "no command for t_k in time (deadline miss): hold the last applied torque, or apply zero",
          ("hold", "zero")),
-    Knob("step_timeout_s", 10.0, (PLANT,), "lockstep: wall time to wait for one command before failing [s]"),
-    Knob("inspection_every", 1, (PLANT,), "publish the inspection topics every n-th step"),
-    Knob("battery_voltage_V", 8.0, (PLANT,), "nominal bus voltage for BatteryState (display only) [V]"),
+    Knob("hold_max_steps", 1, (PLANT,),
+         "deadline_fallback hold: consecutive misses for which the last torque is held; zero after that"),
+    Knob("inspection_every", 1, (PLANT,), "publish the inspection topics every n-th step", minimum=1),
+    Knob("battery_voltage_V", 8.0, (PLANT,), "nominal bus voltage for BatteryState (display only) [V]",
+         positive=True),
     Knob("exit_when_done", True, (PLANT, RECORDER), "exit after the run ends (plant) / the bag is closed"),
     Knob("bag_path", "", (RECORDER,), "MCAP file to write (required)"),
     Knob("bag_overwrite", False, (RECORDER,), "replace an existing bag file"),
+    Knob("bag_chunk_kb", 256, (RECORDER,), "uncompressed KiB per MCAP chunk: a killed recorder loses at most one",
+         minimum=1),
     Knob("drain_timeout_s", 10.0, (RECORDER,), "after run_status done: longest wait for the last messages [s]"),
     Knob("drain_quiet_s", 0.3, (RECORDER,), "after done, topics without a known count: close after this quiet [s]"),
 )  # fmt: skip
@@ -272,9 +349,9 @@ def knobs_for(role: str) -> tuple[Knob, ...]:
 __all__ = [
     "ATTITUDE_COMMAND", "BATTERY", "BODY_FRAME", "CLOCK", "COMMAND_QOS", "CONSTRAINT_KEYS",
     "CONSTRAINT_STATUS_PREFIX", "CONTROLLER", "DEFAULT_NAMESPACE", "EXECUTABLES", "EXPECTED_PREFIX", "FILTER",
-    "FILTER_STATUS", "HILL_FRAME", "INSPECTION_TOPICS", "KNOBS", "MODULES", "NODE_NAMES", "NO_FALLBACK", "ODOMETRY",
-    "PACKAGE",
-    "PLANT", "QP_KEYS", "QP_STATUS_NAME", "RECORDER", "RUN_DONE", "RUN_FAILED", "RUN_RUNNING", "RUN_STATUS",
+    "FILTER_STATUS", "HILL_FRAME", "INPUT_COUNTERS", "INPUT_SOURCE_KEY", "INSPECTION_TOPICS", "KNOBS", "MODULES",
+    "NODE_NAMES", "NO_FALLBACK", "ODOMETRY", "PACKAGE", "PLANT", "PLANT_COUNTERS", "QP_KEYS", "QP_STATUS_NAME",
+    "RECORDER", "RUN_DONE", "RUN_FAILED", "RUN_INTERRUPTED", "RUN_RUNNING", "RUN_STATUS",
     "RUN_STATUS_NAME", "STATE", "STATUS_HARDWARE_ID", "STATUS_QOS", "STREAM_QOS", "SUN_VECTOR", "SYSTEM_PARAMETERS",
     "TEMPERATURE", "TOPICS", "TORQUE_APPLIED", "TORQUE_CMD", "TORQUE_DES", "Knob", "QosSpec", "TopicSpec",
     "expected_readers", "knobs_for", "msg_class", "published", "qos_profile", "recorded", "subscribed",

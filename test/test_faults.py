@@ -1,0 +1,733 @@
+"""Fault tolerance: bad, late and missing input never makes a node emit an invalid command, stall or
+lose data; configuration errors are one line and a non-zero exit.
+
+- the filter node, driven through its real callbacks with random and extreme messages (hypothesis):
+  every torque_cmd is finite and inside U, every answer is counted and stamped once;
+- validation in the nodes: log once per episode, counters in filter_status / run_status, quaternion
+  tolerance, stale states against /clock, plant command checks and the lockstep command timeout;
+- faults in the running loop, four node processes over Fast DDS (`python -m` as the launcher runs
+  them): the filter killed and restarted (the plant applies its fallback meanwhile, the loop goes
+  on), the controller killed (the filter keeps the spacecraft safe with u_des = 0), SIGINT to
+  everything (the bag is complete and holds every message the nodes published), SIGKILL of the
+  recorder (the bag is readable up to its last complete chunk and `analyze` says so);
+- configuration errors of nodes, the launcher and the CLI: one line naming parameter, value and
+  what is allowed, exit 1, no traceback;
+- isolation defaults (localhost discovery, domain id).
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import itertools
+import math
+import os
+import re
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+import rclpy
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+from rclpy.parameter import Parameter
+
+from rta_attitude import config, launcher, model
+from rta_attitude.bag import read_bag
+from rta_attitude.errors import BagError, MessageError
+from rta_attitude.nodes import convert, topics
+from rta_attitude.nodes.faults import FaultLog, StampOrder
+from rta_attitude.nodes.filter_node import FilterNode
+from rta_attitude.nodes.plant_node import PlantNode
+from rta_attitude.nodes.spin import make_executor
+from rta_attitude.simulation import integrate
+from rta_attitude.state import STATE_NAMES
+
+CFG = config.load()
+U_MAX = CFG.u_max_rad_s2  # the filter's box U (rad/s^2, per axis)
+NS = topics.DEFAULT_NAMESPACE
+X0 = CFG.scenario("paper_example").x0
+S = convert.NS_PER_S
+
+
+# ----------------------------------------------------------------------------- helpers
+
+
+class Collector:
+    """Stands in for a PublishGate: keeps what the node publishes."""
+
+    def __init__(self) -> None:
+        self.msgs: list[Any] = []
+        self.sent = 0
+
+    def publish(self, msg: Any) -> None:
+        self.msgs.append(msg)
+        self.sent += 1
+
+
+class Lines:
+    """A logger that keeps its lines (for FaultLog)."""
+
+    def __init__(self) -> None:
+        self.warnings: list[str] = []
+        self.infos: list[str] = []
+
+    def warning(self, message: str) -> None:
+        self.warnings.append(message)
+
+    def info(self, message: str) -> None:
+        self.infos.append(message)
+
+
+@pytest.fixture
+def filter_node() -> Any:
+    """A FilterNode in its own context, its outputs collected (nothing is spun unless a test does).
+    Function-scoped: no DDS participant of the test process outlives its test (the process tests
+    below check what the nodes leave in /dev/shm)."""
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    node = FilterNode(context=context, parameter_overrides=[Parameter("record", value=False)])
+    try:
+        yield node
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown(context=context)
+
+
+def _reset(node: FilterNode, gone: bool = False, **knobs: Any) -> dict[str, Collector]:
+    """Fresh pairing state, counters and collectors (hypothesis reuses the node across examples). No controller runs
+    here: `gone` says whether the node is to take it as gone (after it was heard) or as alive."""
+    node.states.clear()
+    node.desired.clear()
+    node.state_order, node.desired_order = StampOrder(), StampOrder()
+    node.answered_ns = -1
+    node.heard_controller = False
+    for k in list(node.counts):
+        node.counts[k] = 0
+    node.faults.active.clear()
+    node.faults.episodes.clear()
+    node.knobs.update(knobs)
+    node._controller_gone = lambda: gone and node.heard_controller  # type: ignore[method-assign]
+    node.out = {topics.TORQUE_CMD: Collector(), topics.FILTER_STATUS: Collector()}
+    return node.out
+
+
+def _state(t_ns: int, x: np.ndarray | list[float] = X0, names: list[str] | None = None) -> Any:
+    msg = convert.state_msg(np.zeros(19), 0)
+    msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(t_ns, S) if t_ns >= 0 else (-1, 0)
+    msg.position = [float(v) for v in x]
+    msg.name = list(STATE_NAMES) if names is None else names
+    return msg
+
+
+def _torque(t_ns: int, tau: np.ndarray | list[float], frame: str = topics.BODY_FRAME) -> Any:
+    msg = convert.torque_msg(np.zeros(3), 0)
+    msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(t_ns, S) if t_ns >= 0 else (-1, 0)
+    msg.header.frame_id = frame
+    msg.vector.x, msg.vector.y, msg.vector.z = (float(v) for v in tau)
+    return msg
+
+
+def _check_outputs(out: dict[str, Collector]) -> list[int]:
+    """Every torque_cmd finite and inside U, one filter_status each, stamps strictly increasing."""
+    cmds, statuses = out[topics.TORQUE_CMD].msgs, out[topics.FILTER_STATUS].msgs
+    assert len(cmds) == len(statuses)
+    stamps = []
+    for cmd, status in zip(cmds, statuses):
+        t_ns, tau = convert.torque_from_msg(cmd)  # raises if not finite or not in the body frame
+        u = model.torque_to_wheel_accel(tau, CFG)
+        assert np.all(np.abs(u) <= U_MAX * (1 + 1e-12)), u
+        assert convert.stamp_ns(status.header.stamp) == t_ns
+        stamps.append(t_ns)
+    assert all(b > a for a, b in itertools.pairwise(stamps)), stamps
+    return stamps
+
+
+# ----------------------------------------------------------------------------- the filter node, property-based
+
+FLOATS = st.one_of(st.floats(allow_nan=True, allow_infinity=True, width=64), st.floats(-1e6, 1e6),
+                   st.sampled_from([0.0, 1e300, -1e300, 576.0, 181.3]))
+STAMPS = st.one_of(st.integers(-1, 40).map(lambda k: k * S if k >= 0 else -1), st.integers(0, 40 * S))
+
+
+@st.composite
+def _state_messages(draw: Any) -> Any:
+    t_ns = draw(STAMPS)
+    kind = draw(st.sampled_from(["good", "values", "quaternion", "short", "names"]))
+    x = X0.copy()
+    if kind == "values":
+        x = np.array(draw(st.lists(FLOATS, min_size=19, max_size=19)))
+    elif kind == "quaternion":
+        x[0:4] *= draw(st.floats(0.0, 3.0))
+    elif kind == "short":
+        x = x[: draw(st.integers(0, 18))]
+    names = None if kind != "names" else list(reversed(STATE_NAMES))
+    return _state(t_ns, x, names)
+
+
+@st.composite
+def _torque_messages(draw: Any) -> Any:
+    t_ns = draw(STAMPS)
+    tau = draw(st.lists(FLOATS, min_size=3, max_size=3))
+    frame = draw(st.sampled_from([topics.BODY_FRAME, topics.BODY_FRAME, "hill"]))
+    return _torque(t_ns, tau, frame)
+
+
+@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow,
+                                                                  HealthCheck.function_scoped_fixture])
+@given(stream=st.lists(st.one_of(_state_messages().map(lambda m: ("state", m)),
+                                 _torque_messages().map(lambda m: ("torque_des", m))), max_size=25),
+       gone=st.booleans())
+def test_filter_node_answers_any_input_with_a_finite_command_inside_U(filter_node: Any, stream: list,
+                                                                       gone: bool) -> None:
+    node = filter_node
+    out = _reset(node, gone=gone)
+    fed: dict[str, set[int]] = {"state": set(), "torque_des": set()}
+    for topic, msg in stream:
+        (node._on_state if topic == "state" else node._on_desired)(msg)
+        if msg.header.stamp.sec >= 0:
+            fed[topic].add(msg.header.stamp.sec * S + msg.header.stamp.nanosec)
+    stamps = _check_outputs(out)
+    # every answer pairs a state and a torque_des (or, with the controller gone, answers a state alone)
+    assert set(stamps) <= (fed["state"] if gone else fed["state"] & fed["torque_des"])
+    # the counters in filter_status are running totals: never decreasing, never ahead of the node's
+    seen = [[convert.diagnostic_values(m)[topics.QP_STATUS_NAME][k] for k in topics.INPUT_COUNTERS]
+            for m in out[topics.FILTER_STATUS].msgs] + [[node.counts[k] for k in topics.INPUT_COUNTERS]]
+    assert all(a <= b for row, nxt in itertools.pairwise(seen) for a, b in zip(row, nxt))
+    assert len(node.states) <= 64 and len(node.desired) <= 64
+
+
+def test_filter_node_counts_and_logs_each_fault_once_per_episode(filter_node: Any) -> None:
+    node = filter_node
+    out = _reset(node)
+    nan = X0.copy()
+    nan[5] = math.nan
+    for k in range(50):  # 50 NaN states, each answered with the invalid-state fallback
+        node._on_state(_state(k * S, nan))
+        node._on_desired(_torque(k * S, [1e-4, 0.0, 0.0]))
+    node._on_state(_state(50 * S))  # a good one ends the episode
+    node._on_desired(_torque(50 * S, [1e-4, 0.0, 0.0]))
+    for k in range(51, 61):  # a second episode
+        node._on_state(_state(k * S, nan))
+        node._on_desired(_torque(k * S, [0.0, 0.0, 0.0]))
+    stamps = _check_outputs(out)
+    assert stamps == [k * S for k in range(61)]
+    assert node.counts["state_rejected"] == 60 and node.faults.episodes["state_rejected"] == 2
+    recs = [convert.filter_record(m, node.filter.names) for m in out[topics.FILTER_STATUS].msgs]
+    assert [r["fallback"] for r in recs].count("invalid_state") == 60
+    assert all(np.array_equal(r["u"], np.zeros(3)) for r in recs if r["fallback"] == "invalid_state")
+    last = convert.diagnostic_values(out[topics.FILTER_STATUS].msgs[-1])[topics.QP_STATUS_NAME]
+    assert last["state_rejected"] == 60 and last["invalid_states"] >= 60
+
+    # duplicates, out-of-order and late messages are dropped, counted, logged once
+    node._on_state(_state(60 * S))
+    node._on_state(_state(59 * S))
+    node._on_desired(_torque(60 * S, [0.0, 0.0, 0.0]))
+    node._on_desired(_torque(60 * S, [0.0, 0.0, 0.0]))
+    node._on_desired(_torque(58 * S, [0.0, 0.0, 0.0]))
+    assert (node.counts["state_duplicate"], node.counts["state_out_of_order"]) == (1, 1)
+    assert (node.counts["torque_des_duplicate"], node.counts["torque_des_out_of_order"]) == (2, 1)
+    assert node.faults.episodes["torque_des_duplicate"] == 1  # two in a row: one line
+    # a NaN torque_des with a valid stamp: the core's non-finite-u_des fallback answers it
+    node._on_state(_state(61 * S))
+    node._on_desired(_torque(61 * S, [math.nan, 0.0, 0.0]))
+    rec = convert.filter_record(out[topics.FILTER_STATUS].msgs[-1], node.filter.names)
+    assert rec["fallback"] == "non_finite_u_des" and node.counts["torque_des_rejected"] == 1
+    # a quaternion slightly off unit is renormalised (counted), far off rejected (invalid state, u = 0)
+    x = X0.copy()
+    x[0:4] *= 1.005
+    node._on_state(_state(62 * S, x))
+    node._on_desired(_torque(62 * S, [0.0, 0.0, 0.0]))
+    x[0:4] *= 1.1
+    node._on_state(_state(63 * S, x))
+    node._on_desired(_torque(63 * S, [0.0, 0.0, 0.0]))
+    assert node.counts["state_renormalised"] == 1 and node.counts["state_rejected"] == 61
+    recs = [convert.filter_record(m, node.filter.names) for m in out[topics.FILTER_STATUS].msgs[-2:]]
+    assert recs[0]["fallback"] == "" and recs[1]["fallback"] == "invalid_state"
+    _check_outputs(out)
+
+
+def test_filter_node_answers_a_state_without_torque_des_with_u_des_zero(filter_node: Any) -> None:
+    """The timeout is armed by the first torque_des; then a missing one is answered with u_des = 0,
+    and its late arrival is dropped and counted."""
+    node = filter_node
+    out = _reset(node, desired_timeout_s=0.05)
+    node._on_state(_state(0))
+    time.sleep(0.08)
+    node._expire()
+    assert out[topics.TORQUE_CMD].msgs == []  # not armed yet: the controller may still be starting
+    node._on_desired(_torque(0, [1e-4, 0.0, 0.0]))
+    node._on_state(_state(1 * S))
+    node._expire()
+    assert len(out[topics.TORQUE_CMD].msgs) == 1  # within the timeout: still waiting
+    time.sleep(0.08)
+    node._expire()
+    assert len(out[topics.TORQUE_CMD].msgs) == 2
+    values = convert.diagnostic_values(out[topics.FILTER_STATUS].msgs[-1])[topics.QP_STATUS_NAME]
+    assert values[topics.INPUT_SOURCE_KEY] == "missing" and values["torque_des_missing"] == 1
+    assert values["u_des_x"] == values["u_des_y"] == values["u_des_z"] == 0.0
+    node._on_desired(_torque(1 * S, [1e-4, 0.0, 0.0]))
+    assert node.counts["torque_des_late"] == 1 and len(out[topics.TORQUE_CMD].msgs) == 2
+    _check_outputs(out)
+
+
+def test_output_guard_replaces_an_invalid_filter_output_with_zero(filter_node: Any,
+                                                                   monkeypatch: pytest.MonkeyPatch) -> None:
+    """Defence in depth: were the core ever to return a non-finite u or one outside U, the node sends 0."""
+    node = filter_node
+    out = _reset(node)
+    real = node.filter.filter
+    for bad in (np.array([math.nan, 0.0, 0.0]), 2.0 * U_MAX):
+        monkeypatch.setattr(node.filter, "filter", lambda x, u, bad=bad: dataclasses.replace(real(x, u), u=bad))
+        t_ns = (node.answered_ns // S + 1) * S
+        node._on_state(_state(t_ns))
+        node._on_desired(_torque(t_ns, [0.0, 0.0, 0.0]))
+    _check_outputs(out)
+    recs = [convert.filter_record(m, node.filter.names) for m in out[topics.FILTER_STATUS].msgs]
+    assert [r["fallback"] for r in recs] == ["output_guard"] * 2 and node.counts["output_guard"] == 2
+    assert all(np.array_equal(r["u"], np.zeros(3)) for r in recs)
+
+
+def test_stale_states_are_dropped_against_the_sim_clock(filter_node: Any) -> None:
+    """With use_sim_time, a state older than /clock by more than max_state_age_s is dropped."""
+    from rosgraph_msgs.msg import Clock
+
+    node = filter_node
+    out = _reset(node, max_state_age_s=2.0)
+    node.set_parameters([Parameter("use_sim_time", value=True)])
+    helper = rclpy.create_node("clock_source", context=node.context)
+    executor = make_executor("single", context=node.context)
+    executor.add_node(node)
+    executor.add_node(helper)
+    try:
+        spec = topics.TOPICS[topics.CLOCK]
+        pub = helper.create_publisher(Clock, spec.name, topics.qos_profile(spec.qos))
+        deadline = time.monotonic() + 10
+        while node.get_clock().now().nanoseconds != 100 * S:
+            assert time.monotonic() < deadline, "no /clock"
+            pub.publish(convert.clock_msg(100 * S))
+            executor.spin_once(timeout_sec=0.05)
+        node._on_state(_state(97 * S))  # 3 s old: stale
+        node._on_state(_state(99 * S))  # 1 s old: taken
+        node._on_desired(_torque(99 * S, [0.0, 0.0, 0.0]))
+    finally:
+        executor.remove_node(node)
+        executor.shutdown()
+        helper.destroy_node()
+        node.set_parameters([Parameter("use_sim_time", value=False)])
+    assert node.counts["state_stale"] == 1
+    assert _check_outputs(out) == [99 * S]
+
+
+def test_fault_log_is_once_per_episode_and_counts_every_occurrence() -> None:
+    lines = Lines()
+    changes: list[tuple[str, bool]] = []
+    log = FaultLog(lines, on_change=lambda kind, active: changes.append((kind, active)))
+    for _ in range(1000):
+        log.fault("stale", "old")
+    log.clear("stale", "never_seen")
+    log.fault("stale", "old again")
+    assert log.counts == {"stale": 1001} and log.episodes == {"stale": 2}
+    assert len(lines.warnings) == 2 and len(lines.infos) == 1 and "1000 in a row" in lines.infos[0]
+    assert changes == [("stale", True), ("stale", False), ("stale", True)]
+    order = StampOrder()
+    assert order.check(5) == ""
+    order.take(5)
+    assert (order.check(5), order.check(4), order.check(6)) == ("duplicate", "out_of_order", "")
+
+
+def test_quaternion_tolerance_renormalises_within_and_rejects_beyond() -> None:
+    x = X0.copy()
+    assert convert.unit_attitude(x, 0.01) == (x, False) or convert.unit_attitude(x, 0.01)[1] is False
+    x[0:4] *= 1.004
+    y, renormalised = convert.unit_attitude(x, 0.01)
+    assert renormalised and abs(np.linalg.norm(y[0:4]) - 1.0) < 1e-15 and np.array_equal(y[4:], x[4:])
+    x[0:4] *= 1.01
+    with pytest.raises(MessageError, match="unit quaternion"):
+        convert.unit_attitude(x, 0.01)
+    x[0:4] = math.nan
+    with pytest.raises(MessageError, match="unit quaternion"):
+        convert.unit_attitude(x, 0.01)
+
+
+# ----------------------------------------------------------------------------- the plant's command checks
+
+
+def test_plant_checks_commands_and_times_out_in_lockstep(tmp_path: Path) -> None:
+    """Over DDS in one process: a plant in lockstep and a stand-in for the filter that sends bad
+    commands. NaN or wrong frame: rejected; wrong stamps: future/duplicate/late; beyond the actuator
+    limit: applied saturated and counted; no command within command_timeout_s: deadline miss, the
+    last torque held once (hold_max_steps 1), then zero; the run goes on."""
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    executor = make_executor("single", context=context)
+    plant = PlantNode(context=context, parameter_overrides=[Parameter(k, value=v) for k, v in {
+        "rta": False, "record": False, "command_timeout_s": 0.3, "deadline_fallback": "hold", "stop_timeout_s": 0.5,
+        "hold_max_steps": 1, "scenarios.paper_example.duration_s": 4.0}.items()])
+    stub = rclpy.create_node("filter_stub", namespace=NS, context=context)
+    states: list[Any] = []
+    spec = topics.TOPICS[topics.STATE]
+    stub.create_subscription(topics.msg_class(spec.type_name), spec.name, states.append, topics.qos_profile(spec.qos))
+    spec = topics.TOPICS[topics.TORQUE_CMD]
+    pub = stub.create_publisher(topics.msg_class(spec.type_name), spec.name, topics.qos_profile(spec.qos))
+    executor.add_node(plant)
+    executor.add_node(stub)
+
+    def spin_until(cond: Any, timeout_s: float = 10.0) -> None:
+        deadline = time.monotonic() + timeout_s
+        while not cond():
+            assert time.monotonic() < deadline
+            executor.spin_once(timeout_sec=0.02)
+
+    try:
+        spin_until(lambda: len(states) == 1 and pub.get_subscription_count() == 1)
+        big = model.wheel_accel_to_torque(np.array([2.0 * CFG.limits.wheel_accel_max_rad_s2, 0.0, 0.0]), CFG)
+        for msg in (_torque(0, [math.nan, 0.0, 0.0]), _torque(0, [0.0, 0.0, 0.0], "hill"), _torque(5 * S, big),
+                    _torque(0, big)):
+            pub.publish(msg)
+        spin_until(lambda: len(states) == 2)  # the saturated command was applied: step 1
+        pub.publish(_torque(0, big))  # duplicate of the applied one
+        spin_until(lambda: len(states) == 4, timeout_s=5.0)  # two misses: hold once, then zero
+        pub.publish(_torque(1 * S, big))  # late
+        spin_until(lambda: plant.finished.done(), timeout_s=5.0)
+    finally:
+        executor.shutdown()
+        stub.destroy_node()
+        plant.destroy_node()
+        rclpy.try_shutdown(context=context)
+    c = plant.counts
+    assert (c["rejected"], c["future"], c["duplicate"], c["late"]) == (2, 1, 1, 1)
+    assert c["outside_u"] == c["saturated"] == 1  # the applied one; the late and the duplicate are not
+    assert c["deadline_misses"] == 4 and c["fallback_hold"] == 1 and c["fallback_zero"] == 3
+    assert plant.exit_code == 0 and plant.k == 4
+    u_big = model.torque_to_wheel_accel(big, CFG)
+    x = X0
+    for u in (u_big, u_big, np.zeros(3), np.zeros(3)):  # saturated, held once, then zero
+        x, _ = integrate(x, u, 1.0, CFG)
+    assert np.max(np.abs(plant.x - x)) <= 1e-12
+
+
+# ----------------------------------------------------------------------------- faults in the running loop
+
+
+def _shm_now() -> set[str]:
+    try:
+        return {p.name for p in Path("/dev/shm").iterdir() if "fastrtps" in p.name or "fast_datasharing" in p.name}
+    except OSError:
+        return set()
+
+
+class Loop:
+    """The four nodes as OS processes, started with the launcher's command lines."""
+
+    def __init__(self, tmp_path: Path, *params: str, duration: int = 100) -> None:
+        parser = argparse.ArgumentParser()
+        launcher.add_arguments(parser)
+        self.bag = tmp_path / "run.mcap"
+        args = parser.parse_args(["--duration", str(duration), "--bag", str(self.bag), "-p", "bag_chunk_kb=16",
+                                  "-p", "drain_timeout_s=3",
+                                  *itertools.chain.from_iterable(("-p", p) for p in params)])
+        self.plan = launcher.plan(args)
+        self.env = {**os.environ, **self.plan.env, "PYTHONUNBUFFERED": "1", "RCUTILS_COLORIZED_OUTPUT": "0"}
+        self.logs = tmp_path / "logs"
+        self.logs.mkdir()
+        self.procs: dict[str, subprocess.Popen[bytes]] = {}
+        self.shm_before = _shm_now()
+        for role in launcher.START_ORDER:
+            self.start(role)
+
+    def start(self, role: str, tag: str = "") -> None:
+        with open(self.logs / f"{role}{tag}.log", "wb") as log:
+            self.procs[role + tag] = subprocess.Popen(self.plan.commands[role], stdout=log, stderr=subprocess.STDOUT,
+                                                      env=self.env, start_new_session=True)
+
+    def states(self) -> int:
+        try:
+            return read_bag(self.bag, topics=[f"{NS}/state"], decode=False).counts.get(f"{NS}/state", 0)
+        except BagError:
+            return 0
+
+    def wait_states(self, n: int, timeout_s: float = 60.0, track: str = "") -> set[str]:
+        """Wait until the bag holds n states; returns the Fast DDS files process `track` used meanwhile."""
+        deadline = time.monotonic() + timeout_s
+        files: set[str] = set()
+        while self.states() < n:
+            assert time.monotonic() < deadline and self.procs["plant"].poll() is None, self.log("plant")
+            if track:
+                files |= launcher.fastdds_files([self.procs[track].pid])
+            time.sleep(0.1)
+        return files | (launcher.fastdds_files([self.procs[track].pid]) if track else set())
+
+    def stop(self, name: str, sig: signal.Signals = signal.SIGINT, timeout_s: float = 20.0) -> int:
+        proc = self.procs[name]
+        if proc.poll() is None:
+            proc.send_signal(sig)
+        return proc.wait(timeout_s)
+
+    def wait(self, *names: str, timeout_s: float = 90.0) -> dict[str, int]:
+        return {n: self.procs[n].wait(timeout_s) for n in names}
+
+    def log(self, name: str) -> str:
+        return (self.logs / f"{name}.log").read_text(errors="replace")
+
+    def published(self, name: str) -> dict[str, int]:
+        """What a node says it published (its exit line `published: topic n, ...; counters: ...`)."""
+        m = re.search(r"published: (.*?); counters", self.log(name))
+        assert m, self.log(name)
+        return {t: int(n) for t, n in (item.rsplit(" ", 1) for item in m.group(1).split(", "))}
+
+    def close(self) -> None:
+        for proc in self.procs.values():
+            if proc.poll() is None:
+                proc.send_signal(signal.SIGINT)
+        for proc in self.procs.values():
+            try:
+                proc.wait(20)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+
+
+@pytest.fixture
+def loop_factory(tmp_path: Path) -> Any:
+    loops: list[Loop] = []
+
+    def make(*params: str, duration: int = 100) -> Loop:
+        loops.append(Loop(tmp_path, *params, duration=duration))
+        return loops[-1]
+
+    yield make
+    for lp in loops:
+        lp.close()
+
+
+def _status_records(bag: Path) -> list[dict[str, Any]]:
+    contents = read_bag(bag, topics=[f"{NS}/filter_status"])
+    return [convert.diagnostic_values(m.message)[topics.QP_STATUS_NAME] for m in contents.messages]
+
+
+def _final_run_status(bag: Path) -> tuple[str, dict[str, Any]]:
+    contents = read_bag(bag, topics=[f"{NS}/run_status"])
+    return convert.run_status_from_msg(contents.messages[-1].message)
+
+
+def _assert_commands_valid(bag: Path) -> None:
+    contents = read_bag(bag, topics=[f"{NS}/torque_cmd"])
+    for m in contents.messages:
+        u = model.torque_to_wheel_accel(convert.torque_from_msg(m.message)[1], CFG)
+        assert np.all(np.abs(u) <= U_MAX * (1 + 1e-12))
+
+
+@pytest.mark.slow
+def test_filter_killed_and_restarted_the_plant_falls_back_and_the_loop_resumes(loop_factory: Any) -> None:
+    lp = loop_factory("command_timeout_s=0.5", "deadline_fallback=zero", "stop_timeout_s=1.0")
+    lp.wait_states(25)
+    assert lp.stop("filter", signal.SIGTERM) == 0  # a clean stop of a DDS participant, mid-run
+    killed_at = lp.states()
+    lp.start("filter", "2")
+    assert lp.wait("plant", "recorder") == {"plant": 0, "recorder": 0}, lp.log("plant")
+    assert lp.stop("controller") == 0 and lp.stop("filter2") == 0
+    state, run = _final_run_status(lp.bag)
+    assert state == topics.RUN_DONE and run["step"] == 100
+    assert run["deadline_misses"] > 0 and run["fallback_zero"] == run["deadline_misses"]
+    contents = read_bag(lp.bag, decode=False)
+    assert not contents.truncated and contents.counts[f"{NS}/state"] == 101
+    # no data lost: every torque_cmd either filter published is in the bag, and the plant took them
+    first, second = lp.published("filter"), lp.published("filter2")
+    assert contents.counts[f"{NS}/torque_cmd"] == first["torque_cmd"] + second["torque_cmd"]
+    assert contents.counts[f"{NS}/filter_status"] == first["filter_status"] + second["filter_status"]
+    assert second["torque_cmd"] > 10  # the loop resumed through the new filter
+    applied = read_bag(lp.bag, topics=[f"{NS}/torque_applied"]).messages
+    zero = [convert.torque_from_msg(m.message)[0] // S for m in applied
+            if not np.any(convert.torque_from_msg(m.message)[1])]
+    assert len(zero) >= run["deadline_misses"] and min(zero) >= killed_at - 5  # zero torque during the outage
+    calls = [r["calls"] for r in _status_records(lp.bag)]
+    assert calls == list(range(1, first["filter_status"] + 1)) + list(range(1, second["filter_status"] + 1))
+    _assert_commands_valid(lp.bag)
+
+
+@pytest.mark.slow
+def test_controller_killed_the_filter_keeps_the_spacecraft_safe_with_u_des_zero(loop_factory: Any) -> None:
+    from rta_attitude.analysis import load_run, summarize_run
+
+    lp = loop_factory("desired_timeout_s=0.2", "command_timeout_s=3.0", "stop_timeout_s=1.0")
+    lp.wait_states(25)
+    assert lp.stop("controller", signal.SIGTERM) == 0
+    assert lp.wait("plant", "recorder") == {"plant": 0, "recorder": 0}, lp.log("plant")
+    assert lp.stop("filter") == 0
+    state, run = _final_run_status(lp.bag)
+    assert state == topics.RUN_DONE and run["step"] == 100
+    recs = _status_records(lp.bag)
+    assert len(recs) == 101  # the filter answered every state
+    missing = [i for i, r in enumerate(recs) if r[topics.INPUT_SOURCE_KEY] == "missing"]
+    sent = lp.published("controller")["torque_des"]
+    assert 25 <= sent < 101 and set(range(sent, 101)) <= set(missing)  # after its last message: u_des = 0
+    assert recs[-1]["torque_des_missing"] == len(missing) and run["deadline_misses"] == 0
+    assert all(recs[i]["u_des_x"] == recs[i]["u_des_y"] == recs[i]["u_des_z"] == 0.0 for i in missing)
+    assert "torque_des_missing" in lp.log("filter")
+    assert lp.log("filter").count("torque_des_missing: no torque_des") == 1  # one episode, one line
+    _assert_commands_valid(lp.bag)
+    summary = summarize_run(load_run(lp.bag, CFG), CFG)
+    assert summary["safe"] is True and summary["bag"]["reintegration_residual"] == 0.0
+
+
+@pytest.mark.slow
+def test_sigint_to_everything_finalizes_a_bag_with_every_published_message(tmp_path: Path) -> None:
+    bag, out = tmp_path / "cut.mcap", tmp_path / "out"
+    proc = subprocess.Popen([sys.executable, "-m", "rta_attitude.launcher", "--duration", "1000", "--bag", str(bag),
+                             "--out", str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 60
+    while not (bag.exists() and bag.stat().st_size > 120_000):
+        assert proc.poll() is None and time.monotonic() < deadline, proc.communicate()[1][-2000:]
+        time.sleep(0.1)
+    proc.send_signal(signal.SIGINT)  # the launcher passes SIGINT to every node at once
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 1 and "interrupted" in err and "SIGKILL" not in err and "/dev/shm" not in err
+    contents = read_bag(bag, decode=False)
+    assert not contents.truncated  # finalized: footer, summary, metadata record
+    assert "rta_attitude" in contents.metadata
+    logs = out / "logs"
+    published: dict[str, int] = {}
+    for name in ("plant_node", "pd_controller_node", "asif_filter_node"):
+        text = (logs / f"{name}.log").read_text()
+        m = re.search(r"published: (.*?); counters", text)
+        assert m, text
+        published.update({t: int(n) for t, n in (i.rsplit(" ", 1) for i in m.group(1).split(", "))})
+    recorded = {t.removeprefix(f"{NS}/"): n for t, n in contents.counts.items() if n}
+    assert recorded == published  # every message any node published before the signal is in the bag
+    state, run = _final_run_status(bag)
+    assert state == f"{topics.RUN_INTERRUPTED}: SIGINT" and 0 < run["step"] < 1000
+
+
+@pytest.mark.slow
+def test_sigkill_of_the_recorder_leaves_a_bag_readable_to_its_last_chunk(loop_factory: Any, tmp_path: Path) -> None:
+    lp = loop_factory("stop_timeout_s=1.0", duration=80)
+    files = lp.wait_states(30, track="recorder") - lp.shm_before  # what Fast DDS will leave behind
+    recorder = lp.procs["recorder"]
+    assert files, "the recorder maps no Fast DDS file"
+    recorder.kill()  # SIGKILL: nothing runs in the process
+    assert recorder.wait(10) == -signal.SIGKILL
+    assert lp.wait("plant", timeout_s=60) == {"plant": 0}
+    assert lp.stop("controller") == 0 and lp.stop("filter") == 0
+    contents = read_bag(lp.bag, decode=False)
+    assert contents.truncated and 30 <= contents.counts[f"{NS}/state"] < 81
+    proc = subprocess.run([sys.executable, "-m", "rta_attitude.cli", "analyze", str(lp.bag), "--out",
+                           str(tmp_path / "analysis"), "--no-plot"], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    m = re.search(r"bag truncated: data ends at t = ([0-9.]+) s", proc.stdout)
+    assert m and 29.0 <= float(m.group(1)) <= 80.0, proc.stdout
+    # the killed process's Fast DDS files: removed once no live process uses them; nothing else leaks
+    removed: set[str] = set()
+    deadline = time.monotonic() + 10
+    while (files & _shm_now()) - removed and time.monotonic() < deadline:
+        removed |= set(launcher.remove_stale_shm(files))
+        time.sleep(0.2)
+    assert removed and not (files & _shm_now()), sorted(files & _shm_now())
+    leaked = launcher.stale_shm(_shm_now() - lp.shm_before)
+    assert leaked == []
+
+
+# ----------------------------------------------------------------------------- configuration errors
+
+
+def _bad_files(tmp_path: Path, full: bool) -> dict[str, tuple[Path, str]]:
+    """name -> (parameter file, what the one error line must say). full: a whole parameter file (the
+    package's, with one bad entry), as the launcher and CLI take; else only the bad entry, as a node's
+    --params-file overrides its config_file."""
+    import yaml
+
+    cases: dict[str, tuple[tuple[str, ...], Any, str]] = {
+        "unknown": (("filter", "prest"), "paper", "unknown key 'prest'"),
+        "type": (("limits", "psi_max_rad_s"), "fast", "psi_max_rad_s must be a finite number, got 'fast'"),
+        "range": (("limits", "psi_max_rad_s"), -5.0, "psi_max_rad_s must be > 0, got -5.0"),
+        "knob": (("command_timeout_s",), -1.0, "command_timeout_s must be a float > 0, got -1.0"),
+    }
+    base = yaml.safe_load(Path(CFG.source).read_text()) if full else {"/**": {"ros__parameters": {}}}
+    out = {}
+    for name, (keys, value, message) in cases.items():
+        doc = yaml.safe_load(yaml.safe_dump(base))
+        node = next(iter(doc.values()))["ros__parameters"]
+        for key in keys[:-1]:
+            node = node.setdefault(key, {})
+        node[keys[-1]] = value
+        path = tmp_path / f"{name}{'_full' if full else ''}.yaml"
+        path.write_text(yaml.safe_dump(doc))
+        out[name] = (path, message)
+    out["yaml"] = (tmp_path / "broken.yaml", "is not valid YAML at line")
+    out["yaml"][0].write_text("/**:\n  ros__parameters:\n    limits: [psi_max_rad_s: \n")
+    out["missing"] = (tmp_path / "missing.yaml", "does not exist")
+    return out
+
+
+def _one_error_line(proc: subprocess.CompletedProcess[str] | Any, message: str) -> None:
+    text = proc.stdout + proc.stderr
+    assert proc.returncode == 1, text
+    assert "Traceback" not in text, text
+    errors = [line for line in text.splitlines() if "ERROR" in line]
+    assert len(errors) == 1 and message in errors[0], text
+
+
+def test_node_with_a_bad_parameter_file_exits_1_with_one_line(tmp_path: Path) -> None:
+    cases = _bad_files(tmp_path, full=False)
+    procs = {name: subprocess.Popen([sys.executable, "-m", topics.MODULES[topics.PLANT], "--ros-args",
+                                     "--params-file", str(path), "-p", "record:=false"],
+                                    stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+             for name, (path, _) in cases.items()}  # fmt: skip
+    for name, proc in procs.items():
+        out, err = proc.communicate(timeout=60)
+        _one_error_line(subprocess.CompletedProcess(proc.args, proc.returncode, out, err), cases[name][1])
+
+
+def test_launcher_and_cli_with_bad_files_or_values_exit_1_with_one_line(tmp_path: Path) -> None:
+    cases = _bad_files(tmp_path, full=True)
+    runs = {
+        "launch-unknown": (["-m", "rta_attitude.launcher", "--config", str(cases["unknown"][0])],
+                           "unknown key 'prest'"),
+        "launch-range": (["-m", "rta_attitude.launcher", "--config", str(cases["range"][0])],
+                         "psi_max_rad_s must be > 0, got -5.0"),
+        "launch-missing": (["-m", "rta_attitude.launcher", "--config", str(cases["missing"][0])], "does not exist"),
+        "launch-knob": (["-m", "rta_attitude.launcher", "-p", "command_timeout_s=-1"],
+                        "parameter command_timeout_s must be a float > 0, got -1.0"),
+        "launch-knob-type": (["-m", "rta_attitude.launcher", "-p", "deadline_fallback=pray"],
+                             "parameter deadline_fallback must be one of hold, zero, got 'pray'"),
+        "launch-domain": (["-m", "rta_attitude.launcher", "--domain-id", "999"],
+                          "--domain-id must be in 0..232, got 999"),
+        "cli-type": (["-m", "rta_attitude.cli", "check-config", "--config", str(cases["type"][0])],
+                     "psi_max_rad_s must be a finite number, got 'fast'"),
+        "cli-missing": (["-m", "rta_attitude.cli", "check-config", "--config", str(cases["missing"][0])],
+                        "does not exist"),
+        "cli-yaml": (["-m", "rta_attitude.cli", "simulate", "--config", str(cases["yaml"][0])], "not valid YAML"),
+    }
+    procs = {name: subprocess.Popen([sys.executable, *argv, *(["--bag", str(tmp_path / f"{name}.mcap")]
+                                                              if "launcher" in argv[1] else [])],
+                                    stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+             for name, (argv, _) in runs.items()}  # fmt: skip
+    for name, proc in procs.items():
+        out, err = proc.communicate(timeout=60)
+        _one_error_line(subprocess.CompletedProcess(proc.args, proc.returncode, out, err), runs[name][1])
+    assert not list(tmp_path.glob("*.mcap"))  # nothing started
+
+
+# ----------------------------------------------------------------------------- isolation
+
+
+def test_launcher_runs_nodes_on_localhost_and_a_configurable_domain(monkeypatch: pytest.MonkeyPatch,
+                                                                     tmp_path: Path) -> None:
+    parser = argparse.ArgumentParser()
+    launcher.add_arguments(parser)
+    monkeypatch.delenv("ROS_DOMAIN_ID", raising=False)
+    plan = launcher.plan(parser.parse_args(["--bag", str(tmp_path / "a.mcap")]))
+    assert plan.env == {"ROS_DOMAIN_ID": str(launcher.DEFAULT_DOMAIN_ID), "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
+    monkeypatch.setenv("ROS_DOMAIN_ID", "42")
+    assert launcher.plan(parser.parse_args(["--bag", str(tmp_path / "b.mcap")])).env["ROS_DOMAIN_ID"] == "42"
+    plan = launcher.plan(parser.parse_args(["--bag", str(tmp_path / "c.mcap"), "--domain-id", "7",
+                                            "--discovery", "subnet"]))
+    assert plan.env == {"ROS_DOMAIN_ID": "7", "ROS_AUTOMATIC_DISCOVERY_RANGE": "SUBNET"}
+    assert os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] == "LOCALHOST"  # the tests' own default (conftest)
+    text = (Path(__file__).resolve().parents[1] / "launch" / "rta_attitude.launch.py").read_text()
+    assert 'SetEnvironmentVariable("ROS_AUTOMATIC_DISCOVERY_RANGE", cfg["discovery_range"])' in text
+    assert '"discovery_range": ("LOCALHOST"' in text
