@@ -81,7 +81,7 @@ KEY_SLACK = "slack"
 KEY_INTERVENING = "intervening"
 KEY_SLACKED = "slacked"
 
-RUN_FACTS: tuple[str, ...] = ("run_state", "stepping", "deadline_misses", "late", "rejected", "unexpected")
+RUN_FACTS: tuple[str, ...] = ("run_state", "stepping", *topics.PLANT_COUNTERS)
 """Facts of the plant's run_status / the recorder's metadata copied into the summary's `bag` section."""
 RESIDUAL_TOLERANCE = 1e-9
 """Relative state difference below which re-integration counts as reproducing the recorded run."""

@@ -136,8 +136,8 @@ class _Section:
     def done(self) -> None:
         extra = sorted(set(self.data) - self.used)
         if extra:
-            raise ConfigError(f"{self.where}: unknown key {extra[0]!r} "
-                              f"(known: {', '.join(sorted(self.used))})")
+            raise ConfigError(f"{self.where}: unknown key {extra[0]!r} (value {self.data[extra[0]]!r}; "
+                              f"known: {', '.join(sorted(self.used))})")
 
 
 _REQUIRED = object()
