@@ -110,3 +110,12 @@ def test_package_xml_and_setup_py_agree():
     v_setup = re.search(r'version="([^"]+)"', setup).group(1)
     assert v_xml == v_setup
     assert re.search(r"<name>rta_attitude</name>", xml)
+
+
+def test_setup_finds_every_package():
+    """setup.py's find_packages must see the core, the constraints and the nodes (each needs an
+    __init__.py), or an installed rta-attitude cannot import itself."""
+    from setuptools import find_packages
+
+    found = set(find_packages(str(ROOT), exclude=["test", "test.*", "bench", "bench.*"]))
+    assert {"rta_attitude", "rta_attitude.constraints", "rta_attitude.nodes"} <= found
