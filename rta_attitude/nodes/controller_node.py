@@ -76,19 +76,8 @@ class ControllerNode(RtaNode):
         except MessageError as exc:
             self.faults.fault("state_rejected", f"{exc}; dropped")
             return
-        order = self.order.check(t_ns)
-        if order:
-            self.faults.fault(f"state_{order}", f"stamp {t_ns / convert.NS_PER_S:g} s; dropped")
+        if not self.admit_state_stamp(t_ns, self.order):
             return
-        max_age = self.knobs["max_state_age_s"]
-        if max_age > 0 and self.uses_sim_time():
-            age = (self.get_clock().now().nanoseconds - t_ns) / convert.NS_PER_S
-            if age > max_age:
-                self.faults.fault("state_stale", f"state of t = {t_ns / convert.NS_PER_S:g} s is {age:g} s old; "
-                                  "dropped")
-                return
-        self.order.take(t_ns)
-        self.faults.clear("state_duplicate", "state_out_of_order", "state_stale")
         try:
             _, x = convert.state_from_msg(msg)
             x, renormalised = convert.unit_attitude(x, self.knobs["quaternion_tolerance"])

@@ -97,31 +97,14 @@ class FilterNode(RtaNode):
             self.faults.fault(kind, f"{exc}; dropped")
             return None
 
-    def _state_age_s(self, t_ns: int) -> float | None:
-        """Sim time since the stamp, if the node runs on /clock; None otherwise."""
-        if not self.uses_sim_time():
-            return None
-        return (self.get_clock().now().nanoseconds - t_ns) / convert.NS_PER_S
-
     def _on_state(self, msg: Any) -> None:
         if self.stopping:
             return
         t_ns = self._stamp(msg, "state_rejected")
         if t_ns is None:
             return
-        order = self.state_order.check(t_ns)
-        if order:
-            self.faults.fault(f"state_{order}", f"stamp {t_ns / convert.NS_PER_S:g} s, newest "
-                              f"{(self.state_order.newest_ns or 0) / convert.NS_PER_S:g} s; dropped")
+        if not self.admit_state_stamp(t_ns, self.state_order):
             return
-        age = self._state_age_s(t_ns)
-        max_age = self.knobs["max_state_age_s"]
-        if max_age > 0 and age is not None and age > max_age:
-            self.faults.fault("state_stale", f"state of t = {t_ns / convert.NS_PER_S:g} s is {age:g} s old "
-                              f"(max_state_age_s {max_age:g}); dropped")
-            return
-        self.state_order.take(t_ns)
-        self.faults.clear("state_duplicate", "state_out_of_order", "state_stale")
         try:
             _, x = convert.state_from_msg(msg)
             x, renormalised = convert.unit_attitude(x, self.knobs["quaternion_tolerance"])

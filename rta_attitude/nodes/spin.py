@@ -40,8 +40,8 @@ from rclpy.task import Future
 from rclpy.timer import Timer
 
 from ..errors import ConfigError, RtaError
-from . import parameters, topics
-from .faults import FaultLog
+from . import convert, parameters, topics
+from .faults import FaultLog, StampOrder
 
 GATE_POLL_S = 0.005
 """How often a closed gate checks its publisher's matches [s]."""
@@ -102,6 +102,26 @@ class RtaNode(Node):
 
     def on_fault_change(self, kind: str, active: bool) -> None:
         """A fault episode of `kind` started (active) or ended; the plant republishes run_status."""
+
+    def admit_state_stamp(self, t_ns: int, order: StampOrder) -> bool:
+        """Screen a state's stamp: duplicates, out-of-order stamps and (on /clock) states older than
+        `max_state_age_s` are dropped and counted as one fault episode each; an admitted stamp is
+        taken into `order`. Returns True if the state may be used."""
+        kind = order.check(t_ns)
+        if kind:
+            self.faults.fault(f"state_{kind}", f"stamp {t_ns / convert.NS_PER_S:g} s, newest "
+                              f"{(order.newest_ns or 0) / convert.NS_PER_S:g} s; dropped")
+            return False
+        max_age = self.knobs["max_state_age_s"]
+        if max_age > 0 and self.uses_sim_time():
+            age = (self.get_clock().now().nanoseconds - t_ns) / convert.NS_PER_S
+            if age > max_age:
+                self.faults.fault("state_stale", f"state of t = {t_ns / convert.NS_PER_S:g} s is {age:g} s old "
+                                  f"(max_state_age_s {max_age:g}); dropped")
+                return False
+        order.take(t_ns)
+        self.faults.clear("state_duplicate", "state_out_of_order", "state_stale")
+        return True
 
     def uses_sim_time(self) -> bool:
         """True when the node's clock follows /clock (use_sim_time) and /clock has been heard."""
