@@ -298,11 +298,6 @@ class Scenario:
         k = int(np.searchsorted(np.asarray(self.schedule_s), t_s, side="right")) - 1
         return np.array(self.schedule_q[max(k, 0)], dtype=float)
 
-    @property
-    def steps(self) -> int:
-        """Number of samples after t = 0 at dt = 1 s granularity is decided by the caller."""
-        return round(self.duration_s)
-
 
 @dataclass(frozen=True)
 class Config:

@@ -35,13 +35,6 @@ def product(q: Array, p: Array) -> Array:
     return np.concatenate([vec, sca], axis=-1)
 
 
-def skew(v: Array) -> Array:
-    """Cross-product matrix [v x] (..., 3, 3), so that skew(v) @ w = v x w."""
-    x, y, z = v[..., 0], v[..., 1], v[..., 2]
-    o = np.zeros_like(x)
-    return np.stack([np.stack([o, -z, y], -1), np.stack([z, o, -x], -1), np.stack([-y, x, o], -1)], -2)
-
-
 def attitude_matrix(q: Array) -> Array:
     """A(q) (..., 3, 3): Hill -> body, A = (q4^2 - |q_v|^2) I + 2 q_v q_v^T - 2 q4 [q_v x]."""
     q = np.asarray(q, dtype=float)
@@ -88,4 +81,4 @@ def error_vector(q: Array, q_c: Array) -> Array:
     return product(q, conjugate(q_c))[..., :3]
 
 
-__all__ = ["attitude_matrix", "conjugate", "error_vector", "kinematics", "normalize", "product", "skew", "xi"]
+__all__ = ["attitude_matrix", "conjugate", "error_vector", "kinematics", "normalize", "product", "xi"]
