@@ -163,8 +163,10 @@ def _check_seconds(name: str, value: float, allow_zero: bool = False) -> None:
 def list_topics(node: Any, window_s: float, discovery_s: float, rates: bool) -> list[dict[str, Any]]:
     """Rows {topic, type, publishers, subscribers, rate_hz, messages} for every topic in the graph.
 
-    rate_hz: messages per wall-clock second received over `window_s` (None: no message, or the type
-    is not installed, then `messages` is None too).
+    rate_hz: messages per wall-clock second received over `window_s`, from the first message to the
+    end of the window (None: no message, or the type is not installed, then `messages` is None too).
+    Arrival times are taken when callbacks run, so a backlog the executor works off at once would make
+    the first-to-last interval too short; measuring to the end of the window does not depend on it.
     """
     from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
@@ -187,14 +189,15 @@ def list_topics(node: Any, window_s: float, discovery_s: float, rates: bool) -> 
                 node.create_subscription(cls, topic, lambda _data, r=received: r.append(time.monotonic()), qos,
                                          raw=True)
             _spin_for(executor, node.context, window_s)
+        window_end = time.monotonic()
     finally:
         executor.shutdown(timeout_sec=0.5)
     rows = []
     for topic, (type_name, pubs, subs) in sorted(graph.items()):
         got = stamps.get(topic)
         rate = None
-        if got is not None and len(got) >= 2 and got[-1] > got[0]:
-            rate = (len(got) - 1) / (got[-1] - got[0])
+        if got is not None and len(got) >= 2 and window_end > got[0]:
+            rate = (len(got) - 1) / (window_end - got[0])
         rows.append({"topic": topic, "type": type_name, "publishers": pubs, "subscribers": subs,
                      "rate_hz": rate, "messages": None if got is None else len(got)})
     return rows
