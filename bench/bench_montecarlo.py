@@ -34,9 +34,8 @@ def check_against_single_runs(cfg: config.Config, x0: np.ndarray, duration_s: fl
     out = batch.BatchSimulator(cfg).run(x0, duration_s, record=True)
     worst = 0.0
     for k in range(len(x0)):
-        loop = simulation.ClosedLoop(cfg, Scenario("bench", "", duration_s, x0[k], controller="none"))
-        loop.filter = batch.ActiveSetFilter(loop.cfg)
-        traj = loop.run()
+        scen = Scenario("bench", "", duration_s, x0[k], controller="none")
+        traj = simulation.ClosedLoop(cfg.with_solver("active_set"), scen).run()
         worst = max(worst, float(np.max(np.abs(traj.x - out.trajectory[k]))))
     return worst
 

@@ -8,7 +8,8 @@ The core (this package without `rta_attitude.nodes`) imports without rclpy:
     traj = simulate(config.load(), "paper-example")
 
 Modules: config, params, state, model, constraints/, asif, controller, simulation, metrics, plots,
-montecarlo, batch, bag, analysis; ROS adapters: nodes/, launcher, replay, topic_tools; cli.
+montecarlo, batch, bag, analysis; compiled kernels: barrier_rows, active_set, filter_kernel
+(kernel_cache keeps numba's cache of them consistent); ROS adapters: nodes/, launcher, replay, topic_tools; cli.
 """
 
 from __future__ import annotations
@@ -16,6 +17,9 @@ from __future__ import annotations
 from importlib.metadata import PackageNotFoundError, version
 
 from .errors import BagError, ConfigError, MessageError, RtaError, SolverError
+from .kernel_cache import drop_stale_caches
+
+drop_stale_caches()  # before any numba kernel reads its cache (see kernel_cache)
 
 try:
     __version__ = version("rta_attitude")

@@ -6,37 +6,45 @@
                 lo(x) <= u <= hi(x)                   admissible set U (and, in the `robust` preset,
                                                       the one-step-ahead ZOH bounds on omega and psi)
 
-BC_i(x, u) = drift_i(x) + gain_i(x) . u comes from `rta_attitude.constraints`. The slack is
-scaled (cost s^2 instead of p delta^2, p = 1e12 would ruin the Hessian's conditioning), every row
-is normalised to unit norm, and every solution proxsuite returns is checked against the rows
-before it is used. Fast path: u0 = clip(u_des, lo, hi) is the exact QP solution whenever it meets
-every row, so the solver is not called then. If the QP fails, the configured fallback acts:
-`pass_through` (the paper: u_des clipped to U), `hold` (u = 0), `soften` (re-solve with every row
-slacked, the least-violation command), or `raise` (SolverError).
+BC_i(x, u) = drift_i(x) + gain_i(x) . u is defined in `rta_attitude.constraints` (one module per
+constraint) and evaluated per call by its compiled port `barrier_rows`. The slack is scaled (cost
+s^2 instead of p delta^2, p = 1e12 would ruin the Hessian's conditioning), every row is normalised
+to unit norm, and every solution is checked against the rows before it is used. Fast path:
+u0 = clip(u_des, lo, hi) is the exact QP solution whenever it meets every row, so the solver is not
+called then. Solvers (`filter.solver`): `active_set`, the exact dual active-set method, compiled
+(`active_set`, default: the whole call runs in `filter_kernel.filter_active_set`), or `proxsuite`
+(iterations capped; answers also checked for KKT stationarity; `quadprog` re-solves where proxsuite
+fails). If the QP fails, the configured fallback acts: `pass_through` (the paper: u_des clipped to
+U), `hold` (u = 0), `soften` (re-solve with every row slacked, the least-violation command), or
+`raise` (SolverError).
 """
 
 from __future__ import annotations
 
 import logging
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 
 import numpy as np
 import proxsuite
 from numpy.typing import NDArray
 
+from . import active_set
+from . import filter_kernel as kernel
+from .barrier_rows import row_parameters
 from .constraints import BarrierTable, ConstraintSet
 from .errors import SolverError
 from .params import Config
+from .state import STATE_SIZE
 
 Array = NDArray[np.float64]
 log = logging.getLogger(__name__)
 
-BIG = 1e20
+BIG = kernel.BIG
 """proxsuite's stand-in for an infinite bound."""
-MIN_ROW_NORM = 1e-12
+MIN_ROW_NORM = kernel.MIN_ROW_NORM
 """Rows whose gradient in u is smaller than this do not depend on u and are not sent to the QP."""
-ACTIVE_MULTIPLIER = 1e-9
+ACTIVE_MULTIPLIER = kernel.ACTIVE_MULTIPLIER
 """A row whose multiplier exceeds this at the solution is active (it shapes u)."""
 
 STATUS_PASS = "pass"
@@ -44,7 +52,7 @@ STATUS_PASS = "pass"
 STATUS_SOLVED = "solved"
 STATUS_FALLBACK = "fallback"
 STATUS_NAMES: tuple[str, ...] = (STATUS_PASS, STATUS_SOLVED, STATUS_FALLBACK)
-CODE_PASS, CODE_SOLVED, CODE_FALLBACK = 0, 1, 2
+CODE_PASS, CODE_SOLVED, CODE_FALLBACK = kernel.CODE_PASS, kernel.CODE_SOLVED, kernel.CODE_FALLBACK
 
 
 @dataclass(frozen=True)
@@ -111,6 +119,8 @@ class BatchResult:
     iterations: NDArray[np.int64]
     fallback: NDArray[np.str_]
     uncontrollable: Array
+    qp_failed: NDArray[np.bool_]
+    """The state's first QP failed (a fallback policy acted)."""
 
 
 @dataclass
@@ -173,7 +183,9 @@ def solve_with_quadprog(problem: QpProblem) -> tuple[Array, Array, bool]:
 class AsifFilter:
     """The ASIF safety filter of one configuration; call `filter(x, u_des)`.
 
-    Not thread-safe (keeps its proxsuite workspaces).
+    The per-call work runs compiled (`filter_kernel`, `barrier_rows`); `evaluate`, `box` and
+    `qp` expose the same rows, box and QP for inspection and tests. Not thread-safe (keeps its
+    proxsuite workspaces).
     """
 
     def __init__(self, cfg: Config) -> None:
@@ -188,17 +200,20 @@ class AsifFilter:
         self.slacked = self.enabled & (weights > 0)
         self.slack_weights = weights
         self.counters = FilterCounters()
-        self._safe_placeholder = np.zeros(19)
-        self._safe_placeholder[3] = 1.0
-        self._safe_placeholder[10] = 273.15
+        self._params = row_parameters(cfg)
+        self._enabled = np.ascontiguousarray(self.enabled, dtype=np.bool_)
+        self._slack_weight = np.where(self.slacked, weights, 0.0)
+        self._policy = kernel.POLICIES.index(cfg.filter.fallback)
         self._workspaces: dict[tuple[int, int], proxsuite.proxqp.dense.QP] = {}
+        self._scratch = (np.empty(3), np.empty(3), np.zeros(kernel.N_INFO, dtype=np.int64))
 
-    # ---------------------------------------------------------------- bounds and rows
+    # ---------------------------------------------------------------- bounds and rows (reference)
     def box(self, x: Array, ctx: object | None = None) -> tuple[Array, Array, Array]:
         """(lo, hi, zoh_infeasible) on u (..., 3): U, intersected with the ZOH bounds if robust.
 
         Where a ZOH interval misses U entirely, the box shrinks to the edge of U nearest to it
-        (the best the actuator can do) and zoh_infeasible is True for that axis.
+        (the best the actuator can do) and zoh_infeasible is True for that axis. (The numpy
+        reference of the compiled box in `barrier_rows`.)
         """
         lo = np.broadcast_to(-self.u_max, (*np.shape(x)[:-1], 3)).copy()
         hi = np.broadcast_to(self.u_max, (*np.shape(x)[:-1], 3)).copy()
@@ -214,43 +229,33 @@ class AsifFilter:
         return lo, hi, bad
 
     def evaluate(self, x: Array) -> tuple[BarrierTable, Array, Array, Array]:
-        """Barrier table and box (lo, hi, zoh_infeasible) of states x (..., 19)."""
+        """Barrier table and box (lo, hi, zoh_infeasible) of states x (..., 19), computed by the
+        numpy reference (`constraints`)."""
         ctx = self.constraints.context(x)
         table = self.constraints.evaluate(x, ctx)
         lo, hi, bad = self.box(x, ctx)
         return table, lo, hi, bad
 
     def qp(self, table: BarrierTable, lo: Array, hi: Array, u_des: Array, soften: bool = False) -> QpProblem:
-        """The QP of one state (table entries of shape (m,), lo/hi/u_des (3,)).
+        """The QP of one state (table entries of shape (m,), lo/hi/u_des (3,)), as the filter
+        builds it (`filter_kernel.assemble`).
 
         Rows of disabled constraints, and rows that do not depend on u, are left out.
         With soften=True every row gets a slack (weight: its own p, or options.soften_weight).
         """
-        rows = [i for i in range(len(self.names))
-                if self.enabled[i] and np.linalg.norm(table.gain[i]) > MIN_ROW_NORM]
-        slack_rows = [i for i in rows if self.slacked[i] or soften]
-        n = 3 + len(slack_rows)
-        slack_index = {i: 3 + k for k, i in enumerate(slack_rows)}
-        scale = np.zeros(n)
-        C = np.zeros((len(rows) + 3, n))
-        lower = np.full(len(rows) + 3, -BIG)
-        upper = np.full(len(rows) + 3, BIG)
-        norms = np.ones(len(rows) + 3)
-        for r, i in enumerate(rows):
-            C[r, :3] = table.gain[i]
-            if i in slack_index:
-                p = self.slack_weights[i] if self.slacked[i] else self.options.soften_weight
-                scale[slack_index[i]] = 1.0 / np.sqrt(p)
-                C[r, slack_index[i]] = scale[slack_index[i]]
-            norms[r] = np.linalg.norm(C[r])
-            C[r] /= norms[r]
-            lower[r] = -table.drift[i] / norms[r]
-        C[len(rows):, :3] = np.eye(3)
-        lower[len(rows):], upper[len(rows):] = lo, hi
-        g = np.zeros(n)
-        g[:3] = -u_des
-        names = (*tuple(self.names[i] for i in rows), "u_x", "u_y", "u_z")
-        return QpProblem(np.eye(n), g, C, lower, upper, names, norms, slack_index, scale)
+        drift = np.ascontiguousarray(table.drift, dtype=float)
+        gain = np.ascontiguousarray(table.gain, dtype=float)
+        gnorm = np.sqrt(np.sum(gain * gain, axis=-1))
+        return self._problem(*kernel.assemble(drift, gain, np.asarray(lo, dtype=float), np.asarray(hi, dtype=float),
+                                              np.asarray(u_des, dtype=float), self._enabled, gnorm,
+                                              self._slack_weight, soften, self.options.soften_weight))
+
+    def _problem(self, C: Array, lower: Array, upper: Array, z0: Array, row_of: NDArray[np.int64],
+                 slack_var: NDArray[np.int64], scale: Array, norms: Array) -> QpProblem:
+        n = C.shape[1]
+        names = (*tuple(self.names[i] for i in row_of), "u_x", "u_y", "u_z")
+        slack_index = {int(i): int(v) for i, v in enumerate(slack_var) if v >= 0}
+        return QpProblem(np.eye(n), -z0, C, lower, upper, names, norms, slack_index, scale)
 
     # ---------------------------------------------------------------- solving
     def _workspace(self, n: int, n_in: int) -> proxsuite.proxqp.dense.QP:
@@ -270,57 +275,46 @@ class AsifFilter:
         return self._workspaces[key]
 
     def solve(self, problem: QpProblem) -> tuple[Array | None, Array, str, int]:
-        """Solve with proxsuite, then (if it failed or its answer does not meet the rows) with the
-        backup solver; verify. Returns (z or None if unusable, row multipliers, status, iterations).
+        """Solve with the configured solver; with proxsuite, also (if it failed or its answer does not
+        meet the rows or the KKT conditions) with the backup solver; verify. Returns (z or None if
+        unusable, row multipliers, status, iterations).
 
         Multipliers follow proxsuite's sign convention: > 0 at an active upper bound, < 0 at an
         active lower bound, 0 for inactive rows.
         """
+        tol = self.options.check_tolerance
         if self.options.solver == "active_set":
-            from .batch import ActiveSetFilter
-
-            return ActiveSetFilter.solve(self, problem)  # type: ignore[arg-type]
+            z, mult, code, iters = active_set.solve(problem.C, problem.lower, problem.upper, -problem.g,
+                                                    active_set.MAX_ACTIVE_SET_ITER)
+            ok = code == active_set.CODE_SOLVED and active_set.rows_hold(problem.C, problem.lower, problem.upper, z,
+                                                                         tol)
+            status = _active_set_status(code, code == active_set.CODE_SOLVED and not ok)
+            return (z if ok else None), mult, status, int(iters)
         n, n_in = problem.C.shape[1], problem.C.shape[0]
         qp = self._workspace(n, n_in)
         qp.init(problem.H, problem.g, None, None, problem.C, problem.lower, problem.upper)
         qp.solve()
         res = qp.results
+        solved = res.info.status == proxsuite.proxqp.QPSolverOutput.PROXQP_SOLVED
         status = res.info.status.name
         z = np.array(res.x, dtype=float)
         mult = np.array(res.z, dtype=float)
         iters = int(res.info.iter)
-        ok = (res.info.status == proxsuite.proxqp.QPSolverOutput.PROXQP_SOLVED and self._meets_rows(problem, z)
-              and self._is_stationary(problem, z, mult))
-        if not ok and res.info.status == proxsuite.proxqp.QPSolverOutput.PROXQP_SOLVED:
+        ok = (solved and active_set.rows_hold(problem.C, problem.lower, problem.upper, z, tol)
+              and kernel.is_stationary(problem.C, problem.lower, problem.upper, z, mult, problem.g, tol))
+        if not ok and solved:
             status += "_CHECK_FAILED"
         if not ok and self.options.backup_solver == "quadprog":
             self.counters.backup_solves += 1
             zq, mq, ok_q = solve_with_quadprog(problem)
             status += ">quadprog:" + ("SOLVED" if ok_q else "INFEASIBLE")
-            if ok_q and self._meets_rows(problem, zq):
+            if ok_q and active_set.rows_hold(problem.C, problem.lower, problem.upper, zq, tol):
                 return zq, mq, status, iters
             if ok_q:
                 status += "_CHECK_FAILED"
         return (z if ok else None), mult, status, iters
 
-    def _is_stationary(self, problem: QpProblem, z: Array, mult: Array) -> bool:
-        """KKT stationarity H z + g + C' y = 0 with y of the right signs (measured: proxsuite can
-        report SOLVED at a point 6 % worse than the optimum when a p = 1e12 slack is present)."""
-        if np.any(mult[problem.lower <= -BIG / 2] < -self.options.check_tolerance):
-            return False
-        if np.any(mult[problem.upper >= BIG / 2] > self.options.check_tolerance):
-            return False
-        r = problem.H @ z + problem.g + problem.C.T @ mult
-        return bool(np.linalg.norm(r[:3]) <= self.options.check_tolerance * (1.0 + np.linalg.norm(problem.g)))
-
-    def _meets_rows(self, problem: QpProblem, z: Array) -> bool:
-        if not np.all(np.isfinite(z)):
-            return False
-        Cz = problem.C @ z
-        tol = self.options.check_tolerance
-        return bool(np.all(Cz >= problem.lower - tol) and np.all(Cz <= problem.upper + tol))
-
-
+    # ---------------------------------------------------------------- filtering
     def filter(self, x: Array, u_des: Array) -> FilterResult:
         """Filter one desired command.
 
@@ -336,122 +330,245 @@ class AsifFilter:
             SolverError: the QP failed and the fallback policy is 'raise'.
         """
         t0 = time.perf_counter()
-        b = self.filter_batch(np.asarray(x, dtype=float)[None], np.asarray(u_des, dtype=float)[None])
-        return FilterResult(
-            u=b.u[0], u_des=np.asarray(u_des, dtype=float), names=self.names, h=b.h[0], psi0=b.psi0[0],
-            psi1=b.psi1[0], bc=b.bc[0], slack=b.slack[0], intervening=b.intervening[0],
-            box_active=b.box_active[0], status=STATUS_NAMES[b.status[0]], solver_status=b.solver_status[0],
-            iterations=int(b.iterations[0]), fallback=b.fallback[0], uncontrollable=b.uncontrollable[0],
-            solve_time_s=time.perf_counter() - t0,
-        )  # fmt: skip
+        x = np.asarray(x, dtype=float)
+        u_des = np.asarray(u_des, dtype=float)
+        if x.shape != (STATE_SIZE,) or u_des.shape != (3,):
+            raise ValueError(f"filter takes x ({STATE_SIZE},) and u_des (3,), got {x.shape} and {u_des.shape}")
+        m = len(self.names)
+        # the record's arrays are new each call; lo, hi and info are scratch (not in the record)
+        u, h, psi0, psi1, bc = np.empty(3), np.empty(m), np.empty(m), np.empty(m), np.empty(m)
+        slack, intervening = np.zeros(m), np.zeros(m, dtype=np.bool_)
+        box_active, uncontrollable = np.zeros(3, dtype=np.bool_), np.zeros(m, dtype=np.bool_)
+        lo, hi, info_array = self._scratch
+        if self.options.solver == "active_set":
+            kernel.filter_active_set(x, u_des, self._params, self._enabled, self._slack_weight,
+                                     self.options.check_tolerance, self._policy, self.options.soften_weight,
+                                     active_set.MAX_ACTIVE_SET_ITER, u, h, psi0, psi1, bc, slack, intervening,
+                                     box_active, uncontrollable, lo, hi, info_array)
+            info = info_array.tolist()
+            solver_status = _kernel_status_text(info)
+        else:
+            out = _Outputs(u, h, psi0, psi1, bc, slack, intervening, box_active, uncontrollable, lo, hi, info_array)
+            solver_status = self._filter_proxsuite(x, u_des, out)
+            info = info_array.tolist()
+        self._count_one(info)
+        if info[kernel.INFO_RAISE]:
+            raise SolverError(f"ASIF QP failed with status {solver_status}")
+        return FilterResult(u, u_des, self.names, h, psi0, psi1, bc, slack, intervening, box_active,
+                            STATUS_NAMES[info[kernel.INFO_STATUS]], solver_status, info[kernel.INFO_ITERATIONS],
+                            self._fallback_text(info[kernel.INFO_FALLBACK]), uncontrollable,
+                            time.perf_counter() - t0)  # positional: FilterResult's field order
 
     def filter_batch(self, x: Array, u_des: Array) -> BatchResult:
-        """Filter a batch: x (N, 19), u_des (N, 3). Rows and the fast path are vectorised; states
-        that need the QP are solved one by one. `filter` is this with N = 1, so a run inside a
-        batch and a single run compute the same numbers."""
-        x = np.array(x, dtype=float)
-        u_des = np.asarray(u_des, dtype=float)
+        """Filter a batch: x (N, 19), u_des (N, 3). Every state goes through the same per-state
+        code as `filter` (compiled in one loop with the active-set solver), so a run inside a batch
+        and a single run compute the same numbers."""
+        x = np.ascontiguousarray(x, dtype=float)
+        u_des = np.ascontiguousarray(u_des, dtype=float)
+        if x.ndim != 2 or x.shape[1] != STATE_SIZE or u_des.shape != (x.shape[0], 3):
+            raise ValueError(f"filter_batch takes x (N, {STATE_SIZE}) and u_des (N, 3), got {x.shape} and "
+                             f"{u_des.shape}")
         n, m = x.shape[0], len(self.names)
-        with np.errstate(all="ignore"):
-            q_norm = np.linalg.norm(x[:, 0:4], axis=-1)
-        valid = np.all(np.isfinite(x), axis=-1) & (q_norm > 0.5) & (q_norm < 1.5)
-        x[valid, 0:4] /= q_norm[valid, None]
-        x[~valid] = self._safe_placeholder
-        with np.errstate(all="ignore"):  # absurd but finite states may overflow: caught just below
-            table, lo, hi, _bad = self.evaluate(x)
-        finite_rows = (np.all(np.isfinite(table.drift), axis=-1) & np.all(np.isfinite(table.gain), axis=(-2, -1))
-                       & np.all(np.isfinite(lo), axis=-1) & np.all(np.isfinite(hi), axis=-1))
-        valid &= finite_rows
-        lo[~valid], hi[~valid] = -self.u_max, self.u_max
-        table.drift[~valid], table.gain[~valid] = 0.0, 0.0
-        gnorm = np.linalg.norm(table.gain, axis=-1)
-        depends = gnorm > MIN_ROW_NORM
-        uncontrollable = self.enabled & ~depends & (table.drift < 0)
-        finite_des = np.all(np.isfinite(u_des), axis=-1)
-        u_target = np.where(np.isfinite(u_des), u_des, 0.0)
-        u0 = np.clip(u_target, lo, hi)
-        bc0 = table.drift + np.einsum("nmk,nk->nm", table.gain, u0)
-        tol = self.options.check_tolerance
-        need = self.enabled & depends & (bc0 < -tol * np.maximum(1.0, gnorm))
-        solve = (need.any(axis=-1) | ~finite_des) & valid
-        u = u0.copy()
-        slack = np.zeros((n, m))
-        intervening = np.zeros((n, m), dtype=bool)
-        status = np.zeros(n, dtype=np.int8)
-        solver_status = np.full(n, "", dtype=object)
-        fallback = np.full(n, "", dtype=object)
-        iterations = np.zeros(n, dtype=np.int64)
-        self.counters.calls += n
-        self.counters.fast_path += int(n - solve.sum())
-        for k in np.nonzero(solve)[0]:
-            row = BarrierTable(table.h[k], table.psi0[k], table.psi1[k], table.drift[k], table.gain[k])
-            u[k], slack[k], intervening[k], status[k], solver_status[k], iterations[k], fallback[k] = (
-                self._solve_state(row, lo[k], hi[k], u_target[k], bool(finite_des[k])))
-        if not valid.all():
-            # a state that is not a state (NaN, inf, no attitude, barrier rows that overflow): no
-            # barrier can be trusted; the wheels hold their speed (u = 0), keeping the body rates
-            bad = ~valid
-            self.counters.fallbacks += int(bad.sum())
-            self.counters.invalid_states += int(bad.sum())
-            lo[bad], hi[bad] = -self.u_max, self.u_max
-            u[bad] = 0.0
-            status[bad] = CODE_FALLBACK
-            fallback[bad] = "invalid_state"
-            table.h[bad] = table.psi0[bad] = table.psi1[bad] = table.drift[bad] = np.nan
-        for code, name in enumerate(STATUS_NAMES):
-            c = int(np.count_nonzero(status == code))
-            if c:
-                self.counters.by_status[name] = self.counters.by_status.get(name, 0) + c
-        des = np.where(np.isfinite(u_des), u_des, 0.0)
-        box_active = ((u <= lo) & (des < lo)) | ((u >= hi) & (des > hi))
+        out = _Outputs.empty(m, n)
+        if self.options.solver == "active_set":
+            kernel.filter_active_set_many(x, u_des, self._params, self._enabled, self._slack_weight,
+                                          self.options.check_tolerance, self._policy, self.options.soften_weight,
+                                          active_set.MAX_ACTIVE_SET_ITER, out.u, out.h, out.psi0, out.psi1, out.bc,
+                                          out.slack, out.intervening, out.box_active, out.uncontrollable, out.lo,
+                                          out.hi, out.info)
+            solver_status = np.array([_kernel_status_text(i) if i[kernel.INFO_SOLVER] >= 0 else "" for i in out.info],
+                                     dtype=str) if n else np.zeros(0, dtype=str)
+        else:
+            texts = []
+            for k in range(n):
+                texts.append(self._filter_proxsuite(x[k], u_des[k], out.row(k)))
+            solver_status = np.array(texts, dtype=str)
+        self._count(out.info)
+        if np.any(out.info[:, kernel.INFO_RAISE]):
+            k = int(np.flatnonzero(out.info[:, kernel.INFO_RAISE])[0])
+            raise SolverError(f"ASIF QP failed with status {solver_status[k]} (state {k} of the batch)")
+        fallback = np.array([self._fallback_text(int(c)) for c in out.info[:, kernel.INFO_FALLBACK]], dtype=str)
         return BatchResult(
-            u=u, h=table.h, psi0=table.psi0, psi1=table.psi1, bc=table.drift + np.einsum("nmk,nk->nm", table.gain, u),
-            slack=slack, intervening=intervening, box_active=box_active, status=status,
-            solver_status=solver_status.astype(str), iterations=iterations, fallback=fallback.astype(str),
-            uncontrollable=uncontrollable,
+            u=out.u, h=out.h, psi0=out.psi0, psi1=out.psi1, bc=out.bc, slack=out.slack,
+            intervening=out.intervening, box_active=out.box_active,
+            status=out.info[:, kernel.INFO_STATUS].astype(np.int8), solver_status=solver_status,
+            iterations=out.info[:, kernel.INFO_ITERATIONS].copy(), fallback=fallback,
+            uncontrollable=out.uncontrollable, qp_failed=out.info[:, kernel.INFO_QP_FAILED].astype(bool),
         )  # fmt: skip
 
-    def _solve_state(self, table: BarrierTable, lo: Array, hi: Array, u_target: Array, finite_des: bool
-                     ) -> tuple[Array, Array, Array, int, str, int, str]:
-        """QP of one state (objective ||u - u_target||^2, u_target = u_des with non-finite entries
-        zeroed), with the fallback policy. Returns (u, slack, intervening, status code, solver
-        status, iterations, fallback name)."""
-        u0 = np.clip(u_target, lo, hi)
+    def _filter_proxsuite(self, x: Array, u_des: Array, out: _Outputs) -> str:
+        """One call with proxsuite (and the backup solver) as the QP solver, around the compiled
+        rows and QP; the same steps as `filter_kernel.filter_active_set`. Returns the solver status."""
         m = len(self.names)
-        slack = np.zeros(m)
-        intervening = np.zeros(m, dtype=bool)
-        problem = self.qp(table, lo, hi, u_target)
-        z, mult, solver_status, iters = self.solve(problem)
-        fallback = "" if finite_des else "non_finite_u_des"
-        if z is None:
-            self.counters.solver_failures += 1
-            fallback = self.options.fallback
-            log.debug("QP failed (%s); fallback %s", solver_status, fallback)
-            if fallback == "raise":
-                raise SolverError(f"ASIF QP failed with status {solver_status}")
-            if fallback == "soften":
-                soft = self.qp(table, lo, hi, u_target, soften=True)
-                z, mult, status2, it2 = self.solve(soft)
-                iters += it2
-                solver_status = f"{solver_status}+soften:{status2}"
-                if z is not None:
-                    problem = soft
+        drift, gain, gnorm, u_target = np.empty(m), np.empty((m, 3)), np.empty(m), np.empty(3)
+        info = out.info
+        info[:] = 0
+        info[kernel.INFO_SOLVER] = info[kernel.INFO_SOFT_SOLVER] = -1
+        out.slack[:] = 0.0
+        out.intervening[:] = False
+        code, finite_des = kernel.prepare(x, u_des, self._params, self._enabled, self.options.check_tolerance,
+                                          out.h, out.psi0, out.psi1, drift, gain, out.lo, out.hi, gnorm, u_target,
+                                          out.uncontrollable)
+        solver_status = ""
+        if code == kernel.PREP_INVALID:
+            out.u[:] = 0.0
+            info[kernel.INFO_STATUS] = kernel.CODE_FALLBACK
+            info[kernel.INFO_FALLBACK] = kernel.FB_INVALID
+            kernel.finish(drift, gain, out.u, out.lo, out.hi, u_target, out.bc, out.box_active)
+            out.h[:] = out.psi0[:] = out.psi1[:] = out.bc[:] = np.nan
+            return solver_status
+        out.u[:] = np.clip(u_target, out.lo, out.hi)
+        if code == kernel.PREP_QP:
+            problem = self._problem(*kernel.assemble(drift, gain, out.lo, out.hi, u_target, self._enabled, gnorm,
+                                                     self._slack_weight, False, self.options.soften_weight))
+            z, mult, solver_status, iters = self.solve(problem)
+            info[kernel.INFO_SOLVER] = 0 if z is not None else 1
+            info[kernel.INFO_ITERATIONS] = iters
+            fb = kernel.FB_NONE if finite_des else kernel.FB_NON_FINITE
             if z is None:
-                self.counters.fallbacks += 1
-                u = np.clip(np.zeros(3), lo, hi) if fallback == "hold" else u0
-                return u, slack, intervening, CODE_FALLBACK, solver_status, iters, fallback
-        if fallback:
-            self.counters.fallbacks += 1
+                info[kernel.INFO_QP_FAILED] = 1
+                fb = kernel.FB_POLICY
+                log.debug("QP failed (%s); fallback %s", solver_status, self.options.fallback)
+                if self._policy == kernel.POLICY_RAISE:
+                    info[kernel.INFO_RAISE] = 1
+                elif self._policy == kernel.POLICY_SOFTEN:
+                    problem = self._problem(*kernel.assemble(drift, gain, out.lo, out.hi, u_target, self._enabled,
+                                                             gnorm, self._slack_weight, True,
+                                                             self.options.soften_weight))
+                    z, mult, status2, it2 = self.solve(problem)
+                    info[kernel.INFO_SOFT_SOLVER] = 0 if z is not None else 1
+                    info[kernel.INFO_ITERATIONS] += it2
+                    solver_status = f"{solver_status}+soften:{status2}"
+                if z is None and self._policy == kernel.POLICY_HOLD:
+                    out.u[:] = np.clip(np.zeros(3), out.lo, out.hi)
+            if z is not None:
+                row_of = np.array([self.names.index(nm) for nm in problem.row_names[:-3]], dtype=np.int64)
+                slack_var = np.full(m, -1, dtype=np.int64)
+                for i, v in problem.slack_index.items():
+                    slack_var[i] = v
+                kernel.extract(z, mult, out.lo, out.hi, row_of, slack_var, problem.slack_scale, out.u, out.slack,
+                               out.intervening)
+            info[kernel.INFO_FALLBACK] = fb
+            info[kernel.INFO_STATUS] = kernel.CODE_FALLBACK if fb != kernel.FB_NONE else kernel.CODE_SOLVED
         else:
-            self.counters.solved += 1
-        u = np.clip(z[:3], lo, hi)
-        for r, nm in enumerate(problem.row_names[:-3]):
-            i = self.names.index(nm)
-            intervening[i] = abs(mult[r]) > ACTIVE_MULTIPLIER
-            if i in problem.slack_index:
-                slack[i] = problem.slack_scale[problem.slack_index[i]] * z[problem.slack_index[i]]
-        return u, slack, intervening, (CODE_FALLBACK if fallback else CODE_SOLVED), solver_status, iters, fallback
+            info[kernel.INFO_STATUS] = kernel.CODE_PASS
+        kernel.finish(drift, gain, out.u, out.lo, out.hi, u_target, out.bc, out.box_active)
+        return solver_status
+
+    def _fallback_text(self, code: int) -> str:
+        return ("", "non_finite_u_des", self.options.fallback, "invalid_state")[code]
+
+    def _count_one(self, info: list[int]) -> None:
+        """Add one call with info (N_INFO,) to the counters (`_count` for one call, on Python ints)."""
+        c = self.counters
+        status = info[kernel.INFO_STATUS]
+        c.calls += 1
+        if status == CODE_PASS:
+            c.fast_path += 1
+        elif status == CODE_SOLVED:
+            c.solved += 1
+        else:
+            c.fallbacks += 1
+        c.solver_failures += info[kernel.INFO_QP_FAILED]
+        c.invalid_states += info[kernel.INFO_FALLBACK] == kernel.FB_INVALID
+        name = STATUS_NAMES[status]
+        c.by_status[name] = c.by_status.get(name, 0) + 1
+
+    def _count(self, info: NDArray[np.int64]) -> None:
+        """Add calls with info rows (N, N_INFO) to the counters."""
+        c = self.counters
+        status = info[:, kernel.INFO_STATUS]
+        c.calls += len(info)
+        c.fast_path += int(np.count_nonzero(status == CODE_PASS))
+        c.solved += int(np.count_nonzero(status == CODE_SOLVED))
+        c.fallbacks += int(np.count_nonzero(status == CODE_FALLBACK))
+        c.solver_failures += int(np.count_nonzero(info[:, kernel.INFO_QP_FAILED]))
+        c.invalid_states += int(np.count_nonzero(info[:, kernel.INFO_FALLBACK] == kernel.FB_INVALID))
+        for code, name in enumerate(STATUS_NAMES):
+            k = int(np.count_nonzero(status == code))
+            if k:
+                c.by_status[name] = c.by_status.get(name, 0) + k
 
 
-__all__ = ["AsifFilter", "BatchResult", "FilterCounters", "FilterResult", "QpProblem", "STATUS_FALLBACK", "STATUS_PASS",
-           "STATUS_SOLVED"]
+@dataclass
+class _Outputs:
+    """Output arrays of one call (shapes (m,), (3,), ...) or of N calls (leading N axis)."""
+
+    u: Array
+    h: Array
+    psi0: Array
+    psi1: Array
+    bc: Array
+    slack: Array
+    intervening: NDArray[np.bool_]
+    box_active: NDArray[np.bool_]
+    uncontrollable: NDArray[np.bool_]
+    lo: Array
+    hi: Array
+    info: NDArray[np.int64]
+
+    @classmethod
+    def empty(cls, m: int, n: int | None = None) -> _Outputs:
+        lead: tuple[int, ...] = () if n is None else (n,)
+        return cls(np.empty((*lead, 3)), np.empty((*lead, m)), np.empty((*lead, m)), np.empty((*lead, m)),
+                   np.empty((*lead, m)), np.zeros((*lead, m)), np.zeros((*lead, m), dtype=np.bool_),
+                   np.zeros((*lead, 3), dtype=np.bool_), np.zeros((*lead, m), dtype=np.bool_), np.empty((*lead, 3)),
+                   np.empty((*lead, 3)), np.zeros((*lead, kernel.N_INFO), dtype=np.int64))
+
+    def row(self, k: int) -> _Outputs:
+        """Views of call k of a batch."""
+        return _Outputs(*(getattr(self, f.name)[k] for f in fields(self)))
+
+
+def compile_kernels(cfg: Config) -> float:
+    """Compile the filter's numba kernels, or load them from numba's on-disk cache (the first call
+    in a fresh installation compiles for ~20-40 s; later processes load in ~0.5 s). Nodes and the
+    launcher call this before their first real call so no message waits for a compiler.
+
+    Returns the seconds it took.
+    """
+    t0 = time.perf_counter()
+    x = np.zeros(STATE_SIZE)
+    x[3], x[10], x[11] = 1.0, 273.15, 5000.0
+    u = np.zeros(3)
+    f = AsifFilter(cfg.with_solver("active_set"))
+    f.filter(x, u)
+    f.filter_batch(x[None], u[None])
+    m = len(f.names)
+    out = _Outputs.empty(m)
+    drift, gain, gnorm, u_target = np.ones(m), np.ones((m, 3)), np.ones(m), np.zeros(3)
+    kernel.prepare(x, u, f._params, f._enabled, 1e-6, out.h, out.psi0, out.psi1, drift, gain, out.lo, out.hi, gnorm,
+                   u_target, out.uncontrollable)
+    C, lower, upper, z0, row_of, slack_var, scale, _n = kernel.assemble(
+        drift, gain, out.lo, out.hi, u_target, f._enabled, gnorm, f._slack_weight, False, 1.0)
+    z, mult, _c, _i = active_set.solve(C, lower, upper, z0, active_set.MAX_ACTIVE_SET_ITER)
+    active_set.rows_hold(C, lower, upper, z, 1e-6)
+    kernel.is_stationary(C, lower, upper, z, mult, -z0, 1e-6)
+    kernel.extract(z, mult, out.lo, out.hi, row_of, slack_var, scale, out.u, out.slack, out.intervening)
+    kernel.finish(drift, gain, out.u, out.lo, out.hi, u_target, out.bc, out.box_active)
+    return time.perf_counter() - t0
+
+
+ACTIVE_SET_STATUS: tuple[str, ...] = ("ACTIVE_SET_SOLVED", "ACTIVE_SET_INFEASIBLE", "ACTIVE_SET_MAX_ITER")
+"""Solver status names of the active-set solver, by its code."""
+
+
+def _active_set_status(code: int, check_failed: bool) -> str:
+    return ACTIVE_SET_STATUS[int(code)] + ("_CHECK_FAILED" if check_failed else "")
+
+
+def _kernel_status_text(info: NDArray[np.int64] | list[int]) -> str:
+    """Solver status of a compiled active-set call from its info vector."""
+    if info[kernel.INFO_SOLVER] < 0:
+        return ""
+    text = _active_set_status(info[kernel.INFO_SOLVER], bool(info[kernel.INFO_CHECK_FAILED]))
+    if info[kernel.INFO_SOFT_SOLVER] >= 0:
+        soft = _active_set_status(info[kernel.INFO_SOFT_SOLVER], bool(info[kernel.INFO_SOFT_CHECK_FAILED]))
+        text += "+soften:" + soft
+    return text
+
+
+__all__ = [
+    "AsifFilter", "BatchResult", "FilterCounters", "FilterResult", "QpProblem", "STATUS_FALLBACK", "STATUS_PASS",
+    "STATUS_SOLVED", "compile_kernels",
+]  # fmt: skip

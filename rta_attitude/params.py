@@ -232,7 +232,7 @@ class FilterOptions:
     pole_guard_rad: float = 1e-3
     soften_weight: float = 1e8
     backup_solver: str = "quadprog"
-    solver: str = "proxsuite"
+    solver: str = "active_set"
 
     def __post_init__(self) -> None:
         _choice("filter.solver", self.solver, SOLVERS)

@@ -38,6 +38,16 @@ def pytest_report_header(config: Any) -> str:
     return f"ROS_DOMAIN_ID={os.environ['ROS_DOMAIN_ID']} (localhost only)"
 
 
+@pytest.fixture(scope="session", autouse=True)
+def compiled_kernels() -> float:
+    """The filter's numba kernels, compiled (or loaded from numba's cache) once before any test, so
+    the node processes the tests start find them in the cache; returns the seconds it took."""
+    from rta_attitude import config
+    from rta_attitude.asif import compile_kernels
+
+    return compile_kernels(config.load())
+
+
 @pytest.fixture(scope="session")
 def paper_reference() -> dict[bool, Any]:
     """{rta: Trajectory} of `paper-example` run in process (ClosedLoop.run), RTA on and off."""

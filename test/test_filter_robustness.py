@@ -4,12 +4,13 @@ states and commands, and bounded work on infeasible and near-infeasible QPs."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from helpers import random_states
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from rta_attitude import config
+from rta_attitude import active_set, config
 from rta_attitude.asif import AsifFilter
 
 CFG = config.load()
@@ -71,19 +72,24 @@ def test_invalid_states_are_counted_fallbacks():
     assert f.filter(y, np.ones(3)).fallback == ""
 
 
-def test_solver_work_is_bounded_on_infeasible_and_near_infeasible_problems():
-    """Caps: proxsuite stops at max_iterations x max_inner_iterations; the exact backup solver
+@pytest.mark.parametrize("solver", ["active_set", "proxsuite"])
+def test_solver_work_is_bounded_on_infeasible_and_near_infeasible_problems(solver):
+    """Caps: the active-set method stops after MAX_ACTIVE_SET_ITER iterations in each of its
+    POLISH_ROUNDS; proxsuite at max_iterations x max_inner_iterations, then the exact backup solver
     terminates finitely; then the fallback answers. Every call ends with a status."""
-    f = AsifFilter(CFG)
+    f = AsifFilter(CFG.with_solver(solver))
     rng = np.random.default_rng(8)
     x = random_states(rng, 300, CFG)
     x[:, 4:7] *= 2.0  # many states far past the rate limit: infeasible or nearly so
     u = rng.uniform(-1, 1, (300, 3)) * 181.3
     b = f.filter_batch(x, u)
-    cap = CFG.filter.max_iterations * CFG.filter.max_inner_iterations
-    solves = np.array([s.count("PROXQP") for s in b.solver_status])
+    if solver == "proxsuite":
+        cap, tag = CFG.filter.max_iterations * CFG.filter.max_inner_iterations, "PROXQP"
+    else:
+        cap, tag = active_set.MAX_ACTIVE_SET_ITER * active_set.POLISH_ROUNDS, "ACTIVE_SET"
+    solves = np.array([s.count(tag) for s in b.solver_status])
     assert np.all(b.iterations <= cap * np.maximum(solves, 1)), b.iterations.max()
     assert (b.status == 2).sum() > 10 and (b.status == 1).sum() > 10  # both kinds are present
-    assert all(s.startswith("PROXQP") for s in b.solver_status[b.status > 0])
+    assert all(s.startswith(tag) for s in b.solver_status[b.status > 0])
     assert np.all(np.isfinite(b.u))
     assert f.counters.fallbacks == int((b.status == 2).sum())

@@ -11,7 +11,6 @@ import numpy as np
 import pytest
 
 from rta_attitude import batch, config, montecarlo, simulation
-from rta_attitude.asif import AsifFilter
 from rta_attitude.constraints import ConstraintSet
 from rta_attitude.params import CONSTRAINT_NAMES, BarrierGains, Config, Scenario
 from rta_attitude.state import ENERGY, OMEGA, PSI, TEMP, THETA_S, Q
@@ -30,10 +29,8 @@ def states(cfg: Config) -> np.ndarray:
 
 def _single_run(cfg: Config, x0: np.ndarray, duration_s: float, solver: str) -> simulation.Trajectory:
     """The single-run reference: ClosedLoop on one sampled state, no primary controller."""
-    loop = simulation.ClosedLoop(cfg, Scenario("mc", "", duration_s, x0, controller="none"))
-    if solver == "active-set":
-        loop.filter = batch.ActiveSetFilter(loop.cfg)
-    return loop.run()
+    c = cfg.with_solver("active_set" if solver == "active-set" else "proxsuite")
+    return simulation.ClosedLoop(c, Scenario("mc", "", duration_s, x0, controller="none")).run()
 
 
 # ----------------------------------------------------------------------------- sampling
@@ -94,20 +91,12 @@ def _with_margins(cfg: Config) -> Config:
 
 
 @pytest.mark.parametrize("preset", ["robust", "paper", "robust-with-margins"])
-def test_rows_and_box_equal_the_core_bit_for_bit(cfg: Config, states: np.ndarray, preset: str) -> None:
+def test_batch_safety_values_equal_the_core_bit_for_bit(cfg: Config, states: np.ndarray, preset: str) -> None:
     c = _with_margins(cfg.with_preset("robust")) if preset == "robust-with-margins" else cfg.with_preset(preset)
     x = _pole_states(states)
-    table = ConstraintSet.from_config(c).evaluate(x)
-    f = AsifFilter(c)
-    lo, hi, _ = f.box(x)
-    rows = batch._Rows(c)
-    X = np.ascontiguousarray(x.T)
-    h, drift, gain = rows.evaluate(X)
-    lo2, hi2 = rows.box(X, rows.context(X), f.u_max, f.robust)
-    for mine, core in ((h, table.h), (drift, table.drift), (gain, table.gain), (lo2, lo), (hi2, hi)):
-        np.testing.assert_array_equal(mine, core)
     sim = batch.BatchSimulator(c)
-    np.testing.assert_array_equal(sim.safety_values(X), ConstraintSet.from_config(c).safety_values(x))
+    np.testing.assert_array_equal(sim.safety_values(np.ascontiguousarray(x.T)),
+                                  ConstraintSet.from_config(c).safety_values(x))
 
 
 def test_plant_equals_integrate_bit_for_bit(cfg: Config, states: np.ndarray) -> None:
@@ -121,67 +110,6 @@ def test_plant_equals_integrate_bit_for_bit(cfg: Config, states: np.ndarray) -> 
     np.testing.assert_array_equal(Y1, x_next.T[[0, 1, 2, 3, 4, 5, 6, TEMP, ENERGY]])
     np.testing.assert_array_equal(psi1, x_next.T[PSI])
     np.testing.assert_array_equal(th1, x_next.T[THETA_S])
-
-
-# ----------------------------------------------------------------------------- the active-set QP solver
-def _random_problems(k: int, seed: int) -> tuple[np.ndarray, ...]:
-    """Projection QPs shaped like the filter's: 10 unit rows (one with a 1e-6 slack column) + box."""
-    rng = np.random.default_rng(seed)
-    C = np.zeros((k, 13, 4))
-    C[:, :10, :3] = rng.normal(size=(k, 10, 3))
-    C[:, 1, 3] = 1e-6
-    C[:, :10] /= np.linalg.norm(C[:, :10], axis=-1, keepdims=True)
-    C[:, 10:, :3] = np.eye(3)
-    lower = np.full((k, 13), -1e20)
-    upper = np.full((k, 13), 1e20)
-    lower[:, :10] = rng.normal(size=(k, 10)) * 0.4 - 0.5
-    lower[:, 10:] = -rng.uniform(0.3, 3.0, (k, 3))
-    upper[:, 10:] = rng.uniform(0.3, 3.0, (k, 3))
-    z0 = np.zeros((k, 4))
-    z0[:, :3] = rng.normal(size=(k, 3))
-    return C, lower, upper, z0
-
-
-def test_active_set_solver_matches_quadprog_and_is_batch_invariant() -> None:
-    quadprog = pytest.importorskip("quadprog")
-    C, lower, upper, z0 = _random_problems(400, 2)
-    z, mult, code, _ = batch.solve_projection_qp(C, lower, upper, z0)
-    checked = 0
-    for k in range(len(z)):
-        rows, b = [], []
-        for r in range(13):
-            if lower[k, r] > -1e19:
-                rows.append(C[k, r])
-                b.append(lower[k, r])
-            if upper[k, r] < 1e19:
-                rows.append(-C[k, r])
-                b.append(-upper[k, r])
-        try:
-            ref = quadprog.solve_qp(np.eye(4), z0[k], np.array(rows).T, np.array(b))[0]
-        except ValueError:  # quadprog: infeasible
-            assert code[k] == 1
-            continue
-        assert code[k] == 0
-        np.testing.assert_allclose(z[k], ref, rtol=1e-9, atol=1e-9)
-        checked += 1
-        # KKT: the multipliers reproduce the step, with proxsuite's signs
-        np.testing.assert_allclose(z[k] - z0[k], -C[k].T @ mult[k], atol=1e-8 * (1 + np.abs(z[k]).max()))
-    assert checked > 300
-    for k in (0, 7, 99):
-        z1, _, c1, _ = batch.solve_projection_qp(C[k:k + 1], lower[k:k + 1], upper[k:k + 1], z0[k:k + 1])
-        np.testing.assert_array_equal(z1[0], z[k])
-        assert c1[0] == code[k]
-
-
-def test_active_set_solver_reports_infeasible() -> None:
-    C = np.zeros((1, 5, 3))
-    C[0, 0] = (1.0, 0.0, 0.0)
-    C[0, 1] = (-1.0, 0.0, 0.0)
-    C[0, 2:] = np.eye(3)
-    lower = np.array([[1.0, 1.0, -5, -5, -5]])
-    upper = np.array([[1e20, 1e20, 5, 5, 5]])
-    _, _, code, _ = batch.solve_projection_qp(C, lower, upper, np.zeros((1, 3)))
-    assert code[0] == 1
 
 
 # ----------------------------------------------------------------------------- whole runs: batch == single run
@@ -220,11 +148,11 @@ def test_full_length_run_equals_single_run(cfg: Config, states: np.ndarray) -> N
 
 
 def test_proxsuite_batch_equals_simulate(cfg: Config, states: np.ndarray) -> None:
-    """solver='proxsuite' runs the core filter_batch: identical with the unmodified single run."""
+    """solver='proxsuite' runs filter_batch with proxsuite: identical with simulate on proxsuite."""
     x0 = states[40:43]
     out = batch.BatchSimulator(cfg, "proxsuite").run(x0, 60.0, record=True)
     for k in range(3):
-        traj = simulation.simulate(cfg, Scenario("mc", "", 60.0, x0[k], controller="none"))
+        traj = simulation.simulate(cfg.with_solver("proxsuite"), Scenario("mc", "", 60.0, x0[k], controller="none"))
         assert np.max(np.abs(traj.x - out.trajectory[k])) <= 1e-9
 
 

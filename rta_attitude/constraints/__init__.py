@@ -10,6 +10,11 @@
 | psi_x/y/z       | psi_max^2 - psi_i^2           | CBF (+ ZOH bound in the robust preset)    | wheel_speed.py    |
 
 Actuator and angular-acceleration limits are the box U of the filter (Config.u_max_rad_s2).
+
+These modules are the definition (vectorised over state batches, checked against finite
+differences). The filter evaluates their compiled one-state port, `rta_attitude/barrier_rows.py`
+(same formulas, tested equal to 1e-13 at random states and at the poles): a change to a barrier
+here must be made there too.
 """
 
 from __future__ import annotations

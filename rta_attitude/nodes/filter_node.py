@@ -39,7 +39,7 @@ from typing import Any
 import numpy as np
 
 from .. import model
-from ..asif import STATUS_FALLBACK, AsifFilter, FilterResult
+from ..asif import STATUS_FALLBACK, AsifFilter, FilterResult, compile_kernels
 from ..errors import MessageError
 from ..state import STATE_SIZE
 from . import convert, topics
@@ -65,6 +65,8 @@ class FilterNode(RtaNode):
         super().__init__(topics.FILTER, **kwargs)
         self.counts.update({k: 0 for k in topics.INPUT_COUNTERS})
         self.filter = AsifFilter(self.cfg)
+        # compile (or load from numba's cache) before subscribing, so no message waits on a compiler
+        self.get_logger().info(f"filter kernels ready in {compile_kernels(self.cfg):.2f} s")
         self.slacked = tuple(n for n, s in zip(self.filter.names, self.filter.slacked) if s)
         self.states: dict[int, tuple[np.ndarray, float]] = {}  # stamp -> (state, wall time of arrival)
         self.desired: dict[int, np.ndarray] = {}

@@ -1,0 +1,78 @@
+"""The compiled rows and box of one state (`barrier_rows`) against the numpy reference
+(`constraints`, `AsifFilter.box`; checked against finite differences in test_constraints)."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+from helpers import random_states
+
+from rta_attitude import barrier_rows, config
+from rta_attitude.asif import AsifFilter
+from rta_attitude.constraints import ConstraintSet
+from rta_attitude.params import Config
+from rta_attitude.state import THETA_S, Q
+
+CFG = config.load()
+
+
+def _pole_states(rng: np.random.Generator, cfg: Config) -> np.ndarray:
+    """Random states plus attitudes at and next to the arccos poles of the angle constraints."""
+    x = random_states(rng, 1500, cfg)
+    p = x[:6].copy()
+    p[0, Q], p[0, THETA_S] = (0.0, 0.0, 0.0, 1.0), math.pi  # sensor anti-sun
+    p[1, Q], p[1, THETA_S] = (0.0, 0.0, 0.0, 1.0), 0.0  # sensor on the sun
+    p[2, Q] = (0.0, 0.0, math.sqrt(0.5), math.sqrt(0.5))  # antenna (+j_B) on the Earth (-x Hill)
+    p[3, Q], p[3, THETA_S] = (math.sqrt(0.5), 0.0, 0.0, math.sqrt(0.5)), 0.5 * math.pi  # panel on the sun
+    p[4, Q], p[4, THETA_S] = (0.0, 0.0, 0.0, 1.0), math.pi + 0.9e-3  # inside the pole guard
+    p[5, Q], p[5, THETA_S] = (0.0, 0.0, 0.0, 1.0), math.pi + 1.1e-3  # just outside it
+    return np.concatenate([x, p])
+
+
+def _with_margins(cfg: Config) -> Config:
+    margins = {"exclusion_zone": 1e-3, "communication": 2e-3, "temperature": 0.1, "battery": 20.0}
+    barriers = {k: dataclasses.replace(v, margin=margins[k]) if k in margins else v for k, v in cfg.barriers.items()}
+    return dataclasses.replace(cfg, barriers=barriers)
+
+
+@pytest.mark.parametrize("variant", ["robust", "paper", "robust-with-margins", "rates-disabled"])
+def test_compiled_rows_and_box_equal_the_reference(variant: str) -> None:
+    if variant == "robust-with-margins":
+        cfg = _with_margins(CFG.with_preset("robust"))
+    elif variant == "rates-disabled":  # the ZOH bounds leave out omega: only psi shapes the box
+        cfg = dataclasses.replace(CFG, barriers={**CFG.barriers,
+                                                 "omega": dataclasses.replace(CFG.barriers["omega"], enabled=False)})
+    else:
+        cfg = CFG.with_preset(variant)
+    x = _pole_states(np.random.default_rng(3), cfg)
+    ref = ConstraintSet.from_config(cfg).evaluate(x)
+    lo, hi, _ = AsifFilter(cfg).box(x)
+    out = barrier_rows.evaluate(x, cfg)
+    for key, r in (("h", ref.h), ("psi0", ref.psi0), ("psi1", ref.psi1), ("drift", ref.drift), ("gain", ref.gain),
+                   ("lo", lo), ("hi", hi)):
+        # the same formulas; summation order may differ in the last bit
+        np.testing.assert_allclose(out[key], r, rtol=1e-13, atol=1e-13, err_msg=key)
+    # the pole guard: inside it the exclusion-zone row has no gain on u; just outside it has
+    assert np.all(out["gain"][-2, 0] == 0.0) and np.any(out["gain"][-1, 0] != 0.0)
+    # one state at a time gives the batch's numbers exactly
+    one = barrier_rows.evaluate(x[7], cfg)
+    for key in one:
+        np.testing.assert_array_equal(one[key], out[key][7])
+
+
+def test_zoh_box_hand_calculation() -> None:
+    """omega_y at 0.9 omega_max, psi_y = 0: the robust box's upper bound on u_y keeps omega_y(t + dt)
+    at (1 - margin) omega_max, by hand from omega_y(t + dt) = omega_y + (f_y + G_y u_y) dt."""
+    x = CFG.scenario("paper-example").x0.copy()
+    x[4:7] = (0.0, 0.9 * CFG.limits.omega_max_rad_s, 0.0)  # no gyroscopic drift with omega_x = omega_z = 0
+    x[7:10] = 0.0
+    out = barrier_rows.evaluate(x, CFG.with_preset("robust"))
+    G = CFG.spacecraft.control_gain[1]
+    dt = CFG.filter.sample_time_s
+    expect = ((1 - CFG.filter.zoh_margin) * CFG.limits.omega_max_rad_s - x[5]) / (G * dt)
+    assert out["hi"][1] == pytest.approx(min(expect, CFG.u_max_rad_s2[1]), rel=1e-12)
+    paper = barrier_rows.evaluate(x, CFG.with_preset("paper"))
+    np.testing.assert_array_equal(paper["hi"], CFG.u_max_rad_s2)
