@@ -17,7 +17,7 @@ setup(
         ("share/" + package_name + "/launch", glob("launch/*.launch.py")),
     ],
     package_data={package_name: ["py.typed"]},
-    install_requires=["setuptools", "numpy", "pyyaml"],
+    install_requires=["setuptools", "numpy", "numba", "pyyaml"],
     zip_safe=True,
     maintainer="rta_attitude developers",
     maintainer_email="rta-attitude@example.com",

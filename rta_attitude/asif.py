@@ -206,6 +206,7 @@ class AsifFilter:
         self._policy = kernel.POLICIES.index(cfg.filter.fallback)
         self._workspaces: dict[tuple[int, int], proxsuite.proxqp.dense.QP] = {}
         self._scratch = (np.empty(3), np.empty(3), np.zeros(kernel.N_INFO, dtype=np.int64))
+        compile_kernels(cfg)
 
     # ---------------------------------------------------------------- bounds and rows (reference)
     def box(self, x: Array, ctx: object | None = None) -> tuple[Array, Array, Array]:
@@ -520,13 +521,22 @@ class _Outputs:
         return _Outputs(*(getattr(self, f.name)[k] for f in fields(self)))
 
 
+_kernels_ready = False
+"""compile_kernels has run in this process."""
+
+
 def compile_kernels(cfg: Config) -> float:
     """Compile the filter's numba kernels, or load them from numba's on-disk cache (the first call
-    in a fresh installation compiles for ~20-40 s; later processes load in ~0.5 s). Nodes and the
-    launcher call this before their first real call so no message waits for a compiler.
+    in a fresh installation compiles for ~20-40 s; later processes load in ~0.5-1 s), once per
+    process. `AsifFilter()` calls it, so no filter call (and no message of a node) waits for a
+    compiler and the first call's time is like any other's.
 
-    Returns the seconds it took.
+    Returns the seconds it took (0 once done in this process).
     """
+    global _kernels_ready
+    if _kernels_ready:
+        return 0.0
+    _kernels_ready = True
     t0 = time.perf_counter()
     x = np.zeros(STATE_SIZE)
     x[3], x[10], x[11] = 1.0, 273.15, 5000.0
