@@ -15,7 +15,7 @@ import hashlib
 import os
 from pathlib import Path
 
-KERNEL_MODULES: tuple[str, ...] = ("active_set", "barrier_rows", "filter_kernel")
+KERNEL_MODULES: tuple[str, ...] = ("active_set", "barrier_rows", "filter_kernel", "plant_kernel")
 """Modules with numba kernels that call each other."""
 STAMP_NAME = "rta_kernels.sha256"
 

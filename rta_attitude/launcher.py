@@ -442,12 +442,13 @@ def run(args: argparse.Namespace) -> int:
     elif not args.verbose:
         log_dir = Path(tempfile.mkdtemp(prefix="rta_launch_logs_"))
     mode = f"realtime x{args.realtime:g}" if args.realtime is not None else "lockstep"
-    if not args.no_rta:
-        from .asif import compile_kernels
+    from .asif import compile_kernels
+    from .plant_kernel import compile_kernel
 
-        # the filter node would compile (or load) numba's kernels at start-up; do it once here so a
-        # fresh installation's compile happens before any node waits on another
-        print(f"filter kernels ready in {compile_kernels(p.cfg):.1f} s", flush=True)
+    # the plant and filter nodes compile (or load) numba's kernels at start-up; do it once here so a
+    # fresh installation's compile happens before any node waits on another
+    ready_s = compile_kernel(p.cfg) + (0.0 if args.no_rta else compile_kernels(p.cfg))
+    print(f"compiled kernels ready in {ready_s:.1f} s", flush=True)
     print(f"launch {p.scenario_key}: {p.steps} steps, {mode}, rta={'off' if args.no_rta else 'on'}, "
           f"namespace {args.namespace}, domain {p.env['ROS_DOMAIN_ID']} "
           f"({p.env['ROS_AUTOMATIC_DISCOVERY_RANGE'].lower()}), bag {p.bag}", flush=True)

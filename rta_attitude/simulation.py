@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from . import model
+from . import model, plant_kernel
 from .asif import AsifFilter, FilterResult
 from .constraints import ConstraintSet
 from .controller import pd_command, zero_command
@@ -44,14 +44,37 @@ def saturate(u: Array, cfg: Config) -> Array:
 
 
 def integrate(x: Array, u: Array, dt_s: float, cfg: Config, substeps: int | None = None) -> tuple[Array, Array]:
-    """Hold u over dt_s. Returns (x at t + dt (..., 19), the substep states (substeps, ..., 19))."""
+    """Hold u over dt_s. Returns (x at t + dt (..., 19), the substep states (substeps, ..., 19)).
+
+    Each state runs through the compiled `plant_kernel.integrate_hold`, which performs the
+    operations of `rk4_step` (and `model.state_derivative`) in the same order: the same numbers,
+    ~100x faster on one state.
+    """
     n = substeps or cfg.substeps
     u = saturate(np.asarray(u, dtype=float), cfg)
-    states = []
-    for _ in range(n):
-        x = rk4_step(x, u, dt_s / n, cfg)
-        states.append(x)
-    return x, np.stack(states)
+    x = np.asarray(x, dtype=float)
+    lead = x.shape[:-1]
+    X = np.ascontiguousarray(x.reshape(-1, x.shape[-1]))
+    U = np.ascontiguousarray(np.broadcast_to(u, (*lead, 3)).reshape(-1, 3))
+    K = _plant_parameters(cfg)
+    out = np.empty((X.shape[0], n, X.shape[1]))
+    for k in range(X.shape[0]):
+        plant_kernel.integrate_hold(X[k], U[k], float(dt_s), n, K, out[k])
+    subs = np.moveaxis(out, 1, 0).reshape((n, *lead, x.shape[-1]))
+    return subs[-1].copy(), subs
+
+
+_PLANT_PARAMETERS: dict[int, tuple[Config, Array]] = {}
+"""plant_kernel parameter vectors by id(cfg) (the Config is kept, so its id stays its own)."""
+
+
+def _plant_parameters(cfg: Config) -> Array:
+    hit = _PLANT_PARAMETERS.get(id(cfg))
+    if hit is None or hit[0] is not cfg:
+        if len(_PLANT_PARAMETERS) > 64:
+            _PLANT_PARAMETERS.clear()
+        hit = _PLANT_PARAMETERS[id(cfg)] = (cfg, plant_kernel.plant_parameters(cfg))
+    return hit[1]
 
 
 def substep_minima(h_start: Array, h_substeps: Array, t_s: Array, dt_s: Array) -> tuple[Array, Array]:

@@ -40,12 +40,13 @@ def pytest_report_header(config: Any) -> str:
 
 @pytest.fixture(scope="session", autouse=True)
 def compiled_kernels() -> float:
-    """The filter's numba kernels, compiled (or loaded from numba's cache) once before any test, so
+    """The filter's and the plant's numba kernels, compiled (or loaded from numba's cache) once before any test, so
     the node processes the tests start find them in the cache; returns the seconds it took."""
-    from rta_attitude import config
+    from rta_attitude import config, plant_kernel
     from rta_attitude.asif import compile_kernels
 
-    return compile_kernels(config.load())
+    cfg = config.load()
+    return compile_kernels(cfg) + plant_kernel.compile_kernel(cfg)
 
 
 @pytest.fixture(scope="session")

@@ -38,7 +38,7 @@ from typing import Any
 
 import numpy as np
 
-from .. import model, simulation
+from .. import model, plant_kernel, simulation
 from ..errors import MessageError
 from . import convert, topics
 from .spin import RtaNode, run
@@ -66,6 +66,8 @@ class PlantNode(RtaNode):
         self.u_actuator = self.cfg.limits.wheel_accel_max_rad_s2  # where the wheels saturate
         self.x = self.scenario.x0.copy()
         self.k = 0
+        # compile (or load from numba's cache) the integrator before the first step needs it
+        self.get_logger().info(f"plant integrator ready in {plant_kernel.compile_kernel(self.cfg):.2f} s")
         self.held_tau = np.zeros(3)
         self.misses_in_a_row = 0
         self.last_command_ns = -1
