@@ -229,6 +229,9 @@ def run_local(cfg: Config, x0: Array, duration_s: float, workers: int, solver: s
         parts = [run_chunk(t, tick_for(t.x0.shape[0])) for t in tasks]
         bar.close()
         return _merge(parts)
+    from .asif import compile_kernels
+
+    compile_kernels(cfg)  # once here, not in every worker (forked workers inherit the compiled code)
     ctx = mp.get_context("fork" if sys.platform.startswith("linux") else "spawn")
     counter = ctx.Value("q", 0)
     with ctx.Pool(processes=min(workers, len(tasks)), initializer=_init_worker, initargs=(counter,)) as pool:
