@@ -183,8 +183,8 @@ def solve_with_quadprog(problem: QpProblem) -> tuple[Array, Array, bool]:
 class AsifFilter:
     """The ASIF safety filter of one configuration; call `filter(x, u_des)`.
 
-    The per-call work runs compiled (`filter_kernel`, `barrier_rows`); `evaluate`, `box` and
-    `qp` expose the same rows, box and QP for inspection and tests. Not thread-safe (keeps its
+    The per-call work runs compiled (`filter_kernel`, `barrier_rows`); `evaluate` and `box` give
+    the same rows and box from the numpy reference (`constraints`), for inspection and tests. Not thread-safe (keeps its
     proxsuite workspaces).
     """
 
@@ -237,20 +237,6 @@ class AsifFilter:
         lo, hi, bad = self.box(x, ctx)
         return table, lo, hi, bad
 
-    def qp(self, table: BarrierTable, lo: Array, hi: Array, u_des: Array, soften: bool = False) -> QpProblem:
-        """The QP of one state (table entries of shape (m,), lo/hi/u_des (3,)), as the filter
-        builds it (`filter_kernel.assemble`).
-
-        Rows of disabled constraints, and rows that do not depend on u, are left out.
-        With soften=True every row gets a slack (weight: its own p, or options.soften_weight).
-        """
-        drift = np.ascontiguousarray(table.drift, dtype=float)
-        gain = np.ascontiguousarray(table.gain, dtype=float)
-        gnorm = np.sqrt(np.sum(gain * gain, axis=-1))
-        return self._problem(*kernel.assemble(drift, gain, np.asarray(lo, dtype=float), np.asarray(hi, dtype=float),
-                                              np.asarray(u_des, dtype=float), self._enabled, gnorm,
-                                              self._slack_weight, soften, self.options.soften_weight))
-
     def _problem(self, C: Array, lower: Array, upper: Array, z0: Array, row_of: NDArray[np.int64],
                  slack_var: NDArray[np.int64], scale: Array, norms: Array) -> QpProblem:
         n = C.shape[1]
@@ -275,22 +261,15 @@ class AsifFilter:
             self._workspaces[key] = qp
         return self._workspaces[key]
 
-    def solve(self, problem: QpProblem) -> tuple[Array | None, Array, str, int]:
-        """Solve with the configured solver; with proxsuite, also (if it failed or its answer does not
-        meet the rows or the KKT conditions) with the backup solver; verify. Returns (z or None if
-        unusable, row multipliers, status, iterations).
+    def solve_proxsuite(self, problem: QpProblem) -> tuple[Array | None, Array, str, int]:
+        """Solve with proxsuite, then (if it failed or its answer does not meet the rows or the KKT
+        conditions) with the backup solver; verify. Returns (z or None if unusable, row
+        multipliers, status, iterations). (The active-set solver runs inside `filter_kernel`.)
 
         Multipliers follow proxsuite's sign convention: > 0 at an active upper bound, < 0 at an
         active lower bound, 0 for inactive rows.
         """
         tol = self.options.check_tolerance
-        if self.options.solver == "active_set":
-            z, mult, code, iters = active_set.solve(problem.C, problem.lower, problem.upper, -problem.g,
-                                                    active_set.MAX_ACTIVE_SET_ITER)
-            ok = code == active_set.CODE_SOLVED and active_set.rows_hold(problem.C, problem.lower, problem.upper, z,
-                                                                         tol)
-            status = _active_set_status(code, code == active_set.CODE_SOLVED and not ok)
-            return (z if ok else None), mult, status, int(iters)
         n, n_in = problem.C.shape[1], problem.C.shape[0]
         qp = self._workspace(n, n_in)
         qp.init(problem.H, problem.g, None, None, problem.C, problem.lower, problem.upper)
@@ -422,7 +401,7 @@ class AsifFilter:
         if code == kernel.PREP_QP:
             problem = self._problem(*kernel.assemble(drift, gain, out.lo, out.hi, u_target, self._enabled, gnorm,
                                                      self._slack_weight, False, self.options.soften_weight))
-            z, mult, solver_status, iters = self.solve(problem)
+            z, mult, solver_status, iters = self.solve_proxsuite(problem)
             info[kernel.INFO_SOLVER] = 0 if z is not None else 1
             info[kernel.INFO_ITERATIONS] = iters
             fb = kernel.FB_NONE if finite_des else kernel.FB_NON_FINITE
@@ -436,7 +415,7 @@ class AsifFilter:
                     problem = self._problem(*kernel.assemble(drift, gain, out.lo, out.hi, u_target, self._enabled,
                                                              gnorm, self._slack_weight, True,
                                                              self.options.soften_weight))
-                    z, mult, status2, it2 = self.solve(problem)
+                    z, mult, status2, it2 = self.solve_proxsuite(problem)
                     info[kernel.INFO_SOFT_SOLVER] = 0 if z is not None else 1
                     info[kernel.INFO_ITERATIONS] += it2
                     solver_status = f"{solver_status}+soften:{status2}"
@@ -551,7 +530,7 @@ def compile_kernels(cfg: Config) -> float:
                    u_target, out.uncontrollable)
     C, lower, upper, z0, row_of, slack_var, scale, _n = kernel.assemble(
         drift, gain, out.lo, out.hi, u_target, f._enabled, gnorm, f._slack_weight, False, 1.0)
-    z, mult, _c, _i = active_set.solve(C, lower, upper, z0, active_set.MAX_ACTIVE_SET_ITER)
+    z, mult = z0.copy(), np.zeros(len(lower))  # any point: this only compiles the proxsuite path's helpers
     active_set.rows_hold(C, lower, upper, z, 1e-6)
     kernel.is_stationary(C, lower, upper, z, mult, -z0, 1e-6)
     kernel.extract(z, mult, out.lo, out.hi, row_of, slack_var, scale, out.u, out.slack, out.intervening)

@@ -39,7 +39,7 @@ _EZ, _COMM, _TEMP, _BATT = 0, 1, 2, 3
 """Row indices in CONSTRAINT_NAMES order (omega_x/y/z 4..6, psi_x/y/z 7..9)."""
 
 
-# ----------------------------------------------------------------------------- constraint rows (SoA)
+# ----------------------------------------------------------------------------- angles of many states (SoA)
 _Vec = tuple["Array | None", "Array | None", "Array | None"]
 """A 3-vector of (N,) arrays; None is an exact zero (skipped in sums, as x + 0 == x)."""
 
@@ -54,10 +54,6 @@ def _sum(*terms: Array | None) -> Array | None:
 
 def _mul(a: Array | float | None, b: Array | None) -> Array | None:
     return None if a is None or b is None else a * b
-
-
-def _neg(a: Array | None) -> Array | None:
-    return None if a is None else -a
 
 
 def _dot(a: _Vec, b: _Vec) -> Array | None:

@@ -71,26 +71,16 @@ class ControllerNode(RtaNode):
     def _on_state(self, msg: Any) -> None:
         if self.stopping:
             return
-        try:
-            t_ns = convert.stamp_ns(msg.header.stamp)
-        except MessageError as exc:
-            self.faults.fault("state_rejected", f"{exc}; dropped")
-            return
-        if not self.admit_state_stamp(t_ns, self.order):
+        t_ns = self.message_stamp(msg, "state_rejected")
+        if t_ns is None or not self.admit_state_stamp(t_ns, self.order):
             return
         try:
-            _, x = convert.state_from_msg(msg)
-            x, renormalised = convert.unit_attitude(x, self.knobs["quaternion_tolerance"])
+            x = self.unit_state(msg, t_ns)
         except MessageError as exc:
             self.faults.fault("state_rejected", f"{exc}; answered with zero torque")
             self.out.publish(convert.torque_msg(np.zeros(3), t_ns))
             return
         self.faults.clear("state_rejected")
-        if renormalised:
-            self.faults.fault("state_renormalised", f"state quaternion of t = {t_ns / convert.NS_PER_S:g} s "
-                              "renormalised")
-        else:
-            self.faults.clear("state_renormalised")
         u_des = pd_command(x, self.reference(t_ns), self.cfg) if self.pd else zero_command(x)
         self.out.publish(convert.torque_msg(model.wheel_accel_to_torque(u_des, self.cfg), t_ns))
 

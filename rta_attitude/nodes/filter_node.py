@@ -93,34 +93,19 @@ class FilterNode(RtaNode):
             self.get_logger().info("rta off: passing torque_des through to torque_cmd")
 
     # ------------------------------------------------------------------ inputs
-    def _stamp(self, msg: Any, kind: str) -> int | None:
-        try:
-            return convert.stamp_ns(msg.header.stamp)
-        except MessageError as exc:
-            self.faults.fault(kind, f"{exc}; dropped")
-            return None
-
     def _on_state(self, msg: Any) -> None:
         if self.stopping:
             return
-        t_ns = self._stamp(msg, "state_rejected")
-        if t_ns is None:
-            return
-        if not self.admit_state_stamp(t_ns, self.state_order):
+        t_ns = self.message_stamp(msg, "state_rejected")
+        if t_ns is None or not self.admit_state_stamp(t_ns, self.state_order):
             return
         try:
-            _, x = convert.state_from_msg(msg)
-            x, renormalised = convert.unit_attitude(x, self.knobs["quaternion_tolerance"])
+            x = self.unit_state(msg, t_ns)
         except MessageError as exc:
             self.faults.fault("state_rejected", f"{exc}; answered as an invalid state (u = 0)")
             x = np.full(STATE_SIZE, np.nan)  # the core's invalid-state fallback answers it
         else:
             self.faults.clear("state_rejected")
-            if renormalised:
-                self.faults.fault("state_renormalised", f"state quaternion of t = {t_ns / convert.NS_PER_S:g} s "
-                                  "renormalised")
-            else:
-                self.faults.clear("state_renormalised")
         self.states[t_ns] = (x, self.wall_now_s())
         if t_ns in self.desired:
             self._filter(t_ns, self.states.pop(t_ns)[0], self.desired.pop(t_ns), SOURCE_DESIRED)
@@ -131,7 +116,7 @@ class FilterNode(RtaNode):
     def _on_desired(self, msg: Any) -> None:
         if self.stopping:
             return
-        t_ns = self._stamp(msg, "torque_des_rejected")
+        t_ns = self.message_stamp(msg, "torque_des_rejected")
         if t_ns is None:
             return
         order = self.desired_order.check(t_ns)

@@ -28,6 +28,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import rclpy
 from rclpy.clock import Clock, ClockType
 from rclpy.context import Context
@@ -39,7 +40,7 @@ from rclpy.signals import SignalHandlerOptions
 from rclpy.task import Future
 from rclpy.timer import Timer
 
-from ..errors import ConfigError, RtaError
+from ..errors import ConfigError, MessageError, RtaError
 from . import convert, parameters, topics
 from .faults import FaultLog, StampOrder
 
@@ -102,6 +103,30 @@ class RtaNode(Node):
 
     def on_fault_change(self, kind: str, active: bool) -> None:
         """A fault episode of `kind` started (active) or ended; the plant republishes run_status."""
+
+    def message_stamp(self, msg: Any, kind: str) -> int | None:
+        """The header stamp of msg in ns, or None (fault `kind` raised, message dropped) if unusable."""
+        try:
+            return convert.stamp_ns(msg.header.stamp)
+        except MessageError as exc:
+            self.faults.fault(kind, f"{exc}; dropped")
+            return None
+
+    def unit_state(self, msg: Any, t_ns: int) -> np.ndarray:
+        """The state (19,) of a state message, its quaternion renormalised within
+        `quaternion_tolerance` (fault `state_renormalised` raised or cleared).
+
+        Raises:
+            MessageError: the message holds no usable state.
+        """
+        _, x = convert.state_from_msg(msg)
+        x, renormalised = convert.unit_attitude(x, self.knobs["quaternion_tolerance"])
+        if renormalised:
+            self.faults.fault("state_renormalised", f"state quaternion of t = {t_ns / convert.NS_PER_S:g} s "
+                              "renormalised")
+        else:
+            self.faults.clear("state_renormalised")
+        return x
 
     def admit_state_stamp(self, t_ns: int, order: StampOrder) -> bool:
         """Screen a state's stamp: duplicates, out-of-order stamps and (on /clock) states older than
