@@ -51,7 +51,8 @@ from numpy.typing import NDArray
 
 from . import bag as bagio
 from . import model
-from .errors import BagError, ConfigError, RtaError
+from .errors import BagError, ConfigError
+from .files import atomic, output_dir, write_text
 from .nodes import topics
 from .params import CONSTRAINT_NAMES, Config
 from .state import AXES, STATE_NAMES, STATE_SIZE
@@ -718,12 +719,13 @@ def _label(summary: Mapping[str, Any]) -> str:
 
 def write_timeseries(run: BagRun, path: Path) -> Path:
     """Save the rebuilt series as a compressed NPZ with named columns (as `simulate`'s timeseries.npz)."""
-    np.savez_compressed(
-        path, t_s=run.t_s, x=run.x, state_names=np.array(STATE_NAMES), u_des=run.u_des, u=run.u,
-        omega_dot=run.omega_dot, constraint_names=np.array(run.names), h=run.h, h_substep_min=run.h_substep_min,
-        slack=run.slack, intervening=run.intervening, box_active=run.box_active, status=run.status,
-        fallback=run.fallback, solve_time_s=run.solve_time_s,
-    )  # fmt: skip
+    with atomic(path) as tmp:
+        np.savez_compressed(
+            tmp, t_s=run.t_s, x=run.x, state_names=np.array(STATE_NAMES), u_des=run.u_des, u=run.u,
+            omega_dot=run.omega_dot, constraint_names=np.array(run.names), h=run.h, h_substep_min=run.h_substep_min,
+            slack=run.slack, intervening=run.intervening, box_active=run.box_active, status=run.status,
+            fallback=run.fallback, solve_time_s=run.solve_time_s,
+        )  # fmt: skip
     return path
 
 
@@ -752,7 +754,7 @@ def run(args: argparse.Namespace) -> int:
     for p in [args.bag, *([args.compare] if args.compare is not None else [])]:
         resolve_bag_path(p)  # check inputs first
     cfg = config_module.load(args.config)
-    out: Path = args.out
+    out = output_dir(args.out)
     t0 = time.perf_counter()
     run_a = load_run(args.bag, cfg, args.namespace, args.scenario)
     summary_a = summarize_run(run_a, cfg)
@@ -765,19 +767,15 @@ def run(args: argparse.Namespace) -> int:
         if run_b.label == run_a.label:  # same kind of run: tell them apart by file
             runs = [(f"{r.label} [{r.path.stem}]", r) for _, r in runs]
     wall = time.perf_counter() - t0
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise RtaError(f"--out {out}: cannot create ({exc.strerror})") from None
-    (out / "summary.json").write_text(json.dumps(summary_a, indent=2) + "\n")
+    write_text(out / "summary.json", json.dumps(summary_a, indent=2) + "\n")
     write_timeseries(run_a, out / "timeseries.npz")
     print(format_summary(summary_a))
     print(format_bag_lines(summary_a))
     written = [out / "summary.json", out / "timeseries.npz"]
     if summary_b is not None:
         rows = compare_summaries(summary_a, summary_b)
-        (out / "summary_compare.json").write_text(json.dumps(summary_b, indent=2) + "\n")
-        (out / "comparison.json").write_text(json.dumps(
+        write_text(out / "summary_compare.json", json.dumps(summary_b, indent=2) + "\n")
+        write_text(out / "comparison.json", json.dumps(
             {"a": str(run_a.path), "b": str(runs[1][1].path), "rows": rows}, indent=2) + "\n")
         print()
         print(format_summary(summary_b))

@@ -347,7 +347,12 @@ class BagWriter:
         for t in (log_time_ns, publish):
             if not isinstance(t, int) or not 0 <= t < 2**64:
                 raise BagError(f"{self.path}: time {t!r} on {topic} is not an integer ns >= 0")
-        self._writer.add_message(entry.channel_id, log_time_ns, bytes(data), publish)
+        try:
+            self._writer.add_message(entry.channel_id, log_time_ns, bytes(data), publish)
+        except OSError as exc:  # e.g. a full disk: the file keeps every chunk completed before
+            self.abandon()
+            raise BagError(f"{self.path}: cannot write ({exc.strerror}); the bag is readable up to its last "
+                           "complete chunk") from None
         entry.count += 1
         t0, t1 = self._times or (log_time_ns, log_time_ns)
         self._times = [min(t0, log_time_ns), max(t1, log_time_ns)]
@@ -375,7 +380,12 @@ class BagWriter:
     def add_metadata(self, name: str, data: dict[str, str]) -> None:
         """Add an MCAP metadata record `name` with string key/values (e.g. run facts)."""
         self._check_open()
-        self._writer.add_metadata(name, {str(k): str(v) for k, v in data.items()})
+        try:
+            self._writer.add_metadata(name, {str(k): str(v) for k, v in data.items()})
+        except OSError as exc:
+            self.abandon()
+            raise BagError(f"{self.path}: cannot write ({exc.strerror}); the bag is readable up to its last "
+                           "complete chunk") from None
 
     def close(self) -> None:
         """Write the rosbag2 metadata record and the MCAP summary, then close the file."""
@@ -386,8 +396,25 @@ class BagWriter:
             text = yaml.safe_dump(self._bag_metadata(), sort_keys=False, default_flow_style=False)
             self._writer.add_metadata("rosbag2", {"serialized_metadata": text})
             self._writer.finish()
+        except OSError as exc:
+            raise BagError(f"{self.path}: cannot finish the file ({exc.strerror}); it is readable up to its last "
+                           "complete chunk") from None
         finally:
+            try:
+                self._file.close()
+            except OSError:
+                pass
+
+    def abandon(self) -> None:
+        """Close the file as it is, without the summary and footer (after a write error): a reader sees
+        it truncated, readable up to its last complete chunk. Idempotent."""
+        if self._closed:
+            return
+        self._closed = True
+        try:
             self._file.close()
+        except OSError:
+            pass
 
     def _check_open(self) -> None:
         if self._closed:

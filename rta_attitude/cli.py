@@ -23,6 +23,7 @@ import numpy as np
 
 from . import config as config_module
 from .errors import RtaError
+from .files import atomic, output_dir, write_text
 from .params import PRESETS, SOLVERS, Config
 from .state import STATE_NAMES
 
@@ -48,12 +49,13 @@ def _add_config(p: argparse.ArgumentParser) -> None:
 def write_trajectory(traj: Any, cfg: Config, out: Path) -> Path:
     """Save a Trajectory's time series as a compressed NPZ with named columns. Returns the path."""
     path = out / "timeseries.npz"
-    np.savez_compressed(
-        path, t_s=traj.t_s, x=traj.x, state_names=np.array(STATE_NAMES), q_c=traj.q_c, u_des=traj.u_des,
-        u=traj.u, omega_dot=traj.omega_dot, constraint_names=np.array(traj.names), h=traj.h,
-        h_substep_min=traj.h_substep_min, bc=traj.bc, slack=traj.slack, intervening=traj.intervening,
-        box_active=traj.box_active, status=traj.status, fallback=traj.fallback, solve_time_s=traj.solve_time_s,
-    )  # fmt: skip
+    with atomic(path) as tmp:
+        np.savez_compressed(
+            tmp, t_s=traj.t_s, x=traj.x, state_names=np.array(STATE_NAMES), q_c=traj.q_c, u_des=traj.u_des,
+            u=traj.u, omega_dot=traj.omega_dot, constraint_names=np.array(traj.names), h=traj.h,
+            h_substep_min=traj.h_substep_min, bc=traj.bc, slack=traj.slack, intervening=traj.intervening,
+            box_active=traj.box_active, status=traj.status, fallback=traj.fallback, solve_time_s=traj.solve_time_s,
+        )  # fmt: skip
     return path
 
 
@@ -76,8 +78,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         from dataclasses import replace
 
         scenario = replace(scenario, duration_s=float(args.duration))
-    out: Path = args.out
-    out.mkdir(parents=True, exist_ok=True)
+    out = output_dir(args.out)
     loop = ClosedLoop(cfg, scenario, rta=not args.no_rta)
     t0 = time.perf_counter()
     traj = loop.run(progress=sys.stderr.isatty())
@@ -85,7 +86,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     summary = summarize_trajectory(traj, cfg.limits.omega_dot_max_rad_s2, slacked_names(loop.cfg))
     summary["wall_time_s"] = wall
     write_trajectory(traj, loop.cfg, out)
-    (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+    write_text(out / "summary.json", json.dumps(summary, indent=2) + "\n")
     print(format_summary(summary))
     if not args.no_plot:
         from .plots import plot_runs
@@ -152,6 +153,10 @@ def main(argv: list[str] | None = None) -> int:
         return int(handlers[args.command](args) or 0)
     except RtaError as exc:
         print(f"ERROR: {exc}", file=sys.stderr)
+        return 1
+    except OSError as exc:  # a file error no command anticipated: still one line, not a traceback
+        where = f"{exc.filename}: " if exc.filename else ""
+        print(f"ERROR: {where}{exc.strerror or exc}", file=sys.stderr)
         return 1
     except KeyboardInterrupt:
         print("ERROR: interrupted", file=sys.stderr)

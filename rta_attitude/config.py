@@ -65,10 +65,17 @@ def read_parameters(path: str | os.PathLike[str] | None = None) -> tuple[dict[st
     import yaml
 
     file = Path(path) if path is not None else default_config_path()
+    if file.is_dir():
+        raise ConfigError(f"config file {str(file)!r} is a directory, not a file")
     if not file.is_file():
         raise ConfigError(f"config file {str(file)!r} does not exist")
     try:
-        doc = yaml.safe_load(file.read_text())
+        text = file.read_text()
+    except (OSError, UnicodeDecodeError) as exc:
+        reason = exc.strerror if isinstance(exc, OSError) else "not UTF-8 text"
+        raise ConfigError(f"config file {str(file)!r} cannot be read ({reason})") from None
+    try:
+        doc = yaml.safe_load(text)
     except yaml.YAMLError as exc:
         line = getattr(getattr(exc, "problem_mark", None), "line", None)
         where = f" at line {line + 1}" if line is not None else ""

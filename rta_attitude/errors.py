@@ -23,4 +23,8 @@ class BagError(RtaError):
     """An MCAP bag cannot be written or read (missing, empty, truncated, foreign)."""
 
 
-__all__ = ["BagError", "ConfigError", "MessageError", "RtaError", "SolverError"]
+class OutputError(RtaError):
+    """An output file or directory cannot be created or written (the message names the path and why)."""
+
+
+__all__ = ["BagError", "ConfigError", "MessageError", "OutputError", "RtaError", "SolverError"]

@@ -49,6 +49,7 @@ import yaml
 
 from . import config as config_module
 from .errors import ConfigError, RtaError
+from .files import output_dir, output_file, write_text
 from .nodes import topics
 from .nodes.parameters import check_knob, flatten, nest
 from .params import PRESETS, Config
@@ -181,10 +182,9 @@ def plan(args: argparse.Namespace) -> Plan:
         raise ConfigError(f"--realtime must be > 0, got {args.realtime}")
     temporary = args.bag is None
     bag = Path(tempfile.mkdtemp(prefix="rta_launch_")) / "run.mcap" if temporary else Path(args.bag)
-    if bag.exists() and not args.overwrite:
+    if bag.exists() and not bag.is_dir() and not args.overwrite:
         raise ConfigError(f"--bag {bag} exists (pass --overwrite to replace it)")
-    if not bag.parent.is_dir():
-        raise ConfigError(f"--bag {bag}: directory {bag.parent} does not exist")
+    output_file(bag, "--bag")
     dt = cfg.filter.sample_time_s
     steps = round(scenario.duration_s / dt)
     if args.timeout is not None:
@@ -353,11 +353,14 @@ def stop_children(children: list[Child], timeout_s: float = STOP_TIMEOUT_S) -> l
     return problems
 
 
-def _tail(child: Child, lines: int = 8) -> str:
+def _last_error(child: Child) -> str:
+    """The node's last logged error (its last log line if none), without the log prefix; '' without a log."""
     if child.log_path is None or not child.log_path.exists():
         return ""
-    text = child.log_path.read_text(errors="replace").strip().splitlines()
-    return "\n".join(f"    {line}" for line in text[-lines:])
+    lines = [line.strip() for line in child.log_path.read_text(errors="replace").splitlines() if line.strip()]
+    errors = [line for line in lines if "[ERROR]" in line or line.startswith("ERROR")]
+    line = (errors or lines or [""])[-1]
+    return line.split("]: ", 1)[-1] if "]: " in line else line
 
 
 # ----------------------------------------------------------------------------- run
@@ -395,8 +398,8 @@ def launch(p: Plan, log_dir: Path | None) -> tuple[list[str], dict[str, Any]]:
             failed = [c for c in children if c.proc.poll() not in (None, 0)]
             if failed:
                 for c in failed:
-                    problems.append(f"{c.name} exited with code {c.proc.returncode}" +
-                                    (f":\n{_tail(c)}" if _tail(c) else ""))
+                    why = _last_error(c)
+                    problems.append(f"{c.name} exited with code {c.proc.returncode}" + (f": {why}" if why else ""))
                 break
             if plant.proc.poll() == 0 and "plant_s" not in facts:
                 facts["plant_s"] = time.monotonic() - t0
@@ -434,11 +437,10 @@ def run(args: argparse.Namespace) -> int:
     from .nodes.convert import run_status_from_msg
 
     p = plan(args)
-    out: Path | None = args.out
+    out: Path | None = output_dir(args.out) if args.out is not None else None
     log_dir = None
     if out is not None:
-        log_dir = out / "logs"
-        log_dir.mkdir(parents=True, exist_ok=True)
+        log_dir = output_dir(out / "logs")
     elif not args.verbose:
         log_dir = Path(tempfile.mkdtemp(prefix="rta_launch_logs_"))
     mode = f"realtime x{args.realtime:g}" if args.realtime is not None else "lockstep"
@@ -453,11 +455,14 @@ def run(args: argparse.Namespace) -> int:
           f"namespace {args.namespace}, domain {p.env['ROS_DOMAIN_ID']} "
           f"({p.env['ROS_AUTOMATIC_DISCOVERY_RANGE'].lower()}), bag {p.bag}", flush=True)
     problems, facts = launch(p, log_dir)
-    for line in problems:
-        print(f"ERROR: {line}", file=sys.stderr)
-    if problems and (not p.bag.exists() or facts["exit_codes"].get(topics.EXECUTABLES[topics.PLANT]) != 0):
+    if problems:  # one ERROR line (the first problem); the rest, and where the logs are, on stdout
+        print(f"ERROR: {problems[0]}", file=sys.stderr)
+        for line in problems[1:]:
+            print(f"also: {line}", flush=True)
+    node_failed = any(facts["exit_codes"].get(topics.EXECUTABLES[r]) != 0 for r in (topics.PLANT, topics.RECORDER))
+    if problems and (not p.bag.exists() or node_failed):
         if log_dir is not None:
-            print(f"node logs: {log_dir}", file=sys.stderr)
+            print(f"node logs: {log_dir}", flush=True)
         return 1
     status = read_bag(p.bag, topics=[f"{args.namespace.rstrip('/')}/{topics.RUN_STATUS}"])
     run_values: dict[str, Any] = {}
@@ -481,7 +486,7 @@ def run(args: argparse.Namespace) -> int:
     if counters:
         print("plant counters: " + ", ".join(f"{k} {v}" for k, v in counters.items()))
     if out is not None:
-        (out / "summary.json").write_text(json.dumps(summary, indent=2, default=str) + "\n")
+        write_text(out / "summary.json", json.dumps(summary, indent=2, default=str) + "\n")
         print(f"wrote {out / 'summary.json'}, bag {p.bag}, logs {log_dir}")
     if p.temporary_bag:
         p.bag.unlink(missing_ok=True)

@@ -12,6 +12,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .errors import RtaError
+from .files import atomic
 from .params import Config
 from .state import ENERGY, OMEGA, PSI, TEMP, THETA_S
 
@@ -89,9 +90,11 @@ def plot_initial_conditions(x0: Array, failed: NDArray[np.bool_], cfg: Config, p
     n_fail = int(failed.sum())
     fig.suptitle(f"{title}  -  {len(x0) - n_fail} safe (green), {n_fail} failed (red)".strip(" -"))
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    try:
+        with atomic(path) as tmp:
+            fig.savefig(tmp, dpi=110)
+    finally:
+        plt.close(fig)
     return path
 
 

@@ -43,6 +43,7 @@ from . import config as config_module
 from .batch import SOLVERS, BatchOutcome, BatchSimulator
 from .constraints import ConstraintSet
 from .errors import ConfigError, RtaError
+from .files import atomic, output_dir, write_text
 from .metrics import H_UNITS
 from .params import CONSTRAINT_NAMES, PRESETS, Config
 from .state import ENERGY, OMEGA, PSI, STATE_NAMES, STATE_SIZE, TEMP, THETA_S, Q
@@ -594,19 +595,21 @@ def format_table(s: dict[str, Any]) -> str:
 
 def write_outputs(result: MonteCarloResult, out: Path, plot: bool = True) -> dict[str, Path]:
     """summary.json, runs.csv and (optionally) initial_conditions.png in out. Returns the paths."""
-    out.mkdir(parents=True, exist_ok=True)
+    output_dir(out)
     s = summary(result)
     paths = {"json": out / "summary.json", "csv": out / "runs.csv", "npz": out / "outcome.npz"}
-    paths["json"].write_text(json.dumps(s, indent=2) + "\n")
+    write_text(paths["json"], json.dumps(s, indent=2) + "\n")
     o = result.outcome
-    np.savez_compressed(paths["npz"], x0=result.x0, redraws=result.redraws, unrecoverable=result.unrecoverable,
-                        constraint_names=np.array(CONSTRAINT_NAMES), state_names=np.array(STATE_NAMES),
-                        **{k: getattr(o, k) for k in ("violated_samples", "violated_substeps", "first_violation_s",
-                                                      "min_h_samples", "qp_steps", "fallback_steps", "qp_failures",
-                                                      "max_comm_slack", "x_final")})
+    with atomic(paths["npz"]) as tmp:
+        np.savez_compressed(tmp, x0=result.x0, redraws=result.redraws, unrecoverable=result.unrecoverable,
+                            constraint_names=np.array(CONSTRAINT_NAMES), state_names=np.array(STATE_NAMES),
+                            **{k: getattr(o, k) for k in ("violated_samples", "violated_substeps",
+                                                          "first_violation_s", "min_h_samples", "qp_steps",
+                                                          "fallback_steps", "qp_failures", "max_comm_slack",
+                                                          "x_final")})
     failed = result.failed()
     failed_sub = result.failed(substeps=True)
-    with paths["csv"].open("w", newline="") as fh:
+    with atomic(paths["csv"]) as tmp, tmp.open("w", newline="") as fh:
         w = csv.writer(fh)
         w.writerow(["run", *STATE_NAMES[:13], "redraws", "failed", "failed_incl_substeps", "unrecoverable",
                     "unrecoverable_rules", "violated", "violated_incl_substeps", "first_violation_s", "qp_steps",
@@ -696,6 +699,7 @@ def run(args: argparse.Namespace) -> int:
     if args.chunk_runs is not None and args.chunk_runs < 1:
         raise ConfigError(f"--chunk-runs must be >= 1, got {args.chunk_runs}")
     cfg = config_module.load(args.config, preset=args.preset)
+    output_dir(args.out)  # before hours of work, not after
     result = montecarlo(cfg, args.runs, args.duration, args.seed, args.workers, args.backend, args.scheduler,
                         args.solver, args.chunk_runs, progress=not args.no_progress and sys.stderr.isatty())
     paths = write_outputs(result, args.out, plot=not args.no_plot)

@@ -17,6 +17,7 @@ from numpy.typing import NDArray
 
 from . import quaternion as quat
 from .errors import RtaError
+from .files import atomic
 from .model import ANTENNA_AXIS_BODY, EARTH_DIRECTION_HILL, SENSOR_AXIS_BODY, sun_direction
 from .params import Config
 from .state import ENERGY, OMEGA, PSI, TEMP, THETA_S, Q
@@ -146,9 +147,11 @@ def plot_runs(runs: Sequence[tuple[str, RunSeries]], cfg: Config, path: str | Pa
     fig.suptitle(title)
     fig.tight_layout()
     out = Path(path)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out, dpi=110)
-    plt.close(fig)
+    try:
+        with atomic(out) as tmp:
+            fig.savefig(tmp, dpi=110)
+    finally:
+        plt.close(fig)
     return out
 
 

@@ -81,7 +81,12 @@ def ros_node(name: str) -> Iterator[Any]:
     Yields:
         The node; destroyed and its context shut down on exit.
     """
-    if signal.getsignal(signal.SIGTERM) in (signal.SIG_DFL, None):
+    # SIGINT and SIGTERM both end the command cleanly (KeyboardInterrupt), whatever the disposition this
+    # process inherited: a shell's background job starts with SIGINT ignored, and would ignore Ctrl-C
+    # (measured: an `echo` started from a background test run printed on for 20 s after SIGINT)
+    if signal.getsignal(signal.SIGINT) in (signal.SIG_DFL, signal.SIG_IGN, None):
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+    if signal.getsignal(signal.SIGTERM) in (signal.SIG_DFL, signal.SIG_IGN, None):
         signal.signal(signal.SIGTERM, _raise_interrupt)
     try:
         import rclpy

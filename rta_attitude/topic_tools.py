@@ -1,7 +1,16 @@
 """Live topic inspection for pip-only installs (no ros2cli): list topics, echo one as YAML.
 
-    rta-attitude topics [--window S] [--no-rates]
-    rta-attitude echo TOPIC [TYPE] [--once | --count N] [--timeout S] [--no-arr] [--full-length]
+    rta-attitude topics [--wait-for TOPIC ...] [--spin-time S] [--settle S] [--window S] [--no-rates]
+    rta-attitude echo TOPIC [TYPE] [--once | --count N] [--spin-time S] [--timeout S] [--no-arr]
+
+Discovery. DDS discovery is asynchronous: another participant's endpoints arrive over 0.05-2.5 s
+(measured here; longer on a loaded machine), one topic at a time. `topics` therefore waits before it
+answers, never for a fixed time:
+- with `--wait-for TOPIC` (repeatable), until every named topic has a publisher, then lists the graph
+  (at most `--spin-time`; a topic still missing then is one `ERROR:` line, exit 1);
+- otherwise until the graph has been unchanged for `--settle` seconds after another participant's own
+  topics (beyond /rosout and /parameter_events) appeared, at most `--spin-time`.
+`echo` waits (at most `--spin-time`) until the topic has a publisher, then subscribes.
 
 `topics` prints every topic in the ROS graph (this ROS_DOMAIN_ID) with its type, the number of
 publishers and subscribers (this tool's own endpoints left out) and the rate at which messages
@@ -18,7 +27,7 @@ the root namespace, as ros2 does (`echo rta/state`, or `echo /rta/state`). The s
 adapts to the publishers as ros2cli's does: reliable if every publisher is, transient-local if every
 publisher is (then the latched history is shown too).
 
-Both stop cleanly on SIGINT/SIGTERM; a topic that does not appear within `--timeout` is one
+Both stop cleanly on SIGINT/SIGTERM; a topic that does not appear within `--spin-time` is one
 `ERROR:` line.
 """
 
@@ -40,10 +49,12 @@ from .replay import message_class, ros_node
 
 DEFAULT_TRUNCATE_LENGTH = 128
 """Longest string or array printed in full by `echo` (ros2 topic echo's default)."""
-DISCOVERY_SETTLE_S = 1.0
-"""`topics`: the graph counts as discovered when it has not changed for this long. Measured here:
-another participant's endpoints appear 0.05-2.5 s after start, and those of several participants
-up to 0.7 s apart."""
+DEFAULT_SETTLE_S = 1.0
+"""`topics`: without --wait-for, the graph counts as discovered when it has not changed for this long.
+Measured here: another participant's endpoints appear 0.05-2.5 s after start, and those of several
+participants up to 0.7 s apart."""
+DEFAULT_SPIN_TIME_S = 5.0
+"""`topics`: longest wait for discovery, s (ros2cli's --spin-time)."""
 RATE_QOS_DEPTH = 100
 INFRASTRUCTURE_TOPICS = frozenset({"/parameter_events", "/rosout"})
 """Topics every rclpy node has; Fast DDS often reports them before a participant's own topics, so a
@@ -132,20 +143,55 @@ def _graph(node: Any) -> dict[str, tuple[str, int, int]]:
     return out
 
 
-def _settled_graph(node: Any, executor: Any, limit_s: float) -> dict[str, tuple[str, int, int]]:
-    """The graph once another participant's endpoints (beyond INFRASTRUCTURE_TOPICS) are seen and
-    have not changed for DISCOVERY_SETTLE_S (at most `limit_s`; a graph without such topics takes all
-    of it)."""
+def _publisher_topics(graph: dict[str, tuple[str, int, int]]) -> set[str]:
+    return {topic for topic, (_type, pubs, _subs) in graph.items() if pubs > 0}
+
+
+def discover(node: Any, executor: Any, spin_time_s: float, settle_s: float = DEFAULT_SETTLE_S,
+             wait_for: tuple[str, ...] = ()) -> dict[str, tuple[str, int, int]]:
+    """The ROS graph once discovery has settled: topic -> (type, publishers, subscribers).
+
+    With `wait_for`, as soon as every named topic has a publisher; otherwise once another
+    participant's own topics (beyond INFRASTRUCTURE_TOPICS) are seen and the graph has not changed
+    for `settle_s`. Waits at most `spin_time_s` in either case.
+
+    Raises:
+        RtaError: a `wait_for` topic has no publisher after `spin_time_s`.
+        KeyboardInterrupt: the context was shut down (a signal) while waiting.
+    """
     start = time.monotonic()
-    graph, changed = _graph(node), time.monotonic()
-    while node.context.ok() and time.monotonic() - start < limit_s:
-        _spin_for(executor, node.context, 0.05)
+    graph, changed = _graph(node), start
+    wanted = set(wait_for)
+    while True:
+        if wanted:
+            if wanted <= _publisher_topics(graph):
+                return graph
+        elif set(graph) - INFRASTRUCTURE_TOPICS and time.monotonic() - changed >= settle_s:
+            return graph
+        if time.monotonic() - start >= spin_time_s:
+            break
+        if not _spin_for(executor, node.context, 0.05):
+            raise KeyboardInterrupt
         now = _graph(node)
         if now != graph:
             graph, changed = now, time.monotonic()
-        elif set(graph) - INFRASTRUCTURE_TOPICS and time.monotonic() - changed >= DISCOVERY_SETTLE_S:
-            break
+    missing = sorted(wanted - _publisher_topics(graph))
+    if missing:
+        raise RtaError(f"no publisher of {', '.join(missing)} within {spin_time_s:g} s "
+                       f"(live topics: {', '.join(sorted(graph)) or 'none'})")
     return graph
+
+
+def measured_rate_hz(arrivals_s: list[float], window_end_s: float) -> float | None:
+    """Messages per second from arrival times: (n - 1) / (window end - first arrival).
+
+    Measured to the end of the window rather than to the last arrival: arrival times are taken when
+    callbacks run, so a backlog the executor works off at once would make first-to-last too short.
+    None with fewer than two messages.
+    """
+    if len(arrivals_s) < 2 or window_end_s <= arrivals_s[0]:
+        return None
+    return (len(arrivals_s) - 1) / (window_end_s - arrivals_s[0])
 
 
 def _executor(node: Any) -> Any:
@@ -164,19 +210,22 @@ def _check_seconds(name: str, value: float, allow_zero: bool = False) -> None:
 # ----------------------------------------------------------------------------- topics
 
 
-def list_topics(node: Any, window_s: float, discovery_s: float, rates: bool) -> list[dict[str, Any]]:
-    """Rows {topic, type, publishers, subscribers, rate_hz, messages} for every topic in the graph.
+def list_topics(node: Any, window_s: float, spin_time_s: float, rates: bool, settle_s: float = DEFAULT_SETTLE_S,
+                wait_for: tuple[str, ...] = ()) -> list[dict[str, Any]]:
+    """Rows {topic, type, publishers, subscribers, rate_hz, messages} for every topic in the graph,
+    once discovery settled (`discover`).
 
-    rate_hz: messages per wall-clock second received over `window_s`, from the first message to the
-    end of the window (None: no message, or the type is not installed, then `messages` is None too).
-    Arrival times are taken when callbacks run, so a backlog the executor works off at once would make
-    the first-to-last interval too short; measuring to the end of the window does not depend on it.
+    rate_hz: messages per wall-clock second received over `window_s` (`measured_rate_hz`; None: no
+    message, or the type is not installed, then `messages` is None too).
+
+    Raises:
+        RtaError: a `wait_for` topic has no publisher within `spin_time_s`.
     """
     from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
     executor = _executor(node)
     try:
-        graph = _settled_graph(node, executor, discovery_s)
+        graph = discover(node, executor, spin_time_s, settle_s, wait_for)
         stamps: dict[str, list[float]] = {}
         if rates:
             qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=RATE_QOS_DEPTH,
@@ -199,9 +248,7 @@ def list_topics(node: Any, window_s: float, discovery_s: float, rates: bool) -> 
     rows = []
     for topic, (type_name, pubs, subs) in sorted(graph.items()):
         got = stamps.get(topic)
-        rate = None
-        if got is not None and len(got) >= 2 and window_end > got[0]:
-            rate = (len(got) - 1) / (window_end - got[0])
+        rate = None if got is None else measured_rate_hz(got, window_end)
         rows.append({"topic": topic, "type": type_name, "publishers": pubs, "subscribers": subs,
                      "rate_hz": rate, "messages": None if got is None else len(got)})
     return rows
@@ -235,10 +282,12 @@ def format_topics(rows: list[dict[str, Any]], window_s: float | None) -> str:
 
 def _run_topics(args: argparse.Namespace) -> int:
     _check_seconds("--window", args.window)
-    _check_seconds("--discovery", args.discovery)
+    _check_seconds("--spin-time", args.spin_time)
+    _check_seconds("--settle", args.settle)
+    wait_for = tuple(resolve_topic(t) for t in args.wait_for)
     try:
         with ros_node(_node_name()) as node:
-            rows = list_topics(node, args.window, args.discovery, not args.no_rates)
+            rows = list_topics(node, args.window, args.spin_time, not args.no_rates, args.settle, wait_for)
     except KeyboardInterrupt:
         return 0
     print(format_topics(rows, None if args.no_rates else args.window), flush=True)
@@ -275,7 +324,8 @@ def _echo_qos(node: Any, topic: str) -> Any:
                       durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE)
 
 
-def _topic_type(node: Any, executor: Any, topic: str, timeout_s: float) -> str:
+def _topic_type(node: Any, executor: Any, topic: str, spin_time_s: float) -> str:
+    """The type of `topic` once it has a publisher (waits at most spin_time_s)."""
     found: list[str] = []
 
     def known() -> bool:
@@ -284,36 +334,38 @@ def _topic_type(node: Any, executor: Any, topic: str, timeout_s: float) -> str:
             found[:] = types
         return bool(found)
 
-    _spin_for(executor, node.context, timeout_s, known)
+    _spin_for(executor, node.context, spin_time_s, known)
     if not found:
         if not node.context.ok():
             raise KeyboardInterrupt
         live = sorted(t for t, _ in node.get_topic_names_and_types())
-        raise RtaError(f"topic {topic}: no publisher found within {timeout_s:g} s "
+        raise RtaError(f"topic {topic}: no publisher found within {spin_time_s:g} s "
                        f"(live topics: {', '.join(live) or 'none'})")
     if len(found) > 1:
         raise RtaError(f"topic {topic} has several types ({', '.join(found)}); pass the type to use")
     return found[0]
 
 
-def echo(node: Any, topic: str, type_name: str | None, count: int | None, timeout_s: float,
+def echo(node: Any, topic: str, type_name: str | None, count: int | None, spin_time_s: float, timeout_s: float,
          truncate_length: int | None, no_arr: bool, out: Any = None) -> int:
     """Print messages of `topic` as YAML + '---' until `count` are printed (None: until interrupted).
+
+    Waits (at most spin_time_s) until the topic has a publisher, then subscribes with a QoS adapted
+    to its publishers; with a count, waits at most timeout_s more for the messages.
 
     Returns:
         The number of messages printed.
 
     Raises:
-        RtaError: the topic does not appear, or (with a count) no message arrives, within timeout_s.
+        RtaError: the topic has no publisher within spin_time_s, or (with a count) fewer than count
+            messages arrive within timeout_s after it was found.
     """
     stream = out if out is not None else sys.stdout
     executor = _executor(node)
     printed = 0
     try:
-        wait_start = time.monotonic()
-        if type_name is None:
-            type_name = _topic_type(node, executor, topic, timeout_s)
-        cls = message_class(type_name)
+        found_type = _topic_type(node, executor, topic, spin_time_s)
+        cls = message_class(type_name or found_type)
 
         def show(msg: Any) -> None:
             nonlocal printed
@@ -328,8 +380,7 @@ def echo(node: Any, topic: str, type_name: str | None, count: int | None, timeou
             while node.context.ok():
                 executor.spin_once(timeout_sec=0.1)
         else:
-            left = max(0.0, timeout_s - (time.monotonic() - wait_start))
-            _spin_for(executor, node.context, left, lambda: printed >= count)
+            _spin_for(executor, node.context, timeout_s, lambda: printed >= count)
             if printed < count and node.context.ok():
                 raise RtaError(f"topic {topic}: {printed} of {count} messages within {timeout_s:g} s")
     finally:
@@ -338,6 +389,7 @@ def echo(node: Any, topic: str, type_name: str | None, count: int | None, timeou
 
 
 def _run_echo(args: argparse.Namespace) -> int:
+    _check_seconds("--spin-time", args.spin_time)
     _check_seconds("--timeout", args.timeout)
     topic = resolve_topic(args.topic)
     if args.message_type is not None:
@@ -348,7 +400,7 @@ def _run_echo(args: argparse.Namespace) -> int:
     truncate = None if args.full_length else args.truncate_length
     try:
         with ros_node(_node_name()) as node:
-            echo(node, topic, args.message_type, count, args.timeout, truncate, args.no_arr)
+            echo(node, topic, args.message_type, count, args.spin_time, args.timeout, truncate, args.no_arr)
     except (KeyboardInterrupt, BrokenPipeError):
         pass
     return 0
@@ -361,8 +413,14 @@ def add_arguments(parser: argparse.ArgumentParser, command: str) -> None:
     """Arguments of `rta-attitude topics` and `rta-attitude echo`."""
     if command == "topics":
         parser.add_argument("--window", type=float, default=2.0, help="rate measurement window, s (default 2)")
-        parser.add_argument("--discovery", type=float, default=5.0,
-                            help="longest wait for other participants to be discovered, s (default 5)")
+        parser.add_argument("--wait-for", action="append", default=[], metavar="TOPIC",
+                            help="wait until this topic has a publisher (repeatable); error if it has none "
+                                 "within --spin-time")
+        parser.add_argument("--spin-time", type=float, default=DEFAULT_SPIN_TIME_S,
+                            help=f"longest wait for discovery, s (default {DEFAULT_SPIN_TIME_S:g})")
+        parser.add_argument("--settle", type=float, default=DEFAULT_SETTLE_S,
+                            help="without --wait-for: list once the graph has not changed for this long, s "
+                                 f"(default {DEFAULT_SETTLE_S:g})")
         parser.add_argument("--no-rates", action="store_true", help="list types and counts only (faster)")
         return
     parser.add_argument("topic", help="topic name, e.g. /rta/state")
@@ -371,8 +429,11 @@ def add_arguments(parser: argparse.ArgumentParser, command: str) -> None:
     group = parser.add_mutually_exclusive_group()
     group.add_argument("--once", action="store_true", help="print one message and exit")
     group.add_argument("--count", type=int, default=None, help="print this many messages and exit")
+    parser.add_argument("--spin-time", type=float, default=10.0,
+                        help="longest wait for the topic to have a publisher, s (default 10)")
     parser.add_argument("--timeout", type=float, default=10.0,
-                        help="longest wait for the topic to appear and, with --once/--count, for its messages, s")
+                        help="with --once/--count: longest wait for the messages once the topic is found, s "
+                             "(default 10)")
     parser.add_argument("--truncate-length", type=int, default=DEFAULT_TRUNCATE_LENGTH,
                         help=f"cut strings and arrays longer than this (default {DEFAULT_TRUNCATE_LENGTH})")
     parser.add_argument("--full-length", action="store_true", help="never cut strings and arrays")

@@ -32,6 +32,8 @@ os.environ.setdefault("RCUTILS_COLORIZED_OUTPUT", "0")
 
 def pytest_configure(config: Any) -> None:
     config.addinivalue_line("markers", "slow: a whole scenario over DDS, or a colcon build (seconds to a minute)")
+    config.addinivalue_line("markers", "dds: real rclpy over real Fast DDS (nodes, processes); bench/flake_hunt.py "
+                            "runs these under load")
 
 
 def pytest_report_header(config: Any) -> str:

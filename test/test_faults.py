@@ -48,6 +48,7 @@ from rta_attitude.nodes.spin import make_executor
 from rta_attitude.simulation import integrate
 from rta_attitude.state import STATE_NAMES
 
+pytestmark = pytest.mark.dds
 CFG = config.load()
 U_MAX = CFG.u_max_rad_s2  # the filter's box U (rad/s^2, per axis)
 NS = topics.DEFAULT_NAMESPACE

@@ -22,6 +22,7 @@ from rta_attitude.metrics import format_summary, summarize_trajectory
 from rta_attitude.nodes import topics
 from rta_attitude.simulation import ClosedLoop
 
+pytestmark = pytest.mark.dds
 CFG = config.load()
 TIMING_KEYS = {"filter_time_us", "wall_time_s", "launch", "bag"}
 """Summary keys that differ between runs by nature (wall-clock timing, provenance)."""

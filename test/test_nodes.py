@@ -35,6 +35,7 @@ from rta_attitude.nodes.spin import make_executor
 from rta_attitude.simulation import ClosedLoop, integrate, saturate
 from rta_attitude.state import STATE_NAMES
 
+pytestmark = pytest.mark.dds
 CFG = config.load()
 NODE_CLASSES = {topics.PLANT: PlantNode, topics.CONTROLLER: ControllerNode, topics.FILTER: FilterNode,
                 topics.RECORDER: RecorderNode}

@@ -38,7 +38,7 @@ from rclpy.serialization import deserialize_message
 from rclpy.timer import Timer
 
 from ..bag import BagWriter, Qos
-from ..errors import ConfigError, MessageError
+from ..errors import BagError, ConfigError, MessageError
 from . import convert, topics
 from .spin import RtaNode, run
 
@@ -101,7 +101,12 @@ class RecorderNode(RtaNode):
             self.faults.fault("not_recorded", f"{topic}: {exc}")
             return
         self.faults.clear("not_recorded")
-        self.bag.write(topic, data, t_ns)
+        try:
+            self.bag.write(topic, data, t_ns)
+        except BagError as exc:  # a full disk or a vanished directory: nothing more can be recorded
+            self.bag = None
+            self.fail(str(exc))
+            return
         self.received[topic] += 1
         self._last_s = self.wall_now_s()
         if topic == self.status_topic:
@@ -175,9 +180,14 @@ class RecorderNode(RtaNode):
             return
         bag, self.bag = self.bag, None
         try:
-            add_metadata(bag, METADATA_NAME, self.metadata())
-        finally:
-            bag.close()
+            try:
+                add_metadata(bag, METADATA_NAME, self.metadata())
+            finally:
+                bag.close()
+        except BagError as exc:
+            self.get_logger().error(str(exc))
+            self.exit_code = 1
+            return
         total = sum(self.received.values())
         self.get_logger().info(f"bag closed: {bag.path} ({total} messages, {self.counts.get('not_recorded', 0)} "
                                "not recorded)")
