@@ -154,7 +154,17 @@ def replay_qos(recorded: dict[str, Any]) -> Any:
         else ReliabilityPolicy.RELIABLE
     durability = DurabilityPolicy.TRANSIENT_LOCAL if recorded.get("durability") == "transient_local" \
         else DurabilityPolicy.VOLATILE
-    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=depth, reliability=reliability, durability=durability)
+    profile = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=depth, reliability=reliability, durability=durability)
+    lease = recorded.get("liveliness_lease_duration")
+    if recorded.get("liveliness") == "automatic" and isinstance(lease, dict):
+        ns = int(lease.get("sec", 0)) * NS_PER_S + int(lease.get("nsec", 0))
+        if ns > 0:  # offer the recorded lease, so readers that request one (the run's nodes) match
+            from rclpy.duration import Duration
+            from rclpy.qos import LivelinessPolicy
+
+            profile.liveliness = LivelinessPolicy.AUTOMATIC
+            profile.liveliness_lease_duration = Duration(nanoseconds=ns)
+    return profile
 
 
 def _clock_message(t_ns: int) -> Any:

@@ -632,6 +632,160 @@ def test_sigkill_of_the_recorder_leaves_a_bag_readable_to_its_last_chunk(loop_fa
     assert leaked == []
 
 
+def _wait_until(cond: Any, timeout_s: float, what: str) -> None:
+    """Poll `cond` until it holds; fail naming `what` after timeout_s."""
+    deadline = time.monotonic() + timeout_s
+    while not cond():
+        assert time.monotonic() < deadline, f"{what} within {timeout_s:g} s"
+        time.sleep(0.05)
+
+
+def _stamps(bag: Path, topic: str) -> list[int]:
+    return [convert.stamp_ns(m.message.header.stamp) for m in read_bag(bag, topics=[f"{NS}/{topic}"]).messages]
+
+
+def _clean_shm(files: set[str]) -> None:
+    """Remove the Fast DDS files of a killed process once no live process uses them (fails if they stay)."""
+    removed: set[str] = set()
+    deadline = time.monotonic() + 10
+    while (files & _shm_now()) - removed and time.monotonic() < deadline:
+        removed |= set(launcher.remove_stale_shm(files))
+        time.sleep(0.2)
+    assert not (files & _shm_now()), sorted(files & _shm_now())
+
+
+@pytest.mark.slow
+def test_plant_killed_its_readers_report_it_once_and_the_recorder_closes_when_told(loop_factory: Any) -> None:
+    """SIGKILL of the plant: controller, filter and recorder learn it through `state`'s liveliness lease
+    (one warning each), the filter drops what waited for the dead plant and sends it nothing more, and
+    the recorder, told to stop, closes a complete bag without waiting for the plant's final status."""
+    lp = loop_factory("stop_timeout_s=1.0", "liveliness_lease_s=1.0", duration=400)
+    files = lp.wait_states(20, track="plant") - lp.shm_before
+    plant = lp.procs["plant"]
+    plant.kill()
+    assert plant.wait(10) == -signal.SIGKILL
+    for name in ("controller", "filter", "recorder"):
+        _wait_until(lambda name=name: "plant_lost:" in lp.log(name), 30, f"{name} reports the plant lost")
+    assert lp.stop("recorder") == 0
+    assert lp.stop("controller") == 0 and lp.stop("filter") == 0
+    for name in ("controller", "filter", "recorder"):
+        assert lp.log(name).count("plant_lost:") == 1, lp.log(name)  # reported once
+    contents = read_bag(lp.bag, decode=False)
+    assert not contents.truncated and "rta_attitude" in contents.metadata  # closed cleanly
+    states, commands = _stamps(lp.bag, "state"), _stamps(lp.bag, "torque_cmd")
+    assert len(states) >= 20 and len(commands) == len(set(commands)) and set(commands) <= set(states)
+    assert contents.counts[f"{NS}/torque_cmd"] == lp.published("filter")["torque_cmd"]  # nothing lost
+    _clean_shm(files)
+
+
+@pytest.mark.slow
+def test_filter_killed_in_real_time_the_plant_falls_back_every_step(loop_factory: Any) -> None:
+    """SIGKILL of the filter while the plant steps in real time: every step after it is a counted
+    deadline miss with the zero fallback, the run completes on time and the bag is whole."""
+    lp = loop_factory("stepping=realtime", "real_time_factor=10", "deadline_fallback=zero", "stop_timeout_s=1.0",
+                      duration=100)
+    files = lp.wait_states(20, track="filter") - lp.shm_before
+    lp.procs["filter"].kill()
+    assert lp.procs["filter"].wait(10) == -signal.SIGKILL
+    killed_at = lp.states()
+    assert lp.wait("plant", "recorder") == {"plant": 0, "recorder": 0}, lp.log("plant")
+    assert lp.stop("controller") == 0
+    state, run = _final_run_status(lp.bag)
+    assert state == topics.RUN_DONE and run["step"] == 100
+    assert run["deadline_misses"] >= 100 - killed_at - 2 and run["fallback_zero"] == run["deadline_misses"]
+    contents = read_bag(lp.bag, decode=False)
+    assert not contents.truncated and contents.counts[f"{NS}/state"] == 101
+    assert max(_stamps(lp.bag, "torque_cmd")) < (killed_at + 2) * S  # nothing answered after the kill
+    _clean_shm(files)
+
+
+@pytest.mark.slow
+def test_a_filter_that_hangs_is_covered_by_the_plants_deadline(loop_factory: Any) -> None:
+    """The filter process stops (SIGSTOP: a call that takes too long, a hung process) for several
+    command timeouts: the lockstep plant applies its deadline fallback each time (counted) and goes on;
+    when the filter runs again (SIGCONT) its stale answers are dropped and the loop resumes through it."""
+    lp = loop_factory("command_timeout_s=0.5", "deadline_fallback=zero", "stop_timeout_s=1.0", duration=60)
+    lp.wait_states(20)
+    lp.procs["filter"].send_signal(signal.SIGSTOP)
+    try:
+        _wait_until(lambda: "deadline_misses: no torque_cmd" in lp.log("plant"), 60, "the plant's first deadline miss")
+        time.sleep(2.0)  # the hang goes on for 4 more command timeouts (the fault's length, not a synchronisation)
+    finally:
+        lp.procs["filter"].send_signal(signal.SIGCONT)
+    assert lp.wait("plant", "recorder") == {"plant": 0, "recorder": 0}, lp.log("plant")
+    assert lp.stop("controller") == 0 and lp.stop("filter") == 0
+    state, run = _final_run_status(lp.bag)
+    assert state == topics.RUN_DONE and run["step"] == 60
+    assert run["deadline_misses"] >= 1 and run["fallback_zero"] == run["deadline_misses"]
+    assert max(_stamps(lp.bag, "torque_cmd")) == 60 * S  # the filter answered the final state: it resumed
+    _assert_commands_valid(lp.bag)
+
+
+@pytest.mark.slow
+def test_clock_jumping_back_resets_the_stamp_screens_once(tmp_path: Path) -> None:
+    """A replay that starts over: /clock jumps back. Controller and filter say so once, reset their stamp
+    screens and answer the second pass's states (same stamps as the first) as new."""
+    parser = argparse.ArgumentParser()
+    launcher.add_arguments(parser)
+    plan = launcher.plan(parser.parse_args(["--bag", str(tmp_path / "unused.mcap"), "-p", "record=false",
+                                            "-p", "stop_timeout_s=1.0"]))
+    env = {**os.environ, **plan.env, "PYTHONUNBUFFERED": "1", "RCUTILS_COLORIZED_OUTPUT": "0"}
+    logs = {role: tmp_path / f"{role}.log" for role in (topics.CONTROLLER, topics.FILTER)}
+    procs = {}
+    for role, path in logs.items():
+        with path.open("wb") as log:
+            procs[role] = subprocess.Popen(plan.commands[role], stdout=log, stderr=subprocess.STDOUT, env=env,
+                                           start_new_session=True)
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    node = rclpy.create_node("plant_stand_in", namespace=NS, context=context)
+    executor = make_executor("single", context=context)
+    executor.add_node(node)
+    lease = next(k.default for k in topics.KNOBS if k.name == "liveliness_lease_s")  # the nodes request it
+    clock = node.create_publisher(topics.msg_class("rosgraph_msgs/msg/Clock"), "/clock",
+                                  topics.qos_profile(topics.STREAM_QOS))
+    state = node.create_publisher(topics.msg_class(topics.TOPICS[topics.STATE].type_name), topics.STATE,
+                                  topics.qos_profile(topics.STATE_QOS, lease))
+    answered: list[int] = []
+    spec = topics.TOPICS[topics.TORQUE_CMD]
+    node.create_subscription(topics.msg_class(spec.type_name), spec.name,
+                             lambda m: answered.append(convert.stamp_ns(m.header.stamp)), topics.qos_profile(spec.qos))
+
+    def spin_until(cond: Any, what: str, timeout_s: float = 60.0) -> None:
+        deadline = time.monotonic() + timeout_s
+        while not cond():
+            assert time.monotonic() < deadline, f"{what} within {timeout_s:g} s"
+            for p in procs.values():
+                assert p.poll() is None, [path.read_text() for path in logs.values()]
+            executor.spin_once(timeout_sec=0.05)
+
+    x = CFG.scenario("paper-example").x0
+    try:
+        spin_until(lambda: state.get_subscription_count() >= 2 and clock.get_subscription_count() >= 2
+                   and node.count_publishers(f"{NS}/{topics.TORQUE_CMD}") >= 1, "controller and filter matched")
+        for lap in range(2):
+            for k in range(5):
+                clock.publish(convert.clock_msg(k * S))  # k = 0 of the second lap: the clock jumps back
+                if lap == 1 and k == 0:
+                    spin_until(lambda: all("jumped back" in p.read_text() for p in logs.values()),
+                               "both nodes notice the jump")
+                state.publish(convert.state_msg(x, k * S))
+                spin_until(lambda lap=lap, k=k: len(answered) == 5 * lap + k + 1, f"the answer to t = {k} s")
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+        rclpy.try_shutdown(context=context)
+        for p in procs.values():
+            p.send_signal(signal.SIGINT)
+        codes = [p.wait(30) for p in procs.values()]
+    assert answered == [k * S for k in range(5)] * 2
+    assert codes == [0, 0]
+    for path in logs.values():
+        text = path.read_text()
+        assert text.count("jumped back") == 1 and "state_duplicate" not in text and "state_out_of_order" not in text, \
+            text
+
+
 # ----------------------------------------------------------------------------- configuration errors
 
 

@@ -43,13 +43,14 @@ class ControllerNode(RtaNode):
         self.overrides: list[tuple[int, np.ndarray]] = []  # (stamp ns, q_c), sorted by stamp
         self.order = StampOrder()
         spec = topics.TOPICS[topics.TORQUE_DES]
-        pub = self.create_publisher(topics.msg_class(spec.type_name), spec.name, topics.qos_profile(spec.qos))
+        pub = self.create_publisher(topics.msg_class(spec.type_name), spec.name, self.qos(topics.TORQUE_DES))
         self.out = self.gate(topics.TORQUE_DES, pub)
-        for name, callback in ((topics.STATE, self._on_state), (topics.ATTITUDE_COMMAND, self._on_command)):
-            spec = topics.TOPICS[name]
-            self.create_subscription(topics.msg_class(spec.type_name), spec.name, callback,
-                                     topics.qos_profile(spec.qos))
+        self.subscribe(topics.STATE, self._on_state, peer=topics.PLANT)
+        self.subscribe(topics.ATTITUDE_COMMAND, self._on_command)
         self.get_logger().info(f"scenario {self.scenario.name}: controller {self.scenario.controller}")
+
+    def on_clock_jump(self) -> None:
+        self.order.reset()
 
     def reference(self, t_ns: int) -> np.ndarray:
         """q_c (4,) in force at t: the latest operator command stamped <= t, else the schedule."""

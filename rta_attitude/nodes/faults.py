@@ -90,5 +90,9 @@ class StampOrder:
         if self.newest_ns is None or t_ns > self.newest_ns:
             self.newest_ns = t_ns
 
+    def reset(self) -> None:
+        """Forget every stamp taken (the clock started over: any stamp is new again)."""
+        self.newest_ns = None
+
 
 __all__ = ["FaultLog", "Logger", "StampOrder"]

@@ -78,13 +78,13 @@ class FilterNode(RtaNode):
         """A torque_des arrived: from now on a missing one is a fault (desired_timeout_s)."""
         self.out: dict[str, Any] = {}
         for spec in topics.published(topics.FILTER, self.rta):
-            pub = self.create_publisher(topics.msg_class(spec.type_name), spec.name, topics.qos_profile(spec.qos))
+            pub = self.create_publisher(topics.msg_class(spec.type_name), spec.name, self.qos(spec.name))
             self.out[spec.name] = self.gate(spec.name, pub)
-        callbacks = {topics.STATE: self._on_state, topics.TORQUE_DES: self._on_desired}
+        callbacks = {topics.STATE: (self._on_state, topics.PLANT), topics.TORQUE_DES: (self._on_desired, "")}
         self.subs: dict[str, Any] = {}
         for spec in topics.subscribed(topics.FILTER, self.rta):
-            self.subs[spec.name] = self.create_subscription(topics.msg_class(spec.type_name), spec.name,
-                                                            callbacks[spec.name], topics.qos_profile(spec.qos))
+            callback, peer = callbacks[spec.name]
+            self.subs[spec.name] = self.subscribe(spec.name, callback, peer=peer)
         if self.rta:
             self.wall_timer(min(EXPIRY_POLL_S, self.knobs["desired_timeout_s"] / 4), self._expire)
             self.get_logger().info(f"filter preset {self.cfg.filter.preset}, fallback {self.cfg.filter.fallback}, "
@@ -153,6 +153,21 @@ class FilterNode(RtaNode):
         """The controller was heard and its torque_des publisher has left (no match any more)."""
         sub = self.subs.get(topics.TORQUE_DES)
         return self.heard_controller and sub is not None and sub.get_publisher_count() == 0
+
+    def on_peer_lost(self, peer: str) -> None:
+        if peer == topics.PLANT:  # no command for a dead plant: what waits for torque_des is dropped
+            self.counts["unpaired_dropped"] += len(self.states)
+            self.states.clear()
+            self.desired.clear()
+
+    def on_clock_jump(self) -> None:
+        """A replay started over: every stamp is new again; what waited for a partner is of the old pass."""
+        self.state_order.reset()
+        self.desired_order.reset()
+        self.counts["unpaired_dropped"] += len(self.states) + len(self.desired)
+        self.states.clear()
+        self.desired.clear()
+        self.answered_ns = -1
 
     def _expire(self) -> None:
         """States without torque_des past desired_timeout_s (or with the controller gone): u_des = 0."""

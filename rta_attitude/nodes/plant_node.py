@@ -74,13 +74,10 @@ class PlantNode(RtaNode):
         self.pending: tuple[int, np.ndarray] | None = None
         self.latency_s: list[float] = []
         self.published: dict[str, int] = {}
-        self.pubs = {name: self.create_publisher(topics.msg_class(spec.type_name), spec.name,
-                                                 topics.qos_profile(spec.qos))
+        self.pubs = {name: self.create_publisher(topics.msg_class(spec.type_name), spec.name, self.qos(name))
                      for name, spec in topics.TOPICS.items() if spec.publisher == topics.PLANT}  # fmt: skip
         self.command_topic = topics.TORQUE_CMD
-        spec = topics.TOPICS[self.command_topic]
-        self.create_subscription(topics.msg_class(spec.type_name), spec.name, self._on_command,
-                                 topics.qos_profile(spec.qos))
+        self.subscribe(self.command_topic, self._on_command)
         self._sent_s = 0.0
         self._progress_s = self.wall_now_s()
         self._ended = False

@@ -55,9 +55,15 @@ def add_metadata(bag: BagWriter, name: str, data: dict[str, str]) -> None:
         bag._writer.add_metadata(name, data)
 
 
-def bag_qos(spec: topics.QosSpec) -> Qos:
-    """The offered QoS profile recorded for `ros2 bag play` (rosbag2 metadata names)."""
-    return Qos(history=spec.history, depth=spec.depth, reliability=spec.reliability, durability=spec.durability)
+def bag_qos(spec: topics.QosSpec, lease_s: float = 0.0) -> Qos:
+    """The offered QoS profile recorded for `ros2 bag play` (rosbag2 metadata names), with the run's
+    liveliness lease where the topic has one (a replay then matches the nodes' readers)."""
+    lease = (0, 0)
+    if spec.liveliness and lease_s > 0:
+        ns = round(lease_s * 1e9)
+        lease = (ns // 1_000_000_000, ns % 1_000_000_000)
+    return Qos(history=spec.history, depth=spec.depth, reliability=spec.reliability, durability=spec.durability,
+               liveliness="automatic" if lease != (0, 0) else "system_default", liveliness_lease_duration=lease)
 
 
 class RecorderNode(RtaNode):
@@ -83,12 +89,12 @@ class RecorderNode(RtaNode):
         specs = {self.resolve_topic_name(spec.name): spec for spec in topics.recorded(self.rta)}
         for name, spec in specs.items():
             self.received[name] = 0
-            self.create_subscription(topics.msg_class(spec.type_name), spec.name, partial(self._on_message, name),
-                                     topics.qos_profile(spec.qos), raw=True)
+            self.subscribe(spec.name, partial(self._on_message, name), raw=True,
+                           peer=topics.PLANT if spec.name == topics.STATE else "")
         # the file is created last, so a node that fails to start leaves no half-written bag
         bag = BagWriter(path, overwrite=self.knobs["bag_overwrite"], chunk_size=self.knobs["bag_chunk_kb"] * 1024)
         for name, spec in specs.items():
-            bag.add_topic(name, spec.type_name, bag_qos(spec.qos))
+            bag.add_topic(name, spec.type_name, bag_qos(spec.qos, self.knobs["liveliness_lease_s"]))
         self.bag = bag
         self.get_logger().info(f"recording {len(self.received)} topics to {path}")
 
@@ -150,8 +156,10 @@ class RecorderNode(RtaNode):
         unknown = any(t not in expected for t in self.received)
         settled = now - self._last_s >= self.knobs["drain_quiet_s"]
         if self.stopping and not self._terminal:
-            # stopped before the plant's final run_status: wait for it while the plant is still there
-            waiting += [self.status_topic] if self.count_publishers(self.status_topic) > 0 else []
+            # stopped before the plant's final run_status: wait for it while the plant is still there (a
+            # killed plant stays matched until Fast DDS's participant lease expires: its liveliness tells)
+            if self.count_publishers(self.status_topic) > 0 and topics.PLANT not in self.lost:
+                waiting.append(self.status_topic)
         limit = self.knobs["stop_timeout_s"] if self.stopping else self.knobs["drain_timeout_s"]
         timed_out = now - self._done_s > limit
         if not timed_out and (waiting or not (settled or (not short and not unknown))):

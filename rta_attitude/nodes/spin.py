@@ -25,14 +25,20 @@ from __future__ import annotations
 import signal
 import sys
 from collections.abc import Callable, Sequence
+from functools import partial
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import rclpy
-from rclpy.clock import Clock, ClockType
+from rclpy.clock import Clock, ClockType, JumpThreshold, TimeJump
 from rclpy.context import Context
 from rclpy.duration import Duration
+from rclpy.event_handler import (
+    QoSLivelinessChangedInfo,
+    QoSRequestedIncompatibleQoSInfo,
+    SubscriptionEventCallbacks,
+)
 from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.publisher import Publisher
@@ -86,6 +92,60 @@ class RtaNode(Node):
         """Fault counters by kind (FaultLog increments them; nodes publish or log them)."""
         self.faults = FaultLog(self.get_logger(), self.counts, self.on_fault_change)
         self.gates: dict[str, PublishGate] = {}
+        self.lost: set[str] = set()
+        """Peers (roles) whose writer lost its liveliness and has not shown a sign of life since."""
+        self.counts.setdefault("clock_jumps", 0)
+        # a backward jump of /clock (a replay that starts over) resets the stamp screens
+        self._jump_handle = self.get_clock().create_jump_callback(
+            JumpThreshold(min_forward=None, min_backward=Duration(nanoseconds=-1), on_clock_change=False),
+            post_callback=self._on_clock_jump)
+
+    def qos(self, topic: str) -> Any:
+        """The QoS profile of one of the run's topics, with this run's liveliness lease."""
+        return topics.qos_profile(topics.TOPICS[topic].qos, self.knobs["liveliness_lease_s"])
+
+    def subscribe(self, topic: str, callback: Callable[[Any], None], peer: str = "", raw: bool = False) -> Any:
+        """Subscribe to one of the run's topics; with `peer` (the writer's role), report that peer lost once
+        when its writer loses liveliness (`on_peer_lost`), and back when it shows a sign of life."""
+        spec = topics.TOPICS[topic]
+        events = SubscriptionEventCallbacks(
+            liveliness=partial(self._on_liveliness, peer) if peer else None,
+            incompatible_qos=partial(self._on_incompatible, spec.name))
+        return self.create_subscription(topics.msg_class(spec.type_name), spec.name, callback, self.qos(topic),
+                                        raw=raw, event_callbacks=events)
+
+    def _on_incompatible(self, topic: str, info: QoSRequestedIncompatibleQoSInfo) -> None:
+        policy = getattr(info.last_policy_kind, "name", str(info.last_policy_kind))
+        hint = (f" (this node requests a liveliness lease of {self.knobs['liveliness_lease_s']:g} s: give the "
+                "writer an automatic lease at most that long, or set liveliness_lease_s:=0 here)"
+                if "LIVELINESS" in policy else "")
+        self.faults.fault("incompatible_qos", f"a writer of {self.resolve_topic_name(topic)} offers an incompatible "
+                          f"QoS ({policy}) and is not matched{hint}")
+
+    def _on_liveliness(self, peer: str, info: QoSLivelinessChangedInfo) -> None:
+        if info.not_alive_count_change > 0 and info.alive_count == 0:
+            if peer not in self.lost:
+                self.lost.add(peer)
+                self.faults.fault(f"{peer}_lost", f"the {peer} shows no sign of life for "
+                                  f"{self.knobs['liveliness_lease_s']:g} s (killed or hung)")
+                self.on_peer_lost(peer)
+        elif info.alive_count_change > 0 and peer in self.lost:
+            self.lost.discard(peer)
+            self.faults.clear(f"{peer}_lost")
+
+    def on_peer_lost(self, peer: str) -> None:
+        """A peer's writer lost its liveliness (reported once by then). Nodes override it."""
+
+    def _on_clock_jump(self, jump: TimeJump) -> None:
+        if jump.delta.nanoseconds >= 0:
+            return
+        self.counts["clock_jumps"] += 1
+        self.get_logger().info(f"/clock jumped back by {-jump.delta.nanoseconds / 1e9:g} s (a replay started "
+                               "over?): stamp screens reset")
+        self.on_clock_jump()
+
+    def on_clock_jump(self) -> None:
+        """/clock jumped backwards: reset stamp screens and pending work. Nodes override it."""
 
     def wall_timer(self, period_s: float, callback: Callable[[], None]) -> Timer:
         """A timer on the steady clock (independent of use_sim_time)."""

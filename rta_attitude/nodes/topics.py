@@ -57,28 +57,44 @@ class QosSpec:
     durability: str = "volatile"
     history: str = "keep_all"
     depth: int = 0
+    liveliness: bool = False
+    """Automatic liveliness with the lease of the `liveliness_lease_s` knob (writers and the run's readers
+    alike): a reader learns within the lease that a writer's process died (SIGKILL) or hangs, where
+    without a lease it keeps the writer matched until Fast DDS's participant lease (20 s) expires."""
 
 
 STREAM_QOS = QosSpec()
 """Lockstep and recorded data: reliable, keep all, volatile."""
+STATE_QOS = QosSpec(liveliness=True)
+"""`state`: as STREAM_QOS, plus automatic liveliness with the run's lease, so that controller, filter and
+recorder learn within the lease that the plant died. Only `state` has it: a reader that requests a lease
+does not match a writer without one, and torque_des must match any primary controller's writer (the
+filter covers a dead controller with `desired_timeout_s`)."""
 STATUS_QOS = QosSpec(durability="transient_local", history="keep_last", depth=10)
 """run_status: late joiners get the latest statuses."""
 COMMAND_QOS = QosSpec(history="keep_last", depth=10)
 """attitude_command reader: reliable, volatile (accepts volatile and latched writers)."""
 
 
-def qos_profile(spec: QosSpec) -> Any:
-    """The rclpy QoSProfile of a QosSpec (imports rclpy)."""
-    from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+def qos_profile(spec: QosSpec, lease_s: float = 0.0) -> Any:
+    """The rclpy QoSProfile of a QosSpec (imports rclpy); `lease_s` > 0 sets automatic liveliness with
+    that lease on specs that have `liveliness` (a reader's requested lease must be >= the writer's, so
+    every node of a run uses the same knob)."""
+    from rclpy.duration import Duration
+    from rclpy.qos import DurabilityPolicy, HistoryPolicy, LivelinessPolicy, QoSProfile, ReliabilityPolicy
 
     keep_all = spec.history == "keep_all"
-    return QoSProfile(
+    profile = QoSProfile(
         history=HistoryPolicy.KEEP_ALL if keep_all else HistoryPolicy.KEEP_LAST,
         depth=max(spec.depth, 1),
         reliability=ReliabilityPolicy.RELIABLE if spec.reliability == "reliable" else ReliabilityPolicy.BEST_EFFORT,
         durability=(DurabilityPolicy.TRANSIENT_LOCAL if spec.durability == "transient_local"
                     else DurabilityPolicy.VOLATILE),
     )
+    if spec.liveliness and lease_s > 0:
+        profile.liveliness = LivelinessPolicy.AUTOMATIC
+        profile.liveliness_lease_duration = Duration(nanoseconds=round(lease_s * 1e9))
+    return profile
 
 
 # ----------------------------------------------------------------------------- topics
@@ -124,7 +140,7 @@ TOPICS: dict[str, TopicSpec] = {
     for t in (
         TopicSpec(CLOCK, "rosgraph_msgs/msg/Clock", STREAM_QOS, PLANT, _ALL,
                   "simulation time t_k, one per step (nodes run with use_sim_time)"),
-        TopicSpec(STATE, "sensor_msgs/msg/JointState", STREAM_QOS, PLANT,
+        TopicSpec(STATE, "sensor_msgs/msg/JointState", STATE_QOS, PLANT,
                   ((CONTROLLER, False, False), (FILTER, True, False), *_ALL),
                   "the whole state: name = STATE_NAMES, position = values (model units), stamp = t_k"),
         TopicSpec(ATTITUDE_COMMAND, "geometry_msgs/msg/QuaternionStamped", COMMAND_QOS, "",
@@ -207,7 +223,7 @@ CONSTRAINT_STATUS_PREFIX = ""
 INPUT_COUNTERS: tuple[str, ...] = (
     "state_rejected", "state_renormalised", "state_stale", "state_duplicate", "state_out_of_order",
     "torque_des_rejected", "torque_des_duplicate", "torque_des_out_of_order", "torque_des_late",
-    "torque_des_missing", "unpaired_dropped", "output_guard",
+    "torque_des_missing", "unpaired_dropped", "output_guard", "plant_lost", "clock_jumps",
 )  # fmt: skip
 """The filter node's input counters (running totals, in every filter_status):
 
@@ -225,7 +241,11 @@ INPUT_COUNTERS: tuple[str, ...] = (
   or at once when the controller's publisher is gone);
 - `unpaired_dropped`: unpaired messages dropped beyond MAX_PENDING per topic; messages whose stamp
   itself is invalid are counted as `*_rejected` and dropped;
-- `output_guard`: a filter output that was not finite or not inside U, replaced by u = 0 (never expected).
+- `output_guard`: a filter output that was not finite or not inside U, replaced by u = 0 (never expected);
+- `plant_lost`: the plant's `state` writer lost its liveliness (no sign of life for `liveliness_lease_s`:
+  the process was killed or hangs); the states that wait for their torque_des are dropped (no command is
+  sent to a dead plant);
+- `clock_jumps`: /clock jumped backwards (a replay restarted): the stamp screens were reset.
 """
 INPUT_SOURCE_KEY = "u_des_source"
 """filter_status key: where this call's u_des came from: `torque_des`, or `missing` (u_des = 0 after a
@@ -306,6 +326,10 @@ KNOBS: tuple[Knob, ...] = (
          "what the node published (recorder: for the last messages) [s]"),
     Knob("executor", "events", _EVERY, "events: rclpy's C++ EventsExecutor; single: SingleThreadedExecutor",
          ("events", "single")),
+    Knob("liveliness_lease_s", 2.0, _EVERY,
+         "automatic liveliness lease of `state` (the plant offers it, its readers request it): a plant that "
+         "shows no sign of life for this long (killed, hung) is reported lost once; 0 = no lease. Readers "
+         "do not match a writer with a longer lease or none (a one-line warning says so) [s]"),
     Knob("quaternion_tolerance", 0.01, (CONTROLLER, FILTER),
          "state and attitude_command: | |q| - 1 | up to this is renormalised (counted), beyond it rejected",
          positive=True, maximum=0.5),
@@ -352,7 +376,8 @@ __all__ = [
     "FILTER_STATUS", "HILL_FRAME", "INPUT_COUNTERS", "INPUT_SOURCE_KEY", "INSPECTION_TOPICS", "KNOBS", "MODULES",
     "NODE_NAMES", "NO_FALLBACK", "ODOMETRY", "PACKAGE", "PLANT", "PLANT_COUNTERS", "QP_KEYS", "QP_STATUS_NAME",
     "RECORDER", "RUN_DONE", "RUN_FAILED", "RUN_INTERRUPTED", "RUN_RUNNING", "RUN_STATUS",
-    "RUN_STATUS_NAME", "STATE", "STATUS_HARDWARE_ID", "STATUS_QOS", "STREAM_QOS", "SUN_VECTOR", "SYSTEM_PARAMETERS",
+    "RUN_STATUS_NAME", "STATE", "STATE_QOS", "STATUS_HARDWARE_ID", "STATUS_QOS", "STREAM_QOS", "SUN_VECTOR",
+    "SYSTEM_PARAMETERS",
     "TEMPERATURE", "TOPICS", "TORQUE_APPLIED", "TORQUE_CMD", "TORQUE_DES", "Knob", "QosSpec", "TopicSpec",
     "expected_readers", "knobs_for", "msg_class", "published", "qos_profile", "recorded", "subscribed",
 ]  # fmt: skip
