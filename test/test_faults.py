@@ -552,12 +552,20 @@ def test_filter_killed_and_restarted_the_plant_falls_back_and_the_loop_resumes(l
 
 
 @pytest.mark.slow
-def test_controller_killed_the_filter_keeps_the_spacecraft_safe_with_u_des_zero(loop_factory: Any) -> None:
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGKILL], ids=["sigterm", "sigkill"])
+def test_controller_killed_the_filter_keeps_the_spacecraft_safe_with_u_des_zero(loop_factory: Any,
+                                                                                sig: signal.Signals) -> None:
+    """SIGTERM: the controller leaves (its publisher unmatches) and the filter answers at once; SIGKILL: it
+    stays matched until Fast DDS's participant lease expires, and each state waits desired_timeout_s."""
     from rta_attitude.analysis import load_run, summarize_run
 
     lp = loop_factory("desired_timeout_s=0.2", "command_timeout_s=3.0", "stop_timeout_s=1.0")
     lp.wait_states(25)
-    assert lp.stop("controller", signal.SIGTERM) == 0
+    if sig == signal.SIGKILL:
+        lp.procs["controller"].kill()
+        assert lp.procs["controller"].wait(10) == -signal.SIGKILL
+    else:
+        assert lp.stop("controller", signal.SIGTERM) == 0
     assert lp.wait("plant", "recorder") == {"plant": 0, "recorder": 0}, lp.log("plant")
     assert lp.stop("filter") == 0
     state, run = _final_run_status(lp.bag)
@@ -565,7 +573,8 @@ def test_controller_killed_the_filter_keeps_the_spacecraft_safe_with_u_des_zero(
     recs = _status_records(lp.bag)
     assert len(recs) == 101  # the filter answered every state
     missing = [i for i, r in enumerate(recs) if r[topics.INPUT_SOURCE_KEY] == "missing"]
-    sent = lp.published("controller")["torque_des"]
+    sent = (lp.published("controller")["torque_des"] if sig == signal.SIGTERM
+            else read_bag(lp.bag, decode=False).counts[f"{NS}/torque_des"])
     assert 25 <= sent < 101 and set(range(sent, 101)) <= set(missing)  # after its last message: u_des = 0
     assert recs[-1]["torque_des_missing"] == len(missing) and run["deadline_misses"] == 0
     assert all(recs[i]["u_des_x"] == recs[i]["u_des_y"] == recs[i]["u_des_z"] == 0.0 for i in missing)
