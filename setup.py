@@ -26,11 +26,11 @@ setup(
     tests_require=["pytest"],
     entry_points={
         "console_scripts": [
-            "rta-attitude = rta_attitude.cli:main",
-            "plant_node = rta_attitude.nodes.plant_node:main",
-            "pd_controller_node = rta_attitude.nodes.controller_node:main",
-            "asif_filter_node = rta_attitude.nodes.filter_node:main",
-            "bag_recorder_node = rta_attitude.nodes.recorder_node:main",
+            "rta-attitude = rta_attitude.cli.main:main",
+            "plant_node = rta_attitude.ros.plant_node:main",
+            "pd_controller_node = rta_attitude.ros.controller_node:main",
+            "asif_filter_node = rta_attitude.ros.filter_node:main",
+            "bag_recorder_node = rta_attitude.ros.recorder_node:main",
         ],
     },
 )

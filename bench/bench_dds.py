@@ -2,7 +2,7 @@
 
     python bench/bench_dds.py [--duration 2000] [--no-rta] [--repeat 1] [--executor events|single]
 
-Runs `paper-example` with `rta_attitude.launcher` (four OS processes, Fast DDS shared memory,
+Runs `paper-example` with `rta_attitude.cli.launcher` (four OS processes, Fast DDS shared memory,
 recorder on), then reports:
 
 - DDS loop wall time: from the plant's first state to its final run_status (the plant measures it),
@@ -34,11 +34,12 @@ os.environ.setdefault("ROS_DOMAIN_ID", str(random.SystemRandom().randint(40, 100
 os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 os.environ.setdefault("AMENT_PREFIX_PATH", sys.prefix)
 
-from rta_attitude import config, launcher
-from rta_attitude.asif import AsifFilter
-from rta_attitude.bag import read_bag
-from rta_attitude.nodes import convert, topics
-from rta_attitude.simulation import ClosedLoop, integrate
+from rta_attitude import config
+from rta_attitude.cli import launcher
+from rta_attitude.filter.asif import AsifFilter
+from rta_attitude.recording.bag import read_bag
+from rta_attitude.ros import convert, topics
+from rta_attitude.simulation.closed_loop import ClosedLoop, integrate
 
 
 def core_costs(cfg: config.Config, duration_s: float, rta: bool) -> dict[str, float]:

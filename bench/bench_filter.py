@@ -14,8 +14,8 @@ import time
 import numpy as np
 
 from rta_attitude import config
-from rta_attitude.asif import AsifFilter, compile_kernels
-from rta_attitude.simulation import ClosedLoop
+from rta_attitude.filter.asif import AsifFilter, compile_kernels
+from rta_attitude.simulation.closed_loop import ClosedLoop
 
 
 def stats(us: np.ndarray) -> str:

@@ -25,8 +25,11 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from rta_attitude import batch, config, montecarlo, simulation  # noqa: E402
-from rta_attitude.params import Scenario  # noqa: E402
+from rta_attitude import config  # noqa: E402
+from rta_attitude.config.schema import Scenario  # noqa: E402
+from rta_attitude.montecarlo import batch  # noqa: E402
+from rta_attitude.montecarlo import campaign as montecarlo  # noqa: E402
+from rta_attitude.simulation import closed_loop as simulation  # noqa: E402
 
 
 def check_against_single_runs(cfg: config.Config, x0: np.ndarray, duration_s: float) -> float:

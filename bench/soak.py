@@ -58,7 +58,7 @@ def _role(pid: int) -> str | None:
     except OSError:
         return None
     for name, module in zip(NODES, ("plant_node", "controller_node", "filter_node", "recorder_node")):
-        if f"rta_attitude.nodes.{module}" in cmd:
+        if f"rta_attitude.ros.{module}" in cmd:
             return name
     return None
 
@@ -98,17 +98,18 @@ def main(argv: list[str] | None = None) -> int:
         print(f"soak: the launch failed (exit {proc.returncode})")
         return 1
     sys.path.insert(0, str(REPO))
-    from rta_attitude.bag import read_bag
-    from rta_attitude.nodes import convert
+    from rta_attitude.recording.bag import read_bag
+    from rta_attitude.ros import convert
 
     contents = read_bag(bag, decode=False)
-    counts = {t.rsplit("/", 1)[-1]: n for t, n in contents.counts.items()}
+    counts = {t.rsplit("/", 1)[-1]: n for t, n in contents.counts.items()}  # topic leaf names, as the nodes log them
     published: dict[str, int] = {}
     for name in NODES[:3]:
         text = (out / "logs" / f"{name}.log").read_text(errors="replace")
         m = re.search(r"published: (.*?); counters", text)
         if m:
-            published.update({t: int(n) for t, n in (i.rsplit(" ", 1) for i in m.group(1).split(", "))})
+            items = (i.rsplit(" ", 1) for i in m.group(1).split(", "))
+            published.update({t.rsplit("/", 1)[-1]: int(n) for t, n in items})
     status = read_bag(bag, topics=["/rta/run_status"]).messages
     state, values = convert.run_status_from_msg(status[-1].message)
     lost = {t: (published[t], counts.get(t, 0)) for t in published if counts.get(t, 0) != published[t]}

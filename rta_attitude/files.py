@@ -14,7 +14,7 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
-from .errors import OutputError
+from rta_attitude.errors import OutputError
 
 
 def _reason(exc: OSError) -> str:

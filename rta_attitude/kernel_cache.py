@@ -1,12 +1,17 @@
 """Keeps numba's on-disk cache of the compiled kernels consistent across source changes.
 
 numba invalidates a cached function when its own source file changes, but not when a function it
-calls from another file changes: after an edit to `active_set.py` (or a `git pull` that brings
-one), `filter_kernel`'s cache would still hold the old solver, linked in, and run it (or crash
-when Python calls the new one: "NRT_adapt_ndarray_to_python: 'descr' is NULL", seen here).
-`drop_stale_caches` hashes the kernel sources and, when the hash differs from the one recorded
-next to the cache, deletes the kernels' cache files so everything recompiles together. It runs
-on package import, before any kernel is called (numba reads its cache at the first call).
+calls from another file changes: after an edit of `filter/active_set.py` (or a `git pull` that
+brings one), `filter/pipeline.py`'s cache would still hold the old solver, linked in, and run it (or
+crash when Python calls the new one: "NRT_adapt_ndarray_to_python: 'descr' is NULL", seen here).
+`drop_stale_caches` hashes the sources of every module with kernels and, when the hash differs from
+the one recorded next to the caches, deletes those modules' cache files so everything recompiles
+together.
+
+Nothing runs at import: the entry points that compile or load kernels call it first (`AsifFilter`,
+the plant node, the launcher, the CLI, the Monte Carlo, the test session). A fresh installation has
+no cache, so only a developer who edits kernel sources and then calls a kernel without one of those
+entry points can meet a stale cache.
 """
 
 from __future__ import annotations
@@ -15,25 +20,33 @@ import hashlib
 import os
 from pathlib import Path
 
-KERNEL_MODULES: tuple[str, ...] = ("active_set", "barrier_rows", "filter_kernel", "plant_kernel")
-"""Modules with numba kernels that call each other."""
 STAMP_NAME = "rta_kernels.sha256"
+PACKAGE_DIR = Path(__file__).resolve().parent
 
 
-def drop_stale_caches(package_dir: Path | None = None) -> bool:
-    """Delete the kernels' numba cache files (<package>/__pycache__/<module>.*.nbi/.nbc) if the
-    kernel sources changed since they were written. Returns True if files were deleted.
-    Does nothing where the cache directory is not writable (numba then caches elsewhere and
-    recompiles after any change of the package files' stamps)."""
-    here = package_dir or Path(__file__).resolve().parent
-    digest = hashlib.sha256()
-    for name in KERNEL_MODULES:
+def kernel_modules(package_dir: Path = PACKAGE_DIR) -> list[Path]:
+    """The package's source files that define numba kernels (they mention `numba.`), sorted."""
+    out = []
+    for path in sorted(package_dir.rglob("*.py")):
         try:
-            digest.update((here / f"{name}.py").read_bytes())
+            if "numba." in path.read_text(errors="replace"):
+                out.append(path)
         except OSError:
-            return False
-    cache = here / "__pycache__"
-    stamp = cache / STAMP_NAME
+            continue
+    return out
+
+
+def drop_stale_caches(package_dir: Path = PACKAGE_DIR) -> bool:
+    """Delete the kernels' numba cache files (<folder>/__pycache__/<module>.*.nbi/.nbc) if any kernel
+    source changed since they were written. Returns True if files were deleted. Does nothing where the
+    package directory is not writable (numba then caches elsewhere and recompiles after any change of
+    the package files' stamps)."""
+    modules = kernel_modules(package_dir)
+    digest = hashlib.sha256()
+    for path in modules:
+        digest.update(str(path.relative_to(package_dir)).encode())
+        digest.update(path.read_bytes())
+    stamp = package_dir / "__pycache__" / STAMP_NAME
     try:
         if stamp.read_text() == digest.hexdigest():
             return False
@@ -41,11 +54,12 @@ def drop_stale_caches(package_dir: Path | None = None) -> bool:
         pass
     dropped = False
     try:
-        cache.mkdir(exist_ok=True)
-        for name in KERNEL_MODULES:
-            for f in list(cache.glob(f"{name}.*.nbi")) + list(cache.glob(f"{name}.*.nbc")):
+        for path in modules:
+            cache = path.parent / "__pycache__"
+            for f in list(cache.glob(f"{path.stem}.*.nbi")) + list(cache.glob(f"{path.stem}.*.nbc")):
                 f.unlink(missing_ok=True)
                 dropped = True
+        stamp.parent.mkdir(exist_ok=True)
         tmp = stamp.with_suffix(f".{os.getpid()}.tmp")
         tmp.write_text(digest.hexdigest())
         tmp.replace(stamp)  # atomic: concurrent processes read a whole stamp or none
@@ -54,4 +68,4 @@ def drop_stale_caches(package_dir: Path | None = None) -> bool:
     return dropped
 
 
-__all__ = ["KERNEL_MODULES", "drop_stale_caches"]
+__all__ = ["PACKAGE_DIR", "STAMP_NAME", "drop_stale_caches", "kernel_modules"]

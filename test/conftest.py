@@ -42,20 +42,20 @@ def pytest_report_header(config: Any) -> str:
 
 @pytest.fixture(scope="session", autouse=True)
 def compiled_kernels() -> float:
-    """The filter's and the plant's numba kernels, compiled (or loaded from numba's cache) once before any test, so
-    the node processes the tests start find them in the cache; returns the seconds it took."""
-    from rta_attitude import config, plant_kernel
-    from rta_attitude.asif import compile_kernels
+    """Every numba kernel, compiled (or loaded from numba's cache, after dropping stale caches) once
+    before any test, so the node processes the tests start find them in the cache; returns the seconds
+    it took."""
+    from rta_attitude import config
+    from rta_attitude.simulation.closed_loop import compile_kernels
 
-    cfg = config.load()
-    return compile_kernels(cfg) + plant_kernel.compile_kernel(cfg)
+    return compile_kernels(config.load())
 
 
 @pytest.fixture(scope="session")
 def paper_reference() -> dict[bool, Any]:
     """{rta: Trajectory} of `paper-example` run in process (ClosedLoop.run), RTA on and off."""
     from rta_attitude import config
-    from rta_attitude.simulation import simulate
+    from rta_attitude.simulation.closed_loop import simulate
 
     cfg = config.load()
     return {rta: simulate(cfg, "paper-example", rta=rta) for rta in (True, False)}

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from rta_attitude.params import Config
-from rta_attitude.state import STATE_SIZE
+from rta_attitude.config.schema import Config
+from rta_attitude.dynamics.state import STATE_SIZE
 
 
 def random_states(rng: np.random.Generator, n: int, cfg: Config) -> np.ndarray:
@@ -20,3 +20,31 @@ def random_states(rng: np.random.Generator, n: int, cfg: Config) -> np.ndarray:
     x[:, 12] = rng.uniform(0, 2 * np.pi, n)
     x[:, 13:19] = rng.normal(size=(n, 6)) * [100, 100, 100, 0.1, 0.1, 0.1]
     return x
+
+
+def to_torque(u: np.ndarray, cfg: Config) -> np.ndarray:
+    """tau = D u, as the nodes convert (rta_attitude.dynamics.spacecraft.wheel_accel_to_torque)."""
+    from rta_attitude.dynamics.spacecraft import wheel_accel_to_torque
+
+    return wheel_accel_to_torque(np.asarray(u, dtype=float), cfg.spacecraft.wheel_inertia_kgm2)
+
+
+def to_wheel_accel(tau: np.ndarray, cfg: Config) -> np.ndarray:
+    """u = tau / D, as the nodes convert."""
+    from rta_attitude.dynamics.spacecraft import torque_to_wheel_accel
+
+    return torque_to_wheel_accel(np.asarray(tau, dtype=float), cfg.spacecraft.wheel_inertia_kgm2)
+
+
+def saturate(u: np.ndarray, cfg: Config) -> np.ndarray:
+    """The actuator's clip at the wheel-acceleration limit."""
+    lim = cfg.limits.wheel_accel_max_rad_s2
+    return np.clip(u, -lim, lim)
+
+
+def integrate(x: np.ndarray, u: np.ndarray, dt_s: float, cfg: Config) -> tuple[np.ndarray, np.ndarray]:
+    """The plant's step of one state (dynamics.spacecraft.integrate with the configuration's record)."""
+    from rta_attitude.dynamics.spacecraft import integrate as step
+    from rta_attitude.dynamics.spacecraft import plant_record
+
+    return step(x, u, dt_s, plant_record(cfg), cfg.substeps)

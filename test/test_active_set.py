@@ -5,13 +5,15 @@ bcaa5df, it matched that solver bit for bit on ~25,000 problems; the port replac
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 import scipy.sparse as sp
 from numpy.typing import NDArray
 
-from rta_attitude import active_set
-from rta_attitude.active_set import (
+from rta_attitude.filter import active_set
+from rta_attitude.filter.active_set import (
     BIG,
     CODE_INFEASIBLE,
     CODE_MAX_ITER,
@@ -25,6 +27,33 @@ from rta_attitude.active_set import (
 )
 
 Array = NDArray[np.float64]
+
+
+def solve_projection_qp(C, lower, upper, z0, max_iter: int = active_set.MAX_ACTIVE_SET_ITER):
+    """`solve` over a batch of K problems (the return contract of the former `batch.solve_projection_qp`).
+
+    Args:
+        C: constraint rows (K, m, n).
+        lower, upper: bounds (K, m), +-BIG where absent.
+        z0: unconstrained minimisers (K, n).
+        max_iter: iterations per round before giving up.
+
+    Returns:
+        (z (K, n), multipliers (K, m) with proxsuite's sign convention, code (K,) int8 0 solved /
+        1 infeasible / 2 too many iterations, iterations (K,) int64).
+    """
+    C = np.ascontiguousarray(C, dtype=np.float64)
+    lower = np.ascontiguousarray(lower, dtype=np.float64)
+    upper = np.ascontiguousarray(upper, dtype=np.float64)
+    z0 = np.ascontiguousarray(z0, dtype=np.float64)
+    K, m, n = C.shape
+    z = np.empty((K, n))
+    mult = np.empty((K, m))
+    code = np.empty(K, dtype=np.int8)
+    iters = np.empty(K, dtype=np.int64)
+    for k in range(K):
+        z[k], mult[k], code[k], iters[k] = active_set.solve(C[k], lower[k], upper[k], z0[k], int(max_iter))
+    return z, mult, code, iters
 
 
 def _random_problems(k: int, seed: int) -> tuple[Array, Array, Array, Array]:
@@ -80,7 +109,7 @@ def _degenerate_problems(k: int, seed: int) -> tuple[Array, Array, Array, Array]
     upper = np.full((k, 6), BIG)
     lower[:, :2] = scale * (1.0 + eps * rng.normal(size=(k, 2)))
     z0 = rng.normal(size=(k, 4)) * 0.3 * scale
-    zs = active_set.solve_projection_qp(C[:, :2], lower[:, :2], upper[:, :2], z0)[0]
+    zs = solve_projection_qp(C[:, :2], lower[:, :2], upper[:, :2], z0)[0]
     lower[:, 2:] = np.einsum("kij,kj->ki", C[:, 2:], zs) + rng.normal(size=(k, 4)) * 1e-12 * scale
     upper[:, 5] = lower[:, 5]
     return C, lower, upper, z0
@@ -167,7 +196,7 @@ def test_matches_quadprog() -> None:
 
 def test_the_batch_wrapper_is_a_loop_of_solve() -> None:
     C, lower, upper, z0 = _dependent_problems(50, 6)
-    z, mult, code, iters = active_set.solve_projection_qp(C, lower, upper, z0)
+    z, mult, code, iters = solve_projection_qp(C, lower, upper, z0)
     for k in range(50):
         one = active_set.solve(C[k], lower[k], upper[k], z0[k], MAX_ACTIVE_SET_ITER)
         np.testing.assert_array_equal(_bits(one[0]), _bits(z[k]))
@@ -245,7 +274,7 @@ def test_dependent_and_nearly_parallel_rows_match_clarabel() -> None:
     from scipy.optimize import linprog
 
     C, lower, upper, z0 = _dependent_problems(600, 8)
-    z, mult, code, _ = active_set.solve_projection_qp(C, lower, upper, z0)
+    z, mult, code, _ = solve_projection_qp(C, lower, upper, z0)
     both_duplicates = both_parallel = checked = infeasible = 0
     for k in range(len(C)):
         ref = _clarabel(C[k], lower[k], upper[k], z0[k])
@@ -276,8 +305,8 @@ def test_zero_padding_changes_nothing() -> None:
     Cp = np.concatenate([C[:, :5], np.zeros((200, 2, 4)), C[:, 5:]], axis=1)
     lp = np.concatenate([lower[:, :5], np.full((200, 2), -BIG), lower[:, 5:]], axis=1)
     up = np.concatenate([upper[:, :5], np.full((200, 2), BIG), upper[:, 5:]], axis=1)
-    a = active_set.solve_projection_qp(C, lower, upper, z0)
-    b = active_set.solve_projection_qp(Cp, lp, up, z0)
+    a = solve_projection_qp(C, lower, upper, z0)
+    b = solve_projection_qp(Cp, lp, up, z0)
     np.testing.assert_array_equal(a[0], b[0])
     np.testing.assert_array_equal(a[1], np.delete(b[1], [5, 6], axis=1))
     np.testing.assert_array_equal(a[2], b[2])
@@ -312,8 +341,9 @@ def test_cached_solver_is_callable_after_the_filter_kernels_loaded(tmp_path) -> 
 
     script = (
         "import numpy as np\n"
-        "from rta_attitude import active_set, config\n"
-        "from rta_attitude.asif import AsifFilter\n"
+        "from rta_attitude import config\n"
+        "from rta_attitude.filter import active_set\n"
+        "from rta_attitude.filter.asif import AsifFilter\n"
         "cfg = config.load()\n"
         "AsifFilter(cfg).filter(cfg.scenario('paper-example').x0, np.zeros(3))\n"
         "z = active_set.solve(np.eye(3), -np.ones(3), np.ones(3), np.array([2.0, 0.0, 0.0]), 100)[0]\n"
@@ -325,28 +355,37 @@ def test_cached_solver_is_callable_after_the_filter_kernels_loaded(tmp_path) -> 
 
 
 def test_stale_kernel_caches_are_dropped_when_any_kernel_source_changes(tmp_path) -> None:
-    from rta_attitude.kernel_cache import KERNEL_MODULES, drop_stale_caches
+    """A change to any kernel source drops every kernel module's numba cache (a caller's cache links its
+    callees in); unchanged sources keep them; other modules' caches are never touched."""
+    from rta_attitude.kernel_cache import drop_stale_caches, kernel_modules
 
-    cache = tmp_path / "__pycache__"
-    cache.mkdir()
-    for name in KERNEL_MODULES:
-        (tmp_path / f"{name}.py").write_text(f"# {name}\n")
+    for rel in ("filter/active_set.py", "filter/pipeline.py", "constraints/rows.py"):
+        (tmp_path / rel).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / rel).write_text(f"import numba.core  # {rel}\n")
+    (tmp_path / "files.py").write_text("# no kernels here\n")
+    assert [p.relative_to(tmp_path).as_posix() for p in kernel_modules(tmp_path)] == [
+        "constraints/rows.py", "filter/active_set.py", "filter/pipeline.py"]
 
-    def cache_files() -> list[str]:
-        for name in KERNEL_MODULES:
+    def caches() -> list[Path]:
+        return sorted(p for p in tmp_path.rglob("__pycache__/*") if p.suffix in (".nbi", ".nbc"))
+
+    def write_caches() -> list[Path]:
+        for path in kernel_modules(tmp_path):
+            (path.parent / "__pycache__").mkdir(exist_ok=True)
             for ext in ("nbi", "nbc"):
-                (cache / f"{name}.solve-1.py311.{ext}").touch()
-        return sorted(p.name for p in cache.iterdir() if p.suffix in (".nbi", ".nbc"))
+                (path.parent / "__pycache__" / f"{path.stem}.solve-1.py311.{ext}").touch()
+        return caches()
 
-    assert cache_files() and drop_stale_caches(tmp_path)  # no stamp yet: dropped, stamp written
-    assert not any(p.suffix in (".nbi", ".nbc") for p in cache.iterdir())
-    written = cache_files()
-    assert not drop_stale_caches(tmp_path)  # same sources: the cache stays
-    assert sorted(p.name for p in cache.iterdir() if p.suffix in (".nbi", ".nbc")) == written
-    (tmp_path / "active_set.py").write_text("# active_set, edited\n")  # a callee changes
+    assert write_caches() and drop_stale_caches(tmp_path)  # no stamp yet: dropped, stamp written
+    assert not caches()
+    written = write_caches()
+    assert not drop_stale_caches(tmp_path)  # same sources: the caches stay
+    assert caches() == written
+    (tmp_path / "filter" / "active_set.py").write_text("import numba.core  # edited\n")  # a callee changes
     assert drop_stale_caches(tmp_path)
-    assert not any(p.suffix in (".nbi", ".nbc") for p in cache.iterdir())
-    (cache / "other_module.f-1.py311.nbi").touch()  # other modules' caches are not touched
-    (tmp_path / "barrier_rows.py").write_text("# edited\n")
+    assert not caches()
+    other = tmp_path / "__pycache__" / "files.f-1.py311.nbi"
+    other.touch()  # a module without kernels: not touched
+    (tmp_path / "constraints" / "rows.py").write_text("import numba.core  # edited again\n")
     drop_stale_caches(tmp_path)
-    assert (cache / "other_module.f-1.py311.nbi").exists()
+    assert other.exists()

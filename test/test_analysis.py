@@ -1,8 +1,8 @@
-"""rta_attitude.analysis: bag -> series and summary, checked against the in-process run.
+"""rta_attitude.recording.analysis: bag -> series and summary, checked against the in-process run.
 
 Bags are written here the way the nodes publish and the recorder records a lockstep run: messages
 built by the nodes' own converters (nodes/convert.py) from an in-process ClosedLoop run, in the
-order the nodes publish them, into rta_attitude.bag.BagWriter; one bag is written instead with the
+order the nodes publish them, into rta_attitude.recording.bag.BagWriter; one bag is written instead with the
 independent `rosbags` writer and serializer. The summary of each bag must equal `simulate`'s
 summary of the same run (metrics.summarize_trajectory), key by key and value by value, apart from
 the analysis' own `bag` section. Bad inputs go through the real CLI in subprocesses. No mocks.
@@ -22,13 +22,15 @@ from typing import Any
 import numpy as np
 import pytest
 
-from rta_attitude import analysis, config, model
-from rta_attitude.bag import BagWriter, Qos
-from rta_attitude.cli import main as cli_main
-from rta_attitude.cli import slacked_names
+from rta_attitude import config
+from rta_attitude.cli.main import main as cli_main
+from rta_attitude.dynamics import spacecraft
+from rta_attitude.dynamics.controller import controller_record, desired_command
 from rta_attitude.errors import BagError
-from rta_attitude.metrics import summarize_trajectory
-from rta_attitude.simulation import ClosedLoop, Trajectory, saturate
+from rta_attitude.recording import analysis
+from rta_attitude.recording.bag import BagWriter, Qos
+from rta_attitude.simulation.closed_loop import ClosedLoop, Trajectory
+from rta_attitude.simulation.metrics import summarize_trajectory
 
 DURATION_S = 150.0
 NS = "/rta"
@@ -52,7 +54,7 @@ def _reference(cfg: Any, rta: bool, duration_s: float = DURATION_S) -> Run:
     scenario = dataclasses.replace(cfg.scenario("paper-example"), duration_s=duration_s)
     loop = ClosedLoop(cfg, scenario, rta=rta)
     traj = loop.run()
-    summary = summarize_trajectory(traj, cfg.limits.omega_dot_max_rad_s2, slacked_names(loop.cfg))
+    summary = summarize_trajectory(traj, cfg.limits.omega_dot_max_rad_s2, loop.cfg.slacked_constraints)
     return Run(loop, traj, summary)
 
 
@@ -69,10 +71,17 @@ def _messages(run: Run) -> list[tuple[str, Any, int]]:
     torque_des; filter torque_cmd + filter_status (RTA) or the pass-through torque_cmd. The chain
     also answers the final state, as in the DDS run. run_status at the start and the end.
     """
-    from rta_attitude.nodes import convert, topics
+    from rta_attitude.ros import convert, topics
 
     loop, traj = run.loop, run.traj
     cfg, n = loop.cfg, traj.steps
+    D = cfg.spacecraft.wheel_inertia_kgm2
+
+    def to_tau(u: np.ndarray) -> np.ndarray:
+        return spacecraft.wheel_accel_to_torque(u, D)
+
+    def through_dds(u: np.ndarray) -> np.ndarray:
+        return spacecraft.torque_to_wheel_accel(to_tau(u), D)
     t_ns = [round(float(t) * 1e9) for t in traj.t_s]
     slacked = tuple(name for name, s in zip(loop.filter.names, loop.filter.slacked) if s)
     values = {"scenario": loop.scenario.name, "rta": loop.rta, "stepping": "lockstep", "steps": n, "step": 0,
@@ -83,21 +92,23 @@ def _messages(run: Run) -> list[tuple[str, Any, int]]:
         t = t_ns[k]
         out += [(f"{NS}/state", convert.state_msg(traj.x[k], t), t), ("/clock", convert.clock_msg(t), t)]
         if k > 0:
-            tau_prev = model.wheel_accel_to_torque(traj.u[k - 1], cfg)
+            tau_prev = to_tau(traj.u[k - 1])
             out.append((f"{NS}/torque_applied", convert.torque_msg(tau_prev, t_ns[k - 1]), t_ns[k - 1]))
         if k < n:
             u_des = traj.u_des[k]
         else:
-            u_des = loop.desired(traj.x[k], float(traj.t_s[k]))[1]
-        out.append((f"{NS}/torque_des", convert.torque_msg(model.wheel_accel_to_torque(u_des, cfg), t), t))
+            q_c = loop.scenario.command_at(float(traj.t_s[k]))
+            law = controller_record(cfg, loop.scenario.controller == "pd")
+            u_des = through_dds(desired_command(traj.x[k], q_c, law))
+        out.append((f"{NS}/torque_des", convert.torque_msg(to_tau(u_des), t), t))
         if not loop.rta:
-            out.append((f"{NS}/torque_cmd", convert.torque_msg(model.wheel_accel_to_torque(u_des, cfg), t), t))
+            out.append((f"{NS}/torque_cmd", convert.torque_msg(to_tau(u_des), t), t))
             continue
         res = loop.filter.filter(traj.x[k], u_des)
         if k < n:  # the filter is deterministic: the re-filtered command is the run's
-            assert np.array_equal(saturate(model.through_torque_interface(res.u, cfg), cfg), traj.u[k])
-            res = dataclasses.replace(res, solve_time_s=float(traj.solve_time_s[k]))
-        tau = model.wheel_accel_to_torque(res.u, cfg)
+            assert np.array_equal(np.clip(through_dds(res.u), -181.3, 181.3), traj.u[k])
+            res.record["solve_time_s"] = float(traj.solve_time_s[k])
+        tau = to_tau(res.u)
         out.append((f"{NS}/torque_cmd", convert.torque_msg(tau, t), t))
         out.append((f"{NS}/filter_status",
                     convert.filter_status_msg(res, t, loop.filter.counters, cfg.filter.preset, slacked), t))
@@ -108,8 +119,8 @@ def _messages(run: Run) -> list[tuple[str, Any, int]]:
 
 def _write(run: Run, path: Path, chunk_size: int = 256 * 1024, metadata: bool = True) -> Path:
     """A bag as bag_recorder_node writes it (BagWriter; the `rta_attitude` metadata record)."""
-    from rta_attitude.nodes import topics
-    from rta_attitude.nodes.recorder_node import add_metadata
+    from rta_attitude.ros import topics
+    from rta_attitude.ros.recorder_node import add_metadata
 
     msgs = _messages(run)
     with BagWriter(path, chunk_size=chunk_size) as bag:
@@ -225,7 +236,7 @@ def test_rosbags_writer_bag_gives_the_same_summary(runs: dict[bool, Run], tmp_pa
 def test_filter_status_layout_matches_the_filter_node(runs: dict[bool, Run], cfg: Any) -> None:
     """parse_diagnostics + load_run read what nodes/convert.filter_status_msg writes (any mismatch in
     key names would show up as zeros here)."""
-    from rta_attitude.nodes import convert
+    from rta_attitude.ros import convert
 
     loop, traj = runs[True].loop, runs[True].traj
     k = int(np.flatnonzero(traj.intervening.any(axis=1))[0])
@@ -276,7 +287,7 @@ def test_cli_bad_and_truncated_bags(bags: dict[str, Path], tmp_path: Path) -> No
     procs = {case: _cli("analyze", str(bags[case]), "--out", str(tmp_path / case), "--no-plot")
              for case in [*expected, "truncated"]}
     procs["ros_free"] = subprocess.Popen(
-        [sys.executable, "-c", "import sys, rta_attitude.analysis; "
+        [sys.executable, "-c", "import sys, rta_attitude.recording.analysis; "
                                "ros = sorted(m for m in sys.modules if m.startswith(('rclpy', 'rosidl'))); "
                                "print(ros); sys.exit(1 if ros else 0)"],
         cwd=REPO, env=ENV, text=True, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
@@ -336,7 +347,7 @@ def test_analyze_compare_writes_summaries_table_and_figure(bags: dict[str, Path]
 
 def test_fast_cdr_reader_matches_the_generic_decoder(bags: dict[str, Path]) -> None:
     """analysis reads raw CDR itself (6x faster on filter_status); mcap_ros2's decoder must agree."""
-    from rta_attitude.bag import read_bag
+    from rta_attitude.recording.bag import read_bag
 
     raw = analysis._collect(read_bag(bags["rta"], decode=False), NS, bags["rta"])
     decoded = analysis._collect(read_bag(bags["rta"], decode=True), NS, bags["rta"])

@@ -12,8 +12,8 @@ import scipy.sparse as sp
 from helpers import random_states
 
 from rta_attitude import config
-from rta_attitude.asif import AsifFilter
 from rta_attitude.errors import SolverError
+from rta_attitude.filter.asif import AsifFilter
 
 CFG = config.load()
 
@@ -63,6 +63,12 @@ def clarabel_solve(gain, drift, slack_w, lo, hi, u_des):
     return z[:3], d
 
 
+def _rows(f: AsifFilter, x: np.ndarray) -> tuple[np.recarray, np.ndarray, np.ndarray]:
+    """The filter's barrier table of states x and its box (lo, hi)."""
+    t = f.constraints.evaluate(x)
+    return t, t.lo, t.hi
+
+
 @pytest.fixture(scope="module")
 def problems():
     rng = np.random.default_rng(11)
@@ -78,7 +84,7 @@ def _objective(u, d, u_des, w):
 def test_filter_matches_independent_solver(problems):
     x, u_des = problems
     f = AsifFilter(CFG)
-    tab, lo, hi, _ = f.evaluate(x)
+    tab, lo, hi = _rows(f, x)
     w = f.slack_weights * f.slacked
     checked = infeasible = compared_u = 0
     for k in range(len(x)):
@@ -108,8 +114,8 @@ def test_solutions_meet_every_row(problems):
     x, u_des = problems
     f = AsifFilter(CFG)
     b = f.filter_batch(x, u_des)
-    _tab, lo, hi, _ = f.evaluate(x)
-    ok = b.status != 2
+    _tab, lo, hi = _rows(f, x)
+    ok = b.status_code != 2
     assert np.all(np.isfinite(b.u))
     assert np.all(b.u >= lo - 1e-12) and np.all(b.u <= hi + 1e-12)
     assert np.all(np.abs(b.u) <= CFG.u_max_rad_s2 + 1e-12)
@@ -125,8 +131,8 @@ def test_infeasible_problems_are_detected_and_fall_back(problems):
     x, u_des = problems
     f = AsifFilter(CFG)
     b = f.filter_batch(x, u_des)
-    tab, lo, hi, _ = f.evaluate(x)
-    fb = np.flatnonzero(b.status == 2)
+    tab, lo, hi = _rows(f, x)
+    fb = np.flatnonzero(b.status_code == 2)
     assert len(fb) > 10
     w = f.slack_weights * f.slacked
     for k in fb[:40]:
@@ -146,7 +152,7 @@ def test_fast_path_is_the_exact_solution():
         if res.status != "pass":
             continue
         n_pass += 1
-        tab, lo, hi, _ = f.evaluate(x[None])
+        tab, lo, hi = _rows(f, x[None])
         u_ref, _ = clarabel_solve(tab.gain[0], tab.drift[0], f.slack_weights * f.slacked, lo[0], hi[0], u_des)
         np.testing.assert_allclose(res.u, u_ref, atol=1e-6)
         assert res.iterations == 0 and res.solver_status == ""
@@ -160,7 +166,7 @@ def _infeasible_case():
     x = random_states(rng, 100, CFG)
     u_des = rng.uniform(-1, 1, (100, 3)) * CFG.limits.wheel_accel_max_rad_s2
     b = f.filter_batch(x, u_des)
-    k = int(np.flatnonzero(b.status == 2)[0])
+    k = int(np.flatnonzero(b.status_code == 2)[0])
     return x[k], u_des[k]
 
 
@@ -174,7 +180,7 @@ def test_fallback_policies(policy):
             f.filter(x, u_des)
         return
     res = f.filter(x, u_des)
-    tab, lo, hi, _ = f.evaluate(x[None])
+    tab, lo, hi = _rows(f, x[None])
     assert np.all(np.isfinite(res.u)) and np.all(res.u >= lo[0]) and np.all(res.u <= hi[0])
     assert f.counters.solver_failures == 1
     if policy == "pass_through":
@@ -203,8 +209,8 @@ def test_non_finite_u_des_is_a_counted_fallback():
 def test_paper_preset_has_no_zoh_bounds():
     x = CFG.scenario("paper-example").x0.copy()
     x[5] = 0.9 * CFG.limits.omega_max_rad_s
-    _lo_r, hi_r, _ = AsifFilter(CFG.with_preset("robust")).box(x[None])
-    _lo_p, hi_p, _ = AsifFilter(CFG.with_preset("paper")).box(x[None])
+    hi_r = _rows(AsifFilter(CFG.with_preset("robust")), x[None])[2]
+    hi_p = _rows(AsifFilter(CFG.with_preset("paper")), x[None])[2]
     np.testing.assert_array_equal(hi_p[0], CFG.u_max_rad_s2)
     # robust: the y rate may grow by at most (1 - margin) w_max - 0.9 w_max in one 1 s step
     G = CFG.spacecraft.control_gain[1]

@@ -1,4 +1,4 @@
-"""rta_attitude.bag: rosbag2-convention MCAP files, checked against independent readers.
+"""rta_attitude.recording.bag: rosbag2-convention MCAP files, checked against independent readers.
 
 Real files in tmp_path, no mocks. rclpy is imported only for its generated message classes and
 rclpy.serialization (no context, no node, so no DDS traffic); discovery is still limited to the
@@ -27,7 +27,8 @@ from rosbags.highlevel import AnyReader
 from rosbags.rosbag2 import Reader
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
-from rta_attitude.bag import (
+from rta_attitude.errors import BagError
+from rta_attitude.recording.bag import (
     BagWriter,
     Qos,
     message_counts,
@@ -38,7 +39,6 @@ from rta_attitude.bag import (
     type_hash,
     write_metadata_yaml,
 )
-from rta_attitude.errors import BagError
 
 # Set before rclpy is first imported (importlib below, so imports above stay at the top).
 os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
@@ -349,7 +349,7 @@ def test_killed_writer_loses_at_most_the_last_chunk(tmp_path: Path) -> None:
     script = textwrap.dedent(
         f"""
         import os, signal
-        from rta_attitude.bag import BagWriter
+        from rta_attitude.recording.bag import BagWriter
         bag = BagWriter({str(path)!r}, chunk_size=4096)
         bag.add_topic("/v", "geometry_msgs/msg/Vector3Stamped")
         for k in range(1000):

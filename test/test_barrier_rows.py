@@ -1,5 +1,6 @@
-"""The compiled rows and box of one state (`barrier_rows`) against the numpy reference
-(`constraints`, `AsifFilter.box`; checked against finite differences in test_constraints)."""
+"""The compiled rows and box of one state (`constraints.rows`) against the numpy oracle (test/oracles,
+the first implementation; the compiled rows are also checked against finite differences in
+test_constraints), at random states and at the arccos poles."""
 
 from __future__ import annotations
 
@@ -9,14 +10,30 @@ import math
 import numpy as np
 import pytest
 from helpers import random_states
+from oracles.constraints import ConstraintSet as OracleSet
 
-from rta_attitude import barrier_rows, config
-from rta_attitude.asif import AsifFilter
+from rta_attitude import config
+from rta_attitude.config.schema import Config
 from rta_attitude.constraints import ConstraintSet
-from rta_attitude.params import Config
-from rta_attitude.state import THETA_S, Q
+from rta_attitude.dynamics.state import THETA_S, Q
 
 CFG = config.load()
+
+
+def oracle_box(x: np.ndarray, cfg: Config) -> tuple[np.ndarray, np.ndarray]:
+    """The box lo <= u <= hi from the numpy oracle: U, intersected in the robust preset with the
+    one-step ZOH intervals; an interval that misses U shrinks the box to U's nearest edge."""
+    oracle = OracleSet.from_config(cfg)
+    u_max = cfg.u_max_rad_s2
+    lo = np.broadcast_to(-u_max, (*np.shape(x)[:-1], 3)).copy()
+    hi = np.broadcast_to(u_max, (*np.shape(x)[:-1], 3)).copy()
+    if cfg.filter.preset == "robust":
+        zlo, zhi = oracle.zoh_bounds(oracle.context(x), cfg.filter.sample_time_s, cfg.filter.zoh_margin)
+        new_lo, new_hi = np.maximum(lo, zlo), np.minimum(hi, zhi)
+        bad = new_lo > new_hi
+        edge = np.where(zhi < lo, lo, hi)
+        lo, hi = np.where(bad, edge, new_lo), np.where(bad, edge, new_hi)
+    return lo, hi
 
 
 def _pole_states(rng: np.random.Generator, cfg: Config) -> np.ndarray:
@@ -48,18 +65,18 @@ def test_compiled_rows_and_box_equal_the_reference(variant: str) -> None:
     else:
         cfg = CFG.with_preset(variant)
     x = _pole_states(np.random.default_rng(3), cfg)
-    ref = ConstraintSet.from_config(cfg).evaluate(x)
-    lo, hi, _ = AsifFilter(cfg).box(x)
-    out = barrier_rows.evaluate(x, cfg)
+    ref = OracleSet.from_config(cfg).evaluate(x)
+    lo, hi = oracle_box(x, cfg)
+    out = ConstraintSet(cfg).evaluate(x)
     for key, r in (("h", ref.h), ("psi0", ref.psi0), ("psi1", ref.psi1), ("drift", ref.drift), ("gain", ref.gain),
                    ("lo", lo), ("hi", hi)):
         # the same formulas; summation order may differ in the last bit
-        np.testing.assert_allclose(out[key], r, rtol=1e-13, atol=1e-13, err_msg=key)
+        np.testing.assert_allclose(out[key], r, rtol=1e-12, atol=1e-13, err_msg=key)
     # the pole guard: inside it the exclusion-zone row has no gain on u; just outside it has
     assert np.all(out["gain"][-2, 0] == 0.0) and np.any(out["gain"][-1, 0] != 0.0)
     # one state at a time gives the batch's numbers exactly
-    one = barrier_rows.evaluate(x[7], cfg)
-    for key in one:
+    one = ConstraintSet(cfg).evaluate(x[7])
+    for key in ("h", "psi0", "psi1", "drift", "gain", "lo", "hi"):
         np.testing.assert_array_equal(one[key], out[key][7])
 
 
@@ -69,10 +86,10 @@ def test_zoh_box_hand_calculation() -> None:
     x = CFG.scenario("paper-example").x0.copy()
     x[4:7] = (0.0, 0.9 * CFG.limits.omega_max_rad_s, 0.0)  # no gyroscopic drift with omega_x = omega_z = 0
     x[7:10] = 0.0
-    out = barrier_rows.evaluate(x, CFG.with_preset("robust"))
+    out = ConstraintSet(CFG.with_preset("robust")).evaluate(x)
     G = CFG.spacecraft.control_gain[1]
     dt = CFG.filter.sample_time_s
     expect = ((1 - CFG.filter.zoh_margin) * CFG.limits.omega_max_rad_s - x[5]) / (G * dt)
     assert out["hi"][1] == pytest.approx(min(expect, CFG.u_max_rad_s2[1]), rel=1e-12)
-    paper = barrier_rows.evaluate(x, CFG.with_preset("paper"))
+    paper = ConstraintSet(CFG.with_preset("paper")).evaluate(x)
     np.testing.assert_array_equal(paper["hi"], CFG.u_max_rad_s2)

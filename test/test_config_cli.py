@@ -97,8 +97,9 @@ def test_cli_simulate_writes_summary_timeseries_and_figure(tmp_path):
 
 
 def test_core_imports_without_rclpy():
-    code = ("import sys, rta_attitude.simulation, rta_attitude.asif, rta_attitude.metrics, rta_attitude.config;"
-            "print('rclpy' in sys.modules)")
+    code = ("import sys, rta_attitude.simulation.closed_loop, rta_attitude.filter.asif, "
+            "rta_attitude.simulation.metrics, rta_attitude.config.loader, rta_attitude.montecarlo.campaign, "
+            "rta_attitude.recording.analysis, rta_attitude.cli.launcher; print('rclpy' in sys.modules)")
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, timeout=120)
     assert r.stdout.strip() == "False", r.stderr
 
@@ -118,4 +119,4 @@ def test_setup_finds_every_package():
     from setuptools import find_packages
 
     found = set(find_packages(str(ROOT), exclude=["test", "test.*", "bench", "bench.*"]))
-    assert {"rta_attitude", "rta_attitude.constraints", "rta_attitude.nodes"} <= found
+    assert {"rta_attitude", "rta_attitude.constraints", "rta_attitude.ros"} <= found

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import pytest
 
-from rta_attitude.cli import main as cli_main
+from rta_attitude.cli.main import main as cli_main
 
 Cli = Callable[..., subprocess.CompletedProcess[str]]
 """The `cli` fixture: run the CLI with arguments, get (returncode, stdout, stderr)."""
@@ -112,9 +112,9 @@ def small_disk(tmp_path: Path) -> Iterator[Path]:
 def bag(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A short bag of paper-example written by the project's bag writer (as the recorder would)."""
     from rta_attitude import config
-    from rta_attitude.bag import BagWriter
-    from rta_attitude.nodes import convert
-    from rta_attitude.simulation import ClosedLoop
+    from rta_attitude.recording.bag import BagWriter
+    from rta_attitude.ros import convert
+    from rta_attitude.simulation.closed_loop import ClosedLoop
 
     cfg = config.load()
     import dataclasses
@@ -204,7 +204,7 @@ def test_launch_file_errors(cli: Cli, tmp_path: Path, full_disk: Path) -> None:
 def test_launch_on_a_disk_too_small_stops_with_one_line_and_a_readable_bag(cli: Cli, small_disk: Path) -> None:
     """The recorder's write fails mid-run: it says why, the launcher stops the run (one line, exit 1),
     and the bag is readable up to its last complete chunk."""
-    from rta_attitude.bag import read_bag
+    from rta_attitude.recording.bag import read_bag
 
     bag = small_disk / "x.mcap"
     proc = cli("launch", "--bag", str(bag), "--duration", "300", "-p", "bag_chunk_kb=4")

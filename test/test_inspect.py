@@ -1,4 +1,4 @@
-"""rta_attitude.replay and rta_attitude.topic_tools over real rclpy and Fast DDS (no mocks).
+"""rta_attitude.ros.replay and rta_attitude.ros.topic_tools over real rclpy and Fast DDS (no mocks).
 
 A short in-process run is written as a bag with the nodes' own message builders; `rta-attitude
 replay` republishes it from a subprocess while this process (its own rclpy context) and the CLI
@@ -24,13 +24,13 @@ from typing import Any
 import numpy as np
 import pytest
 import yaml
+from helpers import to_torque
 
-from rta_attitude import config, model
-from rta_attitude.bag import BagWriter, read_bag
-from rta_attitude.cli import main as cli_main
-from rta_attitude.replay import ros_node
-from rta_attitude.simulation import ClosedLoop
-from rta_attitude.topic_tools import (
+from rta_attitude import config
+from rta_attitude.cli.main import main as cli_main
+from rta_attitude.recording.bag import BagWriter, read_bag
+from rta_attitude.ros.replay import ros_node
+from rta_attitude.ros.topic_tools import (
     echo,
     list_topics,
     measured_rate_hz,
@@ -38,6 +38,7 @@ from rta_attitude.topic_tools import (
     message_to_yaml,
     resolve_topic,
 )
+from rta_attitude.simulation.closed_loop import ClosedLoop
 
 pytestmark = pytest.mark.dds
 REPO = Path(__file__).resolve().parents[1]
@@ -54,7 +55,7 @@ WAIT_FOR = ("--wait-for", "/rta/state", "--wait-for", "/rta/filter_status", "--w
 def bag(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A 30-step RTA run of paper-example as the recorder writes it (state, /clock, torques, status),
     in the recorder's (arrival) order."""
-    from rta_attitude.nodes import convert
+    from rta_attitude.ros import convert
 
     cfg = config.load()
     loop = ClosedLoop(cfg, dataclasses.replace(cfg.scenario("paper-example"), duration_s=float(STEPS)))
@@ -72,9 +73,9 @@ def bag(tmp_path_factory: pytest.TempPathFactory) -> Path:
             w.write_message("/rta/state", convert.state_msg(traj.x[k], t), t)
             w.write_message("/clock", convert.clock_msg(t), t)
             if k:  # the plant publishes the torque it held over the previous step after the new state
-                tau = model.wheel_accel_to_torque(traj.u[k - 1], cfg)
+                tau = to_torque(traj.u[k - 1], cfg)
                 w.write_message("/rta/torque_applied", convert.torque_msg(tau, t - 1_000_000_000), t - 1_000_000_000)
-            w.write_message("/rta/torque_cmd", convert.torque_msg(model.wheel_accel_to_torque(res.u, cfg), t), t)
+            w.write_message("/rta/torque_cmd", convert.torque_msg(to_torque(res.u, cfg), t), t)
             w.write_message("/rta/filter_status", convert.filter_status_msg(
                 res, t, loop.filter.counters, "robust", ("communication",)), t)
     return path

@@ -1,4 +1,4 @@
-"""`rta-attitude launch` (rta_attitude.launcher): the four nodes as separate OS processes over
+"""`rta-attitude launch` (rta_attitude.cli.launcher): the four nodes as separate OS processes over
 Fast DDS, the bag, the summary, clean shutdown (no stray process, nothing left in /dev/shm)."""
 
 from __future__ import annotations
@@ -16,11 +16,10 @@ from typing import Any
 import pytest
 
 from rta_attitude import config
-from rta_attitude.bag import read_bag
-from rta_attitude.cli import slacked_names
-from rta_attitude.metrics import format_summary, summarize_trajectory
-from rta_attitude.nodes import topics
-from rta_attitude.simulation import ClosedLoop
+from rta_attitude.recording.bag import read_bag
+from rta_attitude.ros import topics
+from rta_attitude.simulation.closed_loop import ClosedLoop
+from rta_attitude.simulation.metrics import format_summary, summarize_trajectory
 
 pytestmark = pytest.mark.dds
 CFG = config.load()
@@ -29,13 +28,13 @@ TIMING_KEYS = {"filter_time_us", "wall_time_s", "launch", "bag"}
 
 
 def _launch(*args: str, timeout: float = 240) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([sys.executable, "-m", "rta_attitude.launcher", *args], capture_output=True, text=True,
+    return subprocess.run([sys.executable, "-m", "rta_attitude.cli.launch", *args], capture_output=True, text=True,
                           timeout=timeout)
 
 
 def _reference_summary(traj: Any) -> dict[str, Any]:
     cfg = CFG.for_scenario(CFG.scenario(traj.scenario))
-    return summarize_trajectory(traj, cfg.limits.omega_dot_max_rad_s2, slacked_names(cfg))
+    return summarize_trajectory(traj, cfg.limits.omega_dot_max_rad_s2, cfg.slacked_constraints)
 
 
 def _survivors(marker: str) -> list[int]:
@@ -122,7 +121,7 @@ def test_launch_refuses_to_overwrite_a_bag(tmp_path: Path) -> None:
 
 def test_ctrl_c_stops_every_node_and_finalizes_the_bag(tmp_path: Path) -> None:
     bag = tmp_path / "cut.mcap"
-    launcher = subprocess.Popen([sys.executable, "-m", "rta_attitude.launcher", "--bag", str(bag), "--out",
+    launcher = subprocess.Popen([sys.executable, "-m", "rta_attitude.cli.launch", "--bag", str(bag), "--out",
                                  str(tmp_path / "out")], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     deadline = time.monotonic() + 60
     while not (bag.exists() and bag.stat().st_size > 300_000):  # a few hundred steps recorded

@@ -21,19 +21,21 @@ from typing import Any
 import numpy as np
 import pytest
 import rclpy
+from helpers import integrate, saturate, to_wheel_accel
 from rclpy.parameter import Parameter
 
-from rta_attitude import config, model
-from rta_attitude.asif import AsifFilter
+from rta_attitude import config
+from rta_attitude.dynamics.spacecraft import plant_record
+from rta_attitude.dynamics.state import STATE_NAMES
 from rta_attitude.errors import ConfigError, MessageError
-from rta_attitude.nodes import convert, topics
-from rta_attitude.nodes.controller_node import ControllerNode
-from rta_attitude.nodes.filter_node import FilterNode
-from rta_attitude.nodes.plant_node import PlantNode
-from rta_attitude.nodes.recorder_node import RecorderNode
-from rta_attitude.nodes.spin import make_executor
-from rta_attitude.simulation import ClosedLoop, integrate, saturate
-from rta_attitude.state import STATE_NAMES
+from rta_attitude.filter.asif import AsifFilter
+from rta_attitude.ros import convert, topics
+from rta_attitude.ros.controller_node import ControllerNode
+from rta_attitude.ros.filter_node import FilterNode
+from rta_attitude.ros.plant_node import PlantNode
+from rta_attitude.ros.recorder_node import RecorderNode
+from rta_attitude.ros.spin import make_executor
+from rta_attitude.simulation.closed_loop import ClosedLoop
 
 pytestmark = pytest.mark.dds
 CFG = config.load()
@@ -137,9 +139,9 @@ def test_lockstep_run_over_dds_equals_in_process_run(rta: bool, tmp_path: Path, 
     stamps = [convert.state_from_msg(m.ros_msg)[0] for m in msgs[_topic(topics.STATE)]]
     assert stamps == [convert.seconds_to_ns(t) for t in ref.t_s]
     assert all(m.log_time_ns == s for m, s in zip(msgs[_topic(topics.STATE)], stamps))
-    u_des = model.torque_to_wheel_accel(
+    u_des = to_wheel_accel(
         np.array([convert.torque_from_msg(m.ros_msg)[1] for m in msgs[_topic(topics.TORQUE_DES)]]), CFG)[:n]
-    u_cmd = saturate(model.torque_to_wheel_accel(
+    u_cmd = saturate(to_wheel_accel(
         np.array([convert.torque_from_msg(m.ros_msg)[1] for m in msgs[_topic(topics.TORQUE_CMD)]]), CFG), CFG)[:n]
     assert np.max(np.abs(u_des - ref.u_des)) <= 1e-9 and np.max(np.abs(u_cmd - ref.u)) <= 1e-9
     if rta:
@@ -198,7 +200,7 @@ def test_realtime_run_with_every_node_completes_and_is_recorded(tmp_path: Path) 
                                       "scenarios.paper_example.duration_s": float(steps)})
     plant = out["plant"]
     assert plant.exit_code == 0 and plant.k == steps
-    from rta_attitude.bag import read_bag
+    from rta_attitude.recording.bag import read_bag
 
     contents = read_bag(out["bag"], topics=[_topic(topics.STATE)])
     assert contents.counts[_topic(topics.STATE)] == steps + 1
@@ -254,7 +256,8 @@ def test_cdr_stamp_matches_serialized_messages() -> None:
     x = CFG.scenario("paper_example").x0
     t = 123 * convert.NS_PER_S + 456
     for msg in (convert.state_msg(x, t), convert.clock_msg(t), convert.odometry_msg(x, t),
-                convert.battery_msg(x, t, CFG, 8.0), convert.temperature_msg(x, t), convert.sun_vector_msg(x, t)):
+                convert.battery_msg(x, t, plant_record(CFG), 8.0), convert.temperature_msg(x, t),
+                convert.sun_vector_msg(x, t)):
         assert convert.cdr_stamp_ns(serialize_message(msg)) == t
     with pytest.raises(MessageError):
         convert.cdr_stamp_ns(b"\x00\x01\x00\x00")
@@ -334,7 +337,7 @@ def test_node_with_bad_parameter_exits_1_with_one_line(tmp_path: Path) -> None:
 
 
 def test_nodes_package_keeps_rclpy_out_of_the_core_and_launcher() -> None:
-    code = ("import sys, rta_attitude.launcher, rta_attitude.nodes, rta_attitude.nodes.topics, "
-            "rta_attitude.nodes.convert; print('rclpy' in sys.modules)")
+    code = ("import sys, rta_attitude.cli.launcher, rta_attitude.ros, rta_attitude.ros.topics, "
+            "rta_attitude.ros.convert; print('rclpy' in sys.modules)")
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60, check=True)
     assert proc.stdout.strip() == "False"

@@ -7,16 +7,15 @@ import numpy as np
 import pytest
 
 from rta_attitude import config
-from rta_attitude.cli import slacked_names
-from rta_attitude.metrics import summarize_trajectory
-from rta_attitude.simulation import simulate
+from rta_attitude.simulation.closed_loop import simulate
+from rta_attitude.simulation.metrics import summarize_trajectory
 
 CFG = config.load()
 HARD = ("exclusion_zone", "temperature", "battery", "omega_x", "omega_y", "omega_z", "psi_x", "psi_y", "psi_z")
 
 
 def _summary(traj, cfg=CFG):
-    return summarize_trajectory(traj, cfg.limits.omega_dot_max_rad_s2, slacked_names(cfg))
+    return summarize_trajectory(traj, cfg.limits.omega_dot_max_rad_s2, cfg.slacked_constraints)
 
 
 @pytest.fixture(scope="module")

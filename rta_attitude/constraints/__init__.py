@@ -11,109 +11,124 @@
 
 Actuator and angular-acceleration limits are the box U of the filter (Config.u_max_rad_s2).
 
-These modules are the definition (vectorised over state batches, checked against finite
-differences). The filter evaluates their compiled one-state port, `rta_attitude/barrier_rows.py`
-(same formulas, tested equal to 1e-13 at random states and at the poles): a change to a barrier
-here must be made there too.
+Each module holds the formula (docstring) and the compiled one-state code of its constraint: `h`
+(the physical safety value) and `row` (h, the HOCBF levels and the affine barrier condition
+BC = drift + gain . u). `geometry` computes what they share once per state; `rows` runs them in
+order; `base` has the records their parameters travel in. `ConstraintSet` is the Python face for
+batches of states (reports, sampling, tests): a compiled loop over the same one-state code.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
+import numba
 import numpy as np
+from numpy.typing import NDArray
 
-from ..params import CONSTRAINT_NAMES, Config
-from .angular_rate import AngularRate
-from .base import Array, BarrierValues, Constraint, Context
-from .battery import Battery
-from .communication import Communication
-from .exclusion_zone import ExclusionZone
-from .temperature import Temperature
-from .wheel_speed import WheelSpeed
+from rta_attitude.config.schema import CONSTRAINT_NAMES, Config
+from rta_attitude.constraints.base import (
+    CONSTRAINT_DTYPE,
+    N_CONSTRAINTS,
+    TABLE_DTYPE,
+    constraint_record,
+    group_of,
+)
+from rta_attitude.constraints.geometry import CONTEXT_DTYPE
+from rta_attitude.constraints.rows import ANGLE_NAMES, pointing_angles, rows, safety_values
+from rta_attitude.dynamics.spacecraft import JIT, plant_record
+from rta_attitude.dynamics.state import STATE_SIZE
+
+Array = NDArray[np.float64]
 
 
-@dataclass(frozen=True)
-class BarrierTable:
-    """Every constraint evaluated on a state batch; the last axis m follows ConstraintSet.names.
+@numba.njit(**JIT)
+def rows_many(X: Array, p: NDArray[np.void], c: NDArray[np.void], T: NDArray[np.void]) -> None:
+    """`rows` of states X (N, 19) into tables T (N,)."""
+    ctx = np.zeros(1, CONTEXT_DTYPE)
+    for k in range(X.shape[0]):
+        rows(X[k], p[0], c[0], ctx[0], T[k])
 
-    Attributes:
-        h, psi0, psi1, drift: (..., m); gain: (..., m, 3). BC_i(u) = drift_i + gain_i . u.
+
+@numba.njit(**JIT)
+def safety_many(X: Array, p: NDArray[np.void], c: NDArray[np.void], H: Array) -> None:
+    """`safety_values` of states X (N, 19) into H (N, m)."""
+    ctx = np.zeros(1, CONTEXT_DTYPE)
+    for k in range(X.shape[0]):
+        safety_values(X[k], p[0], c[0], ctx[0], H[k])
+
+
+@numba.njit(**JIT)
+def angles_many(X: Array, p: NDArray[np.void], out: Array) -> None:
+    """`pointing_angles` of states X (N, 19) into out (N, 5)."""
+    ctx = np.zeros(1, CONTEXT_DTYPE)
+    for k in range(X.shape[0]):
+        pointing_angles(X[k], p[0], ctx[0], out[k])
+
+
+class ConstraintSet:
+    """The ordered, named safety constraints of one configuration (Python face of the compiled rows).
+
+    Args:
+        cfg: configuration (limits, gains, preset; the plant model the barriers assume).
     """
 
-    h: Array
-    psi0: Array
-    psi1: Array
-    drift: Array
-    gain: Array
-
-
-@dataclass(frozen=True)
-class ConstraintSet:
-    """The ordered, named safety constraints of one configuration."""
-
-    constraints: tuple[Constraint, ...]
-    cfg: Config
+    def __init__(self, cfg: Config) -> None:
+        self.cfg = cfg
+        self.plant = plant_record(cfg)
+        self.record = constraint_record(cfg)
+        self.names: tuple[str, ...] = CONSTRAINT_NAMES
 
     @classmethod
     def from_config(cls, cfg: Config) -> ConstraintSet:
-        """All ten constraints of the paper, in CONSTRAINT_NAMES order (disabled ones included)."""
-        items: list[Constraint] = [
-            ExclusionZone.from_config(cfg), Communication.from_config(cfg),
-            Temperature.from_config(cfg), Battery.from_config(cfg),
-        ]  # fmt: skip
-        items += [AngularRate.from_config(cfg, i) for i in range(3)]
-        items += [WheelSpeed.from_config(cfg, i) for i in range(3)]
-        assert tuple(c.name for c in items) == CONSTRAINT_NAMES  # a programming error, not input
-        return cls(tuple(items), cfg)
+        return cls(cfg)
 
     @property
-    def names(self) -> tuple[str, ...]:
-        return tuple(c.name for c in self.constraints)
-
-    @property
-    def enabled(self) -> Array:
+    def enabled(self) -> NDArray[np.bool_]:
         """(m,) bool."""
-        return np.array([c.gains.enabled for c in self.constraints])
+        return self.record[0]["gains"]["enabled"].astype(bool)
 
     @property
     def slack_weights(self) -> Array:
         """(m,) slack weight p_i; 0 for hard constraints."""
-        return np.array([c.gains.slack_weight for c in self.constraints], dtype=float)
+        return self.record[0]["gains"]["slack_weight"].copy()
 
-    def context(self, x: Array) -> Context:
-        return Context.from_state(x, self.cfg)
+    @property
+    def slacked(self) -> tuple[str, ...]:
+        """Names of the enabled constraints that carry a slack."""
+        return tuple(n for n, w in zip(self.names, self.slack_weights) if w > 0)
+
+    def evaluate(self, x: Array) -> NDArray[np.void]:
+        """TABLE_DTYPE records of states x (..., 19) (unit quaternions), shape (...), as a numpy record
+        array: h, psi0, psi1, drift (..., m), gain (..., m, 3), lo, hi (..., 3) read as `table.h` or
+        `table["h"]`."""
+        X = _as_states(x)
+        T = np.zeros(X.shape[0], TABLE_DTYPE)
+        rows_many(X, self.plant, self.record, T)
+        return T.reshape(np.shape(x)[:-1]).view(np.recarray)
 
     def safety_values(self, x: Array) -> Array:
-        """Physical h of every constraint (..., m); negative = violated."""
-        ctx = self.context(x)
-        return np.stack([c.safety_value(ctx) for c in self.constraints], axis=-1)
+        """Physical h of every constraint (..., m) of states x (..., 19); negative = violated."""
+        X = _as_states(x)
+        H = np.empty((X.shape[0], N_CONSTRAINTS))
+        safety_many(X, self.plant, self.record, H)
+        return H.reshape((*np.shape(x)[:-1], N_CONSTRAINTS))
 
-    def evaluate(self, x: Array, ctx: Context | None = None) -> BarrierTable:
-        """h, Psi levels and the affine barrier conditions of every constraint."""
-        ctx = ctx if ctx is not None else self.context(x)
-        vals: list[BarrierValues] = [c.evaluate(ctx) for c in self.constraints]
-        return BarrierTable(
-            h=np.stack([v.h for v in vals], axis=-1),
-            psi0=np.stack([v.psi0 for v in vals], axis=-1),
-            psi1=np.stack([v.psi1 for v in vals], axis=-1),
-            drift=np.stack([v.drift for v in vals], axis=-1),
-            gain=np.stack([v.gain for v in vals], axis=-2),
-        )
 
-    def zoh_bounds(self, ctx: Context, dt_s: float, margin: float) -> tuple[Array, Array]:
-        """Intersection of the one-step-ahead rate and wheel-speed intervals on u (..., 3) each."""
-        lo = np.full((*ctx.batch_shape, 3), -np.inf)
-        hi = np.full((*ctx.batch_shape, 3), np.inf)
-        for c in self.constraints:
-            if isinstance(c, (AngularRate, WheelSpeed)) and c.gains.enabled:
-                a, b = c.zoh_bounds(ctx, dt_s, margin)
-                lo[..., c.axis] = np.maximum(lo[..., c.axis], a)
-                hi[..., c.axis] = np.minimum(hi[..., c.axis], b)
-        return lo, hi
+    def angles(self, x: Array) -> dict[str, Array]:
+        """The pointing angles of states x (..., 19) by ANGLE_NAMES, each (...), rad."""
+        X = _as_states(x)
+        out = np.empty((X.shape[0], len(ANGLE_NAMES)))
+        angles_many(X, self.plant, out)
+        return {n: out[:, i].reshape(np.shape(x)[:-1]) for i, n in enumerate(ANGLE_NAMES)}
+
+
+def _as_states(x: Array) -> Array:
+    x = np.asarray(x, dtype=float)
+    if x.shape[-1:] != (STATE_SIZE,):
+        raise ValueError(f"states must be (..., {STATE_SIZE}), got {x.shape}")
+    return np.ascontiguousarray(x.reshape(-1, STATE_SIZE))
 
 
 __all__ = [
-    "AngularRate", "BarrierTable", "BarrierValues", "Battery", "Communication", "Constraint",
-    "ConstraintSet", "Context", "ExclusionZone", "Temperature", "WheelSpeed",
+    "ANGLE_NAMES", "CONSTRAINT_DTYPE", "CONSTRAINT_NAMES", "N_CONSTRAINTS", "TABLE_DTYPE", "ConstraintSet",
+    "angles_many", "constraint_record", "group_of", "rows_many", "safety_many",
 ]  # fmt: skip

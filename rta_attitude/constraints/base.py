@@ -1,4 +1,4 @@
-"""What every safety constraint shares: the evaluation context and the barrier record.
+"""What every safety constraint shares: its parameters by name, the barrier table, the HOCBF step.
 
 A constraint's barrier condition is affine in u:  BC(x, u) = drift(x) + gain(x) . u  >= 0
 (minus a slack delta when the constraint is soft). For relative degree 2 (HOCBF):
@@ -8,104 +8,128 @@ A constraint's barrier condition is affine in u:  BC(x, u) = drift(x) + gain(x) 
 
 and for relative degree 1:  BC = dh/dt|_(f + g u) + k1 h + bias. `bias` is the paper's sigma,
 added to the final condition as the paper's equation writes it (AFRL's framework adds it to h).
+
+Records (structured NumPy arrays, read by name in compiled code):
+- GAIN_DTYPE: one constraint's switches and gains (one per row of CONSTRAINT_NAMES);
+- CONSTRAINT_DTYPE: the limits, the augmentation weights, the sampled-data options and the gains
+  of every constraint (`constraint_record`);
+- TABLE_DTYPE: one state's evaluation: h, Psi_0, Psi_1, drift and gain of every constraint, and the
+  box lo <= u <= hi (U, intersected with the one-step zero-order-hold bounds in the robust preset).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-from typing import Any, Protocol
+import math
 
+import numba
 import numpy as np
 from numpy.typing import NDArray
 
-from .. import model
-from .. import quaternion as quat
-from ..params import BarrierGains, Config
-from ..state import OMEGA, THETA_S, Q
+from rta_attitude.config.schema import CONSTRAINT_NAMES, Config
+from rta_attitude.dynamics.spacecraft import JIT
 
 Array = NDArray[np.float64]
 
+N_CONSTRAINTS = len(CONSTRAINT_NAMES)
+"""Rows in CONSTRAINT_NAMES order: exclusion_zone, communication, temperature, battery,
+omega_x/y/z, psi_x/y/z."""
+EXCLUSION_ZONE, COMMUNICATION, TEMPERATURE, BATTERY = 0, 1, 2, 3
+OMEGA_X, PSI_X = 4, 7
+"""Row of each constraint (omega_y = OMEGA_X + 1, ...)."""
 
-@dataclass(frozen=True)
-class Context:
-    """Quantities every barrier needs, computed once per state batch (shapes (..., k))."""
+GAIN_DTYPE = np.dtype([
+    ("enabled", np.uint8),
+    ("k1", np.float64),            # alpha_1(h) = k1 h, 1/s
+    ("k2", np.float64),            # alpha_2 (relative degree 2), 1/s
+    ("bias", np.float64),          # sigma, added to the final condition
+    ("slack_weight", np.float64),  # p > 0: soft, cost p delta^2
+    ("margin", np.float64),        # the HOCBF keeps h >= margin (robust preset; 0 in `paper`)
+])  # fmt: skip
 
-    x: Array
-    """States (..., 19)."""
-    cfg: Config
-    A: Array
-    """Attitude matrices (..., 3, 3), Hill -> body."""
-    omega: Array
-    """Body rates (..., 3), rad/s."""
-    omega_drift: Array
-    """Gyroscopic part of omega_dot (..., 3), rad/s^2."""
-    sun: Array
-    sun_dot: Array
-    sun_ddot: Array
-    """r_S and its first two time derivatives (..., 3) in Hill."""
-    cache: dict[str, Any] = field(default_factory=dict, repr=False, compare=False)
-    """Results shared by several constraints (e.g. the pointing table), filled on first use."""
+CONSTRAINT_DTYPE = np.dtype([
+    ("gains", GAIN_DTYPE, (N_CONSTRAINTS,)),
+    ("exclusion_angle_rad", np.float64),   # FOV/2 + beta
+    ("comm_angle_rad", np.float64),        # FOV/2
+    ("temperature_max_K", np.float64),
+    ("energy_min_J", np.float64),
+    ("omega_max_rad_s", np.float64),
+    ("psi_max_rad_s", np.float64),
+    ("delta0_K_rad", np.float64),          # temperature: sun-incidence augmentation
+    ("delta1_K_rad", np.float64),          # temperature: Earth-incidence augmentation
+    ("delta2_J_rad", np.float64),          # battery: panel-angle augmentation
+    ("sin_pole_guard", np.float64),        # sin of the arccos pole guard
+    ("robust", np.uint8),                  # 1: one-step zero-order-hold bounds on omega and psi
+    ("dt_s", np.float64),                  # the hold the filter plans for
+    ("zoh_margin", np.float64),            # ZOH bounds aim at (1 - zoh_margin) of the limit
+    ("u_max_rad_s2", np.float64, (3,)),    # the box U
+])  # fmt: skip
 
-    @classmethod
-    def from_state(cls, x: Array, cfg: Config) -> Context:
-        """Build the context of states x (..., 19)."""
-        x = np.asarray(x, dtype=float)
-        sun_dot, sun_ddot = model.sun_direction_rates(x[..., THETA_S], cfg.environment.mean_motion_rad_s)
-        return cls(
-            x=x, cfg=cfg, A=quat.attitude_matrix(x[..., Q]), omega=x[..., OMEGA],
-            omega_drift=model.gyroscopic_rate(x[..., OMEGA], cfg.spacecraft.J),
-            sun=model.sun_direction(x[..., THETA_S]), sun_dot=sun_dot, sun_ddot=sun_ddot,
-        )  # fmt: skip
-
-    @property
-    def batch_shape(self) -> tuple[int, ...]:
-        return self.x.shape[:-1]
-
-
-@dataclass(frozen=True)
-class BarrierValues:
-    """One constraint evaluated on a state batch.
-
-    Attributes:
-        h: physical safety value (...); h < 0 is a violation (units of the constraint).
-        psi0: enforced barrier Psi_0 (...) (h itself, or the augmented form).
-        psi1: second HOCBF level Psi_1 (...); equals psi0 for relative degree 1.
-        drift: BC at u = 0 (...), including class-K terms and bias.
-        gain: dBC/du (..., 3).
-    """
-
-    h: Array
-    psi0: Array
-    psi1: Array
-    drift: Array
-    gain: Array
+TABLE_DTYPE = np.dtype([
+    ("h", np.float64, (N_CONSTRAINTS,)),
+    ("psi0", np.float64, (N_CONSTRAINTS,)),
+    ("psi1", np.float64, (N_CONSTRAINTS,)),
+    ("drift", np.float64, (N_CONSTRAINTS,)),
+    ("gain", np.float64, (N_CONSTRAINTS, 3)),
+    ("lo", np.float64, (3,)),
+    ("hi", np.float64, (3,)),
+])  # fmt: skip
 
 
-class Constraint(Protocol):
-    """A named safety constraint: its physical h and its barrier condition."""
-
-    name: str
-    relative_degree: int
-    gains: BarrierGains
-
-    def safety_value(self, ctx: Context) -> Array:
-        """Physical h (...) of the states in ctx."""
-        ...
-
-    def evaluate(self, ctx: Context) -> BarrierValues:
-        """h, Psi levels and the affine barrier condition of the states in ctx."""
-        ...
+def group_of(name: str) -> str:
+    """The `constraints:` section of a constraint (omega_y -> omega)."""
+    return name.split("_")[0] if name[:3] in ("ome", "psi") else name
 
 
-def sampled_data_margin(cfg: Config, group: str) -> float:
-    """The margin a relative-degree-2 constraint keeps in the `robust` preset (0 in `paper`)."""
-    return cfg.barriers[group].margin if cfg.filter.preset == "robust" else 0.0
+def constraint_record(cfg: Config) -> NDArray[np.void]:
+    """The CONSTRAINT_DTYPE record (shape (1,)) of a configuration (margins only in the robust preset)."""
+    robust = cfg.filter.preset == "robust"
+    L, aug = cfg.limits, cfg.augmentation
+    rec = np.zeros(1, CONSTRAINT_DTYPE)
+    c = rec[0]
+    for i, name in enumerate(CONSTRAINT_NAMES):
+        g = cfg.barriers[group_of(name)]
+        gi = c["gains"][i]
+        gi["enabled"], gi["k1"], gi["k2"], gi["bias"] = g.enabled, g.k1, g.k2, g.bias
+        gi["slack_weight"] = g.slack_weight if g.enabled else 0.0
+        gi["margin"] = g.margin if robust else 0.0
+    c["exclusion_angle_rad"], c["comm_angle_rad"] = L.exclusion_angle_rad, L.comm_angle_rad
+    c["temperature_max_K"], c["energy_min_J"] = L.temperature_max_K, L.energy_min_J
+    c["omega_max_rad_s"], c["psi_max_rad_s"] = L.omega_max_rad_s, L.psi_max_rad_s
+    c["delta0_K_rad"], c["delta1_K_rad"], c["delta2_J_rad"] = aug.delta0_K_rad, aug.delta1_K_rad, aug.delta2_J_rad
+    c["sin_pole_guard"] = math.sin(cfg.filter.pole_guard_rad)
+    c["robust"] = robust
+    c["dt_s"], c["zoh_margin"] = cfg.filter.sample_time_s, cfg.filter.zoh_margin
+    c["u_max_rad_s2"] = cfg.u_max_rad_s2
+    return rec
 
 
-def second_order_condition(
-    psi0: Array, psi0_dot: Array, psi0_ddot_drift: Array, psi0_ddot_gain: Array, gains: BarrierGains
-) -> tuple[Array, Array, Array]:
-    """HOCBF with linear class-K functions: (Psi_1, drift, gain) of BC = Psi_0'' + k1 Psi_0' + k2 Psi_1 + bias."""
-    psi1 = psi0_dot + gains.k1 * psi0
-    drift = psi0_ddot_drift + gains.k1 * psi0_dot + gains.k2 * psi1 + gains.bias
-    return psi1, drift, psi0_ddot_gain
+@numba.njit(**JIT)
+def second_order(t: np.void, i: int, psi0: float, psi0_dot: float, psi0_ddot_drift: float, g: np.void) -> None:
+    """HOCBF with linear class-K functions into row i of table t: Psi_0, Psi_1 = Psi_0' + k1 Psi_0 and
+    the drift of BC = Psi_0'' + k1 Psi_0' + k2 Psi_1 + bias (the gain on u is the caller's)."""
+    psi1 = psi0_dot + g.k1 * psi0
+    t.psi0[i] = psi0
+    t.psi1[i] = psi1
+    t.drift[i] = psi0_ddot_drift + g.k1 * psi0_dot + g.k2 * psi1 + g.bias
+
+
+@numba.njit(**JIT)
+def nan_max(a: float, b: float) -> float:
+    """numpy.maximum of two floats (NaN propagates)."""
+    if a != a or b != b:
+        return math.nan
+    return a if a > b else b
+
+
+@numba.njit(**JIT)
+def nan_min(a: float, b: float) -> float:
+    """numpy.minimum of two floats (NaN propagates)."""
+    if a != a or b != b:
+        return math.nan
+    return a if a < b else b
+
+
+__all__ = [
+    "BATTERY", "COMMUNICATION", "CONSTRAINT_DTYPE", "EXCLUSION_ZONE", "GAIN_DTYPE", "N_CONSTRAINTS", "OMEGA_X", "PSI_X",
+    "TABLE_DTYPE", "TEMPERATURE", "constraint_record", "group_of", "nan_max", "nan_min", "second_order",
+]  # fmt: skip

@@ -1,51 +1,47 @@
 """Battery charge: E >= E_min.
 
-    h_batt   = E - E_min                       (J; relative degree 3)
-    Psi_batt = E - E_min - delta2 theta_SI     (theta_SI: sun incidence on the +k_B panel, [0, pi])
+    h_batt = E - E_min                                         (J; relative degree 3)
+    Psi_0  = E - E_min - margin - delta2 theta_SI              theta_SI: sun incidence on the +k_B panel, [0, pi]
+    Psi_1  = Psi_0' + k1 Psi_0,   BC = Psi_0''(u) + k1 Psi_0' + k2 Psi_1 + bias >= 0   (HOCBF)
 
-Psi_batt has relative degree 2 and is enforced as a HOCBF.
-    E_dot  = P_peak max(0, cos theta_SI) - P_out,   E_ddot = P_peak [cos theta_SI > 0] d/dt cos theta_SI.
-Singular (arccos) at theta_SI = 0 (panel on the sun, the safest attitude) and pi.
+    E_dot  = P_peak max(0, cos theta_SI) - P_out                  (`dynamics.spacecraft.net_power`)
+    E_ddot = P_peak [cos theta_SI > 0] d/dt cos theta_SI
+
+Psi_0 has relative degree 2. Singular (arccos) at theta_SI = 0 (panel on the sun, the safest
+attitude) and pi.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import numba
+import numpy as np
+from numpy.typing import NDArray
 
-from ..model import PANEL_NORMAL_BODY, net_power
-from ..params import BarrierGains, Config
-from ..state import ENERGY
-from .base import Array, BarrierValues, Context, sampled_data_margin, second_order_condition
-from .pointing import sun_pointing
+from rta_attitude.constraints.base import BATTERY, second_order
+from rta_attitude.constraints.geometry import pointing
+from rta_attitude.dynamics.spacecraft import JIT, net_power
+
+NAME = "battery"
+AXIS_BODY = (0.0, 0.0, 1.0)
+"""Solar panel normal +k_B."""
 
 
-@dataclass(frozen=True)
-class Battery:
-    """Lower battery-energy limit through the panel-angle-augmented barrier."""
+@numba.njit(**JIT)
+def h(ctx: np.void, x: NDArray[np.float64], c: np.void) -> float:
+    """E - E_min (J); negative = the battery is below its minimum."""
+    return x[11] - c.energy_min_J
 
-    gains: BarrierGains
-    delta2_J_rad: float
-    E_min_J: float
-    margin_J: float = 0.0
-    """Sampled-data margin kept by the barrier (robust preset), J."""
-    name: str = "battery"
-    relative_degree: int = 2
 
-    @classmethod
-    def from_config(cls, cfg: Config) -> Battery:
-        return cls(cfg.barriers["battery"], cfg.augmentation.delta2_J_rad, cfg.limits.energy_min_J,
-                   sampled_data_margin(cfg, "battery"))
-
-    def safety_value(self, ctx: Context) -> Array:
-        return ctx.x[..., ENERGY] - self.E_min_J
-
-    def evaluate(self, ctx: Context) -> BarrierValues:
-        p = sun_pointing(ctx, PANEL_NORMAL_BODY)
-        h = ctx.x[..., ENERGY] - self.E_min_J
-        E_dot = net_power(p.cos, ctx.cfg)
-        E_ddot = ctx.cfg.power.peak_W * (p.cos > 0) * p.cos_dot
-        d2 = self.delta2_J_rad
-        psi0 = h - self.margin_J - d2 * p.theta
-        psi1, drift, gain = second_order_condition(psi0, E_dot - d2 * p.theta_dot, E_ddot - d2 * p.theta_ddot_drift,
-                                                   -d2 * p.theta_ddot_gain, self.gains)
-        return BarrierValues(h, psi0, psi1, drift, gain)
+@numba.njit(**JIT)
+def row(ctx: np.void, x: NDArray[np.float64], c: np.void, p: np.void, t: np.void) -> None:
+    """h, HOCBF levels and the barrier row of the battery into table t (p: the plant model)."""
+    i = BATTERY
+    g = c.gains[i]
+    cp, cp_dot, th, th_dot, th_dd, g0, g1, g2 = pointing(0.0, 0.0, 1.0, ctx.sun, ctx.sun_rate, ctx.sun_acc, ctx,
+                                                         c.sin_pole_guard)
+    t.h[i] = x[11] - c.energy_min_J
+    E_dot = net_power(cp, p)
+    E_ddot = p.panel_peak_W * (1.0 if cp > 0 else 0.0) * cp_dot
+    d2 = c.delta2_J_rad
+    second_order(t, i, t.h[i] - g.margin - d2 * th, E_dot - d2 * th_dot, E_ddot - d2 * th_dd, g)
+    t.gain[i, 0], t.gain[i, 1], t.gain[i, 2] = -d2 * g0, -d2 * g1, -d2 * g2

@@ -1,44 +1,41 @@
 """Communication: the +j_B antenna stays within FOV/2 of the ground station (the Earth, -x Hill).
 
-    h_comm = FOV/2 - theta_GS      (rad; relative degree 2, HOCBF; the paper's slacked constraint)
+    h_comm = FOV/2 - theta_GS                     theta_GS = angle(+j_B, r_E), rad
+    Psi_0  = h_comm - margin
+    Psi_1  = -theta_dot + k1 Psi_0
+    BC     = -theta_ddot(u) - k1 theta_dot + k2 Psi_1 + bias >= 0        (relative degree 2, HOCBF)
 
-Safest at theta_GS = 0 (antenna at Earth), where arccos is singular.
+The paper's slacked constraint. Safest at theta_GS = 0 (antenna at Earth), an arccos pole.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import numba
+import numpy as np
+from numpy.typing import NDArray
 
-from ..model import ANTENNA_AXIS_BODY
-from ..params import BarrierGains, Config
-from .base import Array, BarrierValues, Context, sampled_data_margin, second_order_condition
-from .pointing import earth_pointing
+from rta_attitude.constraints.base import COMMUNICATION, second_order
+from rta_attitude.constraints.geometry import angle, pointing
+from rta_attitude.dynamics.spacecraft import JIT
+
+NAME = "communication"
+AXIS_BODY = (0.0, 1.0, 0.0)
+"""Antenna boresight +j_B."""
 
 
-@dataclass(frozen=True)
-class Communication:
-    """Antenna-to-ground-station pointing cone."""
+@numba.njit(**JIT)
+def h(ctx: np.void, x: NDArray[np.float64], c: np.void) -> float:
+    """FOV/2 - theta_GS (rad); negative = the ground station is outside the antenna's cone."""
+    return c.comm_angle_rad - angle(0.0, 1.0, 0.0, ctx.earth)
 
-    gains: BarrierGains
-    limit_rad: float
-    """FOV/2, rad."""
-    margin_rad: float = 0.0
-    """Sampled-data margin kept by the barrier (robust preset), rad."""
-    name: str = "communication"
-    relative_degree: int = 2
 
-    @classmethod
-    def from_config(cls, cfg: Config) -> Communication:
-        return cls(cfg.barriers["communication"], cfg.limits.comm_angle_rad,
-                   sampled_data_margin(cfg, "communication"))
-
-    def safety_value(self, ctx: Context) -> Array:
-        return self.limit_rad - earth_pointing(ctx, ANTENNA_AXIS_BODY).theta
-
-    def evaluate(self, ctx: Context) -> BarrierValues:
-        p = earth_pointing(ctx, ANTENNA_AXIS_BODY)
-        h = self.limit_rad - p.theta
-        psi0 = h - self.margin_rad
-        psi1, drift, gain = second_order_condition(psi0, -p.theta_dot, -p.theta_ddot_drift, -p.theta_ddot_gain,
-                                                   self.gains)
-        return BarrierValues(h, psi0, psi1, drift, gain)
+@numba.njit(**JIT)
+def row(ctx: np.void, x: NDArray[np.float64], c: np.void, t: np.void) -> None:
+    """h, HOCBF levels and the barrier row of communication into table t."""
+    i = COMMUNICATION
+    g = c.gains[i]
+    _, _, th, th_dot, th_ddot, g0, g1, g2 = pointing(0.0, 1.0, 0.0, ctx.earth, ctx.earth_rate, ctx.earth_acc, ctx,
+                                                     c.sin_pole_guard)
+    t.h[i] = c.comm_angle_rad - th
+    second_order(t, i, t.h[i] - g.margin, -th_dot, -th_ddot, g)
+    t.gain[i, 0], t.gain[i, 1], t.gain[i, 2] = -g0, -g1, -g2

@@ -1,44 +1,42 @@
 """Attitude exclusion zone: the +i_B sensor stays >= FOV/2 + beta away from the sun.
 
-    h_EZ = theta_EZ - FOV/2 - beta      (rad; relative degree 2, enforced as a HOCBF)
+    h_EZ  = theta_EZ - FOV/2 - beta              theta_EZ = angle(+i_B, r_S), rad
+    Psi_0 = h_EZ - margin                         (margin: robust preset's sampled-data allowance)
+    Psi_1 = theta_dot + k1 Psi_0
+    BC    = theta_ddot(u) + k1 theta_dot + k2 Psi_1 + bias >= 0          (relative degree 2, HOCBF)
 
-theta_EZ = angle(+i_B, r_S). Safest at theta_EZ = pi (sensor anti-sun), where arccos is singular.
+theta and its rates from `geometry.pointing` of +i_B and the sun. Safest at theta_EZ = pi (sensor
+anti-sun), an arccos pole: there the angle is held stationary (pole guard).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import numba
+import numpy as np
+from numpy.typing import NDArray
 
-from ..model import SENSOR_AXIS_BODY
-from ..params import BarrierGains, Config
-from .base import Array, BarrierValues, Context, sampled_data_margin, second_order_condition
-from .pointing import sun_pointing
+from rta_attitude.constraints.base import EXCLUSION_ZONE, second_order
+from rta_attitude.constraints.geometry import angle, pointing
+from rta_attitude.dynamics.spacecraft import JIT
+
+NAME = "exclusion_zone"
+AXIS_BODY = (1.0, 0.0, 0.0)
+"""Sensor boresight +i_B."""
 
 
-@dataclass(frozen=True)
-class ExclusionZone:
-    """Sun keep-out cone of the sensor boresight."""
+@numba.njit(**JIT)
+def h(ctx: np.void, x: NDArray[np.float64], c: np.void) -> float:
+    """theta_EZ - FOV/2 - beta (rad); negative = the sensor is inside the keep-out cone."""
+    return angle(1.0, 0.0, 0.0, ctx.sun) - c.exclusion_angle_rad
 
-    gains: BarrierGains
-    limit_rad: float
-    """FOV/2 + beta, rad."""
-    margin_rad: float = 0.0
-    """Sampled-data margin kept by the barrier (robust preset), rad."""
-    name: str = "exclusion_zone"
-    relative_degree: int = 2
 
-    @classmethod
-    def from_config(cls, cfg: Config) -> ExclusionZone:
-        return cls(cfg.barriers["exclusion_zone"], cfg.limits.exclusion_angle_rad,
-                   sampled_data_margin(cfg, "exclusion_zone"))
-
-    def safety_value(self, ctx: Context) -> Array:
-        return sun_pointing(ctx, SENSOR_AXIS_BODY).theta - self.limit_rad
-
-    def evaluate(self, ctx: Context) -> BarrierValues:
-        p = sun_pointing(ctx, SENSOR_AXIS_BODY)
-        h = p.theta - self.limit_rad
-        psi0 = h - self.margin_rad
-        psi1, drift, gain = second_order_condition(psi0, p.theta_dot, p.theta_ddot_drift, p.theta_ddot_gain,
-                                                   self.gains)
-        return BarrierValues(h, psi0, psi1, drift, gain)
+@numba.njit(**JIT)
+def row(ctx: np.void, x: NDArray[np.float64], c: np.void, t: np.void) -> None:
+    """h, HOCBF levels and the barrier row of the exclusion zone into table t."""
+    i = EXCLUSION_ZONE
+    g = c.gains[i]
+    _, _, th, th_dot, th_ddot, g0, g1, g2 = pointing(1.0, 0.0, 0.0, ctx.sun, ctx.sun_rate, ctx.sun_acc, ctx,
+                                                     c.sin_pole_guard)
+    t.h[i] = th - c.exclusion_angle_rad
+    second_order(t, i, t.h[i] - g.margin, th_dot, th_ddot, g)
+    t.gain[i, 0], t.gain[i, 1], t.gain[i, 2] = g0, g1, g2

@@ -1,76 +1,70 @@
 """Temperature of the -j_B face: T <= T_max.
 
-    h_temp   = T_max - T                                      (K; relative degree 3)
-    Psi_temp = T_max - T - delta0 max(0, pi/2 - theta_SI) - delta1 max(0, pi/2 - theta_EI)
+    h_temp   = T_max - T                                                  (K; relative degree 3)
+    Psi_0    = T_max - T - margin - delta0 max(0, pi/2 - theta_SI) - delta1 max(0, pi/2 - theta_EI)
+    Psi_1    = Psi_0' + k1 Psi_0,   BC = Psi_0''(u) + k1 Psi_0' + k2 Psi_1 + bias >= 0   (HOCBF)
 
-theta_SI / theta_EI: sun / Earth incidence angles of the face normal -j_B. Psi_temp <= h_temp and
-has relative degree 2 (u enters theta_ddot); it is enforced as a HOCBF. The clamps (SPEC sec. 4,
-[resolved]) give the zero gradient the paper mentions when the face sees neither sun nor Earth.
+theta_SI / theta_EI: sun / Earth incidence angles of the face normal -j_B. Psi_0 <= h_temp and has
+relative degree 2 (u enters theta_ddot); the clamps (SPEC sec. 4, [resolved]) give the zero gradient
+the paper mentions when the face sees neither sun nor Earth. With c_S, c_E the incidence cosines:
 
     T_dot  = (alpha A S max(0, c_S) + (alpha A S A_f + sigma eps A T_E^4) F max(0, c_E)
-              - sigma eps A T^4) / (m c_p)
+              - sigma eps A T^4) / (m c_p)                          (`dynamics.spacecraft.thermal_rate`)
     T_ddot = (alpha A S [c_S > 0] c_S_dot + (alpha A S A_f + sigma eps A T_E^4) F [c_E > 0] c_E_dot
-              - 4 sigma eps A T^3 T_dot) / (m c_p)          (no u: T has relative degree 3)
+              - 4 sigma eps A T^3 T_dot) / (m c_p)                  (no u: T has relative degree 3)
+
+([c_E > 0] is 1 when the view factor is not clamped.)
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import math
 
+import numba
 import numpy as np
+from numpy.typing import NDArray
 
-from ..model import THERMAL_FACE_NORMAL_BODY, thermal_fluxes
-from ..params import Augmentation, BarrierGains, Config
-from ..state import TEMP
-from .base import Array, BarrierValues, Context, sampled_data_margin, second_order_condition
-from .pointing import earth_pointing, sun_pointing
+from rta_attitude.constraints.base import TEMPERATURE, nan_max, second_order
+from rta_attitude.constraints.geometry import pointing
+from rta_attitude.dynamics.spacecraft import JIT, thermal_rate
+
+NAME = "temperature"
+AXIS_BODY = (0.0, -1.0, 0.0)
+"""Outward normal of the thermal node's face, -j_B."""
 
 
-@dataclass(frozen=True)
-class Temperature:
-    """Upper temperature limit of the thermal node, through the angle-augmented barrier."""
+@numba.njit(**JIT)
+def h(ctx: np.void, x: NDArray[np.float64], c: np.void) -> float:
+    """T_max - T (K); negative = too hot."""
+    return c.temperature_max_K - x[10]
 
-    gains: BarrierGains
-    augmentation: Augmentation
-    T_max_K: float
-    margin_K: float = 0.0
-    """Sampled-data margin kept by the barrier (robust preset), K."""
-    name: str = "temperature"
-    relative_degree: int = 2
 
-    @classmethod
-    def from_config(cls, cfg: Config) -> Temperature:
-        return cls(cfg.barriers["temperature"], cfg.augmentation, cfg.limits.temperature_max_K,
-                   sampled_data_margin(cfg, "temperature"))
-
-    def safety_value(self, ctx: Context) -> Array:
-        return self.T_max_K - ctx.x[..., TEMP]
-
-    def evaluate(self, ctx: Context) -> BarrierValues:
-        cfg = ctx.cfg
-        th, env = cfg.thermal, cfg.environment
-        sun = sun_pointing(ctx, THERMAL_FACE_NORMAL_BODY)
-        earth = earth_pointing(ctx, THERMAL_FACE_NORMAL_BODY)
-        T = ctx.x[..., TEMP]
-        heat_capacity = th.mass_kg * th.specific_heat_J_kgK
-        T_dot = thermal_fluxes(sun.cos, earth.cos, T, cfg) / heat_capacity
-        solar = th.absorptivity * th.area_m2 * env.solar_constant_W_m2
-        earth_coeff = (solar * env.albedo_factor
-                       + env.stefan_boltzmann_W_m2K4 * th.emissivity * th.area_m2 * env.earth_temperature_K**4)
-        earth_on = (earth.cos > 0) if th.clamp_view_factor else np.ones_like(earth.cos, dtype=bool)
-        T_ddot = (solar * (sun.cos > 0) * sun.cos_dot
-                  + earth_coeff * env.earth_view_factor * earth_on * earth.cos_dot
-                  - 4 * env.stefan_boltzmann_W_m2K4 * th.emissivity * th.area_m2 * T**3 * T_dot) / heat_capacity
-
-        d0, d1 = self.augmentation.delta0_K_rad, self.augmentation.delta1_K_rad
-        sun_on = sun.theta < np.pi / 2
-        earth_in = earth.theta < np.pi / 2
-        h = self.T_max_K - T
-        psi0 = (h - self.margin_K - d0 * np.maximum(0.0, np.pi / 2 - sun.theta)
-                - d1 * np.maximum(0.0, np.pi / 2 - earth.theta))
-        psi0_dot = -T_dot + d0 * sun_on * sun.theta_dot + d1 * earth_in * earth.theta_dot
-        psi0_ddot_drift = -T_ddot + d0 * sun_on * sun.theta_ddot_drift + d1 * earth_in * earth.theta_ddot_drift
-        psi0_ddot_gain = (d0 * sun_on[..., None] * sun.theta_ddot_gain
-                          + d1 * earth_in[..., None] * earth.theta_ddot_gain)
-        psi1, drift, gain = second_order_condition(psi0, psi0_dot, psi0_ddot_drift, psi0_ddot_gain, self.gains)
-        return BarrierValues(h, psi0, psi1, drift, gain)
+@numba.njit(**JIT)
+def row(ctx: np.void, x: NDArray[np.float64], c: np.void, p: np.void, t: np.void) -> None:
+    """h, HOCBF levels and the barrier row of the temperature into table t (p: the plant model)."""
+    i = TEMPERATURE
+    g = c.gains[i]
+    guard = c.sin_pole_guard
+    cs, cs_dot, th_s, th_s_dot, th_s_dd, gs0, gs1, gs2 = pointing(0.0, -1.0, 0.0, ctx.sun, ctx.sun_rate, ctx.sun_acc,
+                                                                  ctx, guard)
+    ce, ce_dot, th_e, th_e_dot, th_e_dd, ge0, ge1, ge2 = pointing(0.0, -1.0, 0.0, ctx.earth, ctx.earth_rate,
+                                                                  ctx.earth_acc, ctx, guard)
+    T = x[10]
+    T_dot = thermal_rate(cs, ce, T, p)
+    earth_coeff = p.albedo_W + p.sigma_eps_A_W_K4 * p.earth_T4_K4
+    earth_on = (1.0 if ce > 0 else 0.0) if p.clamp_view_factor else 1.0
+    sun_lit = 1.0 if cs > 0 else 0.0
+    T_ddot = (p.solar_W * sun_lit * cs_dot + earth_coeff * p.earth_view_factor * earth_on * ce_dot
+              - 4 * p.sigma_eps_A_W_K4 * T**3 * T_dot) / p.heat_capacity_J_K
+    d0, d1 = c.delta0_K_rad, c.delta1_K_rad
+    half_pi = math.pi / 2
+    sun_on = 1.0 if th_s < half_pi else 0.0
+    earth_in = 1.0 if th_e < half_pi else 0.0
+    t.h[i] = c.temperature_max_K - T
+    psi0 = t.h[i] - g.margin - d0 * nan_max(0.0, half_pi - th_s) - d1 * nan_max(0.0, half_pi - th_e)
+    psi0_dot = -T_dot + d0 * sun_on * th_s_dot + d1 * earth_in * th_e_dot
+    psi0_dd = -T_ddot + d0 * sun_on * th_s_dd + d1 * earth_in * th_e_dd
+    second_order(t, i, psi0, psi0_dot, psi0_dd, g)
+    t.gain[i, 0] = d0 * sun_on * gs0 + d1 * earth_in * ge0
+    t.gain[i, 1] = d0 * sun_on * gs1 + d1 * earth_in * ge1
+    t.gain[i, 2] = d0 * sun_on * gs2 + d1 * earth_in * ge2

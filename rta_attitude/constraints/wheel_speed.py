@@ -1,49 +1,49 @@
 """Wheel speed, per wheel i: |psi_i| <= psi_max.
 
-    h = psi_max^2 - psi_i^2        (rad^2/s^2; relative degree 1, CBF)
-    BC = -2 psi_i u_i + k1 h + bias
+    h  = psi_max^2 - psi_i^2                (rad^2/s^2; relative degree 1, CBF)
+    BC = -2 psi_i u_i + k1 h + bias >= 0
 
 Sampled data (`robust` preset): psi is exactly linear over a held step, so the one-step-ahead
-bound |psi_i + u_i dt| <= (1 - margin) psi_max keeps the limit at and between samples.
+bound |psi_i + u_i dt| <= (1 - zoh_margin) psi_max (`zoh_interval`) keeps the limit at and between
+samples.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
+import numba
 import numpy as np
+from numpy.typing import NDArray
 
-from ..params import BarrierGains, Config
-from ..state import AXES, PSI
-from .base import Array, BarrierValues, Context
+from rta_attitude.constraints.base import PSI_X
+from rta_attitude.dynamics.spacecraft import JIT
+
+NAMES = ("psi_x", "psi_y", "psi_z")
 
 
-@dataclass(frozen=True)
-class WheelSpeed:
-    """Speed limit of one reaction wheel."""
+@numba.njit(**JIT)
+def h(ctx: np.void, x: NDArray[np.float64], c: np.void, axis: int) -> float:
+    """psi_max^2 - psi_axis^2 (rad^2/s^2); negative = the wheel is too fast."""
+    return c.psi_max_rad_s**2 - x[7 + axis] ** 2
 
-    gains: BarrierGains
-    axis: int
-    psi_max_rad_s: float
-    name: str = "psi"
-    relative_degree: int = 1
 
-    @classmethod
-    def from_config(cls, cfg: Config, axis: int) -> WheelSpeed:
-        return cls(cfg.barriers["psi"], axis, cfg.limits.psi_max_rad_s, name=f"psi_{AXES[axis]}")
+@numba.njit(**JIT)
+def row(ctx: np.void, x: NDArray[np.float64], c: np.void, axis: int, t: np.void) -> None:
+    """h and the CBF row of one wheel into table t."""
+    i = PSI_X + axis
+    g = c.gains[i]
+    pa = x[7 + axis]
+    hp = c.psi_max_rad_s**2 - pa * pa
+    t.h[i] = hp
+    t.psi0[i] = hp
+    t.psi1[i] = hp
+    for a in range(3):
+        t.gain[i, a] = 0.0
+    t.gain[i, axis] = -2.0 * pa
+    t.drift[i] = g.k1 * hp + g.bias
 
-    def safety_value(self, ctx: Context) -> Array:
-        return self.psi_max_rad_s**2 - ctx.x[..., PSI.start + self.axis] ** 2
 
-    def evaluate(self, ctx: Context) -> BarrierValues:
-        psi = ctx.x[..., PSI.start + self.axis]
-        h = self.psi_max_rad_s**2 - psi**2
-        gain = np.zeros((*ctx.batch_shape, 3))
-        gain[..., self.axis] = -2.0 * psi
-        return BarrierValues(h, h, h, self.gains.k1 * h + self.gains.bias, gain)
-
-    def zoh_bounds(self, ctx: Context, dt_s: float, margin: float) -> tuple[Array, Array]:
-        """(lower, upper) on u_i (...), rad/s^2, keeping |psi_i(t + dt)| <= (1 - margin) psi_max."""
-        psi = ctx.x[..., PSI.start + self.axis]
-        limit = (1.0 - margin) * self.psi_max_rad_s
-        return (-limit - psi) / dt_s, (limit - psi) / dt_s
+@numba.njit(**JIT)
+def zoh_interval(ctx: np.void, x: NDArray[np.float64], c: np.void, axis: int) -> tuple[float, float]:
+    """(lower, upper) on u_axis, rad/s^2, keeping |psi_axis(t + dt)| <= (1 - zoh_margin) psi_max."""
+    limit = (1.0 - c.zoh_margin) * c.psi_max_rad_s
+    return (-limit - x[7 + axis]) / c.dt_s, (limit - x[7 + axis]) / c.dt_s

@@ -1,0 +1,86 @@
+"""`rta-attitude analyze BAG [--compare BAG2]`: summary, verdict and figure of a recorded run
+(`recording.analysis`), optionally beside a second run."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Arguments of `rta-attitude analyze`."""
+    parser.add_argument("bag", type=Path, help="MCAP file (or rosbag2 directory) recorded from a run")
+    parser.add_argument("--out", type=Path, default=Path("out/analyze"), help="output directory")
+    parser.add_argument("--compare", type=Path, default=None, metavar="BAG2",
+                        help="a second run (e.g. without RTA) to overlay and tabulate against the first")
+    parser.add_argument("--namespace", default=None, help="namespace of the run's topics (default: found in the bag)")
+    parser.add_argument("--scenario", default=None,
+                        help="scenario of the run (names the report, sets its slack weights; default: recorded)")
+    parser.add_argument("--config", type=Path, default=None,
+                        help="parameter YAML of the run (default: $RTA_ATTITUDE_CONFIG or the package's)")
+    parser.add_argument("--no-plot", action="store_true", help="skip the PNG figure")
+
+
+def run(args: argparse.Namespace) -> int:
+    """`rta-attitude analyze`: summary (printed, summary.json), time series and figure of a bag."""
+    from rta_attitude import config as config_module
+    from rta_attitude.files import output_dir, write_text
+    from rta_attitude.recording.analysis import (
+        compare_summaries,
+        format_bag_lines,
+        format_comparison,
+        label,
+        load_run,
+        resolve_bag_path,
+        summarize_run,
+        write_timeseries,
+    )
+    from rta_attitude.simulation.metrics import format_summary
+
+    for p in [args.bag, *([args.compare] if args.compare is not None else [])]:
+        resolve_bag_path(p)  # check inputs first
+    cfg = config_module.load(args.config)
+    out = output_dir(args.out)
+    t0 = time.perf_counter()
+    run_a = load_run(args.bag, cfg, args.namespace, args.scenario)
+    summary_a = summarize_run(run_a, cfg)
+    runs = [(run_a.label, run_a)]
+    summary_b = None
+    if args.compare is not None:
+        run_b = load_run(args.compare, cfg, args.namespace, args.scenario)
+        summary_b = summarize_run(run_b, cfg)
+        runs.append((run_b.label, run_b))
+        if run_b.label == run_a.label:  # same kind of run: tell them apart by file
+            runs = [(f"{r.label} [{r.path.stem}]", r) for _, r in runs]
+    wall = time.perf_counter() - t0
+    write_text(out / "summary.json", json.dumps(summary_a, indent=2) + "\n")
+    write_timeseries(run_a, out / "timeseries.npz")
+    print(format_summary(summary_a))
+    print(format_bag_lines(summary_a))
+    written = [out / "summary.json", out / "timeseries.npz"]
+    if summary_b is not None:
+        rows = compare_summaries(summary_a, summary_b)
+        write_text(out / "summary_compare.json", json.dumps(summary_b, indent=2) + "\n")
+        write_text(out / "comparison.json", json.dumps(
+            {"a": str(run_a.path), "b": str(runs[1][1].path), "rows": rows}, indent=2) + "\n")
+        print()
+        print(format_summary(summary_b))
+        print(format_bag_lines(summary_b))
+        print()
+        print(format_comparison(rows, label(summary_a), label(summary_b)))
+        written += [out / "summary_compare.json", out / "comparison.json"]
+    if not args.no_plot:
+        from rta_attitude.recording.plots import plot_runs
+
+        title = f"{run_a.scenario}: " + " vs ".join(label for label, _ in runs) + \
+            f" (from {' and '.join(r.path.name for _, r in runs)})"
+        written.append(plot_runs(runs, cfg, out / "figure.png", title))
+    print(f"wrote {', '.join(str(p) for p in written)} (bags read and analysed in {wall:.2f} s)")
+    return 0
+
+
+
+
+__all__ = ["add_arguments", "run"]

@@ -1,0 +1,79 @@
+"""`rta-attitude`: the command line. Every subcommand checks its inputs first, prints one
+`ERROR: ...` line and returns 1 on bad input or a file error (no traceback).
+
+    rta-attitude simulate --scenario paper-example [--no-rta] [--preset robust|paper] --out DIR
+    rta-attitude check-config [--config FILE]
+    rta-attitude launch ...        (the nodes over DDS: cli/launch.py)
+    rta-attitude montecarlo ...    (cli/montecarlo.py)
+    rta-attitude analyze BAG ...   (cli/analyze.py)
+    rta-attitude replay BAG        (cli/replay.py)
+    rta-attitude topics | echo     (cli/topics.py)
+
+Each subcommand is one module of this package with `add_arguments(parser)` and `run(args) -> int`;
+their imports are light (the core, numba and rclpy load in `run`), so `--help` and argument errors
+answer at once.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import logging
+import sys
+from collections.abc import Callable
+from typing import Any
+
+from rta_attitude.errors import RtaError
+
+SUBCOMMANDS: dict[str, tuple[str, str]] = {
+    "simulate": ("simulate", "run a scenario in process (no DDS); summary, time series, figure"),
+    "check-config": ("check_config", "validate a parameter file and print what it sets"),
+    "launch": ("launch", "run the closed loop as ROS 2 nodes over DDS, record an MCAP bag"),
+    "montecarlo": ("montecarlo", "the paper's Monte Carlo of the filter from Latin-hypercube states"),
+    "analyze": ("analyze", "summary and figure of a recorded MCAP bag"),
+    "replay": ("replay", "republish a bag's messages over DDS with /clock"),
+    "topics": ("topics", "list live ROS topics with types, publishers and rates"),
+    "echo": ("topics", "print the messages of one live topic as YAML"),
+}
+"""Subcommand -> (module of rta_attitude.cli, help)."""
+
+
+def build_parser() -> tuple[argparse.ArgumentParser, dict[str, Callable[[argparse.Namespace], int]]]:
+    """The argument parser and the handler of each subcommand."""
+    parser = argparse.ArgumentParser(prog="rta-attitude", description=__doc__.split("\n")[0])
+    parser.add_argument("-v", "--verbose", action="store_true", help="log debug messages")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    handlers: dict[str, Callable[[argparse.Namespace], int]] = {}
+    for name, (module_name, help_text) in SUBCOMMANDS.items():
+        module: Any = importlib.import_module(f"rta_attitude.cli.{module_name}")
+        p = sub.add_parser(name, help=help_text)
+        if module_name == "topics":
+            module.add_arguments(p, name)
+        else:
+            module.add_arguments(p)
+        handlers[name] = module.run
+    return parser, handlers
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Console entry point; returns the exit status."""
+    parser, handlers = build_parser()
+    args = parser.parse_args(argv)
+    logging.basicConfig(level=logging.DEBUG if args.verbose else logging.WARNING,
+                        format="%(levelname)s %(name)s: %(message)s")
+    try:
+        return int(handlers[args.command](args) or 0)
+    except RtaError as exc:
+        print(f"ERROR: {exc}", file=sys.stderr)
+        return 1
+    except OSError as exc:  # a file error no command anticipated: still one line, not a traceback
+        where = f"{exc.filename}: " if exc.filename else ""
+        print(f"ERROR: {where}{exc.strerror or exc}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print("ERROR: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,303 @@
+"""The one loader: YAML file -> validated `Config`. deg -> rad and degC -> K happen here only.
+
+The file is a ROS 2 parameters file (`/**: ros__parameters: {...}`), so the nodes read the same
+file with `--ros-args --params-file`. Unknown keys, wrong types and out-of-range values raise
+`ConfigError` with one line naming the key, the value and what is allowed.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import sys
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from rta_attitude.config.schema import (
+    Augmentation,
+    BarrierGains,
+    Config,
+    ControllerGains,
+    Environment,
+    FilterOptions,
+    Limits,
+    Power,
+    Scenario,
+    Spacecraft,
+    Thermal,
+)
+from rta_attitude.dynamics.state import make_state
+from rta_attitude.errors import ConfigError
+
+CONFIG_FILE_NAME = "rta_attitude.yaml"
+CELSIUS_OFFSET_K = 273.15
+CONFIG_ENV = "RTA_ATTITUDE_CONFIG"
+
+
+def default_config_path() -> Path:
+    """Where the parameter file is: $RTA_ATTITUDE_CONFIG, the source tree, or the install share/.
+
+    Raises:
+        ConfigError: no parameter file found.
+    """
+    env = os.environ.get(CONFIG_ENV)
+    if env:
+        return Path(env)
+    candidates = [Path(__file__).resolve().parents[2] / "config" / CONFIG_FILE_NAME]
+    prefixes = [*os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep), sys.prefix]
+    candidates += [Path(p) / "share" / "rta_attitude" / "config" / CONFIG_FILE_NAME for p in prefixes if p]
+    for path in candidates:
+        if path.is_file():
+            return path
+    raise ConfigError(f"no {CONFIG_FILE_NAME} found (looked in {', '.join(map(str, candidates))}); "
+                      f"set {CONFIG_ENV}")
+
+
+def read_parameters(path: str | os.PathLike[str] | None = None) -> tuple[dict[str, Any], Path]:
+    """The `ros__parameters` mapping of a parameter file, and the file's path.
+
+    Raises:
+        ConfigError: missing file, unreadable YAML, or no `ros__parameters` section.
+    """
+    import yaml
+
+    file = Path(path) if path is not None else default_config_path()
+    if file.is_dir():
+        raise ConfigError(f"config file {str(file)!r} is a directory, not a file")
+    if not file.is_file():
+        raise ConfigError(f"config file {str(file)!r} does not exist")
+    try:
+        text = file.read_text()
+    except (OSError, UnicodeDecodeError) as exc:
+        reason = exc.strerror if isinstance(exc, OSError) else "not UTF-8 text"
+        raise ConfigError(f"config file {str(file)!r} cannot be read ({reason})") from None
+    try:
+        doc = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        line = getattr(getattr(exc, "problem_mark", None), "line", None)
+        where = f" at line {line + 1}" if line is not None else ""
+        raise ConfigError(f"config file {str(file)!r} is not valid YAML{where}") from None
+    if not isinstance(doc, dict) or len(doc) != 1:
+        raise ConfigError(f"config file {str(file)!r} must hold one node key (e.g. '/**') with ros__parameters")
+    (node_params,) = doc.values()
+    if not isinstance(node_params, dict) or not isinstance(node_params.get("ros__parameters"), dict):
+        raise ConfigError(f"config file {str(file)!r} has no ros__parameters mapping")
+    return node_params["ros__parameters"], file
+
+
+class _Section:
+    """Typed access to one mapping; remembers which keys were read so leftovers are errors."""
+
+    def __init__(self, data: Any, where: str) -> None:
+        if not isinstance(data, Mapping):
+            raise ConfigError(f"{where} must be a mapping, got {type(data).__name__}")
+        self.data, self.where, self.used = data, where, set()
+
+    def _get(self, key: str, default: Any) -> Any:
+        self.used.add(key)
+        if key not in self.data:
+            if default is _REQUIRED:
+                raise ConfigError(f"{self.where}.{key} is missing")
+            return default
+        return self.data[key]
+
+    def number(self, key: str, default: Any = None) -> float:
+        value = self._get(key, _REQUIRED if default is None else default)
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+            raise ConfigError(f"{self.where}.{key} must be a finite number, got {value!r}")
+        return float(value)
+
+    def integer(self, key: str, default: Any = None) -> int:
+        value = self._get(key, _REQUIRED if default is None else default)
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise ConfigError(f"{self.where}.{key} must be an integer, got {value!r}")
+        return value
+
+    def flag(self, key: str, default: Any = None) -> bool:
+        value = self._get(key, _REQUIRED if default is None else default)
+        if not isinstance(value, bool):
+            raise ConfigError(f"{self.where}.{key} must be true or false, got {value!r}")
+        return value
+
+    def text(self, key: str, default: Any = None) -> str:
+        value = self._get(key, _REQUIRED if default is None else default)
+        if not isinstance(value, str):
+            raise ConfigError(f"{self.where}.{key} must be a string, got {value!r}")
+        return value
+
+    def vector(self, key: str, size: int | None = None) -> tuple[float, ...]:
+        value = self._get(key, _REQUIRED)
+        ok = isinstance(value, list) and all(
+            isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in value)
+        if not ok or (size is not None and len(value) != size):
+            n = f"{size} " if size is not None else ""
+            raise ConfigError(f"{self.where}.{key} must be a list of {n}finite numbers, got {value!r}")
+        return tuple(float(v) for v in value)
+
+    def section(self, key: str) -> _Section:
+        return _Section(self._get(key, _REQUIRED), f"{self.where}.{key}")
+
+    def done(self) -> None:
+        extra = sorted(set(self.data) - self.used)
+        if extra:
+            raise ConfigError(f"{self.where}: unknown key {extra[0]!r} (value {self.data[extra[0]]!r}; "
+                              f"known: {', '.join(sorted(self.used))})")
+
+
+_REQUIRED = object()
+
+
+def _barrier(s: _Section, second_order: bool) -> BarrierGains:
+    gains = BarrierGains(
+        enabled=s.flag("enabled", True),
+        k1=s.number("k1"),
+        k2=s.number("k2") if second_order else 0.0,
+        bias=s.number("bias", 0.0),
+        slack_weight=s.number("slack_weight", 0.0),
+        margin=s.number("margin", 0.0) if second_order else 0.0,
+    )
+    return gains
+
+
+def _scenario(name: str, s: _Section) -> Scenario:
+    q = np.array(s.vector("q", 4))
+    if not 0.5 < np.linalg.norm(q) < 1.5:
+        raise ConfigError(f"{s.where}.q must be close to unit norm, got norm {np.linalg.norm(q):.3f}")
+    x0 = make_state(
+        q,
+        np.radians(s.vector("omega_deg_s", 3)),
+        s.vector("psi_rad_s", 3),
+        T_K=s.number("temperature_degC") + CELSIUS_OFFSET_K,
+        E_J=s.number("energy_J"),
+        theta_S_rad=math.radians(s.number("theta_S_deg")),
+    )
+    flat = s.vector("command_schedule")
+    if len(flat) == 0 or len(flat) % 5:
+        raise ConfigError(f"{s.where}.command_schedule must be rows of 5 numbers [t_s, q1, q2, q3, q4], "
+                          f"got {len(flat)} numbers")
+    rows = np.array(flat).reshape(-1, 5)
+    norms = np.linalg.norm(rows[:, 1:], axis=1)
+    if np.any(norms < 0.5) or np.any(norms > 1.5):
+        raise ConfigError(f"{s.where}.command_schedule quaternions must be close to unit norm")
+    qs = rows[:, 1:] / norms[:, None]
+    slack: tuple[tuple[str, float], ...] | None = None
+    if "slack_weights" in s.data:
+        sw = s.section("slack_weights")
+        slack = tuple((k, sw.number(k)) for k in list(sw.data))
+        sw.done()
+    scenario = Scenario(
+        name=name,
+        description=s.text("description", ""),
+        duration_s=s.number("duration_s"),
+        x0=x0,
+        controller=s.text("controller", "pd"),
+        schedule_s=tuple(float(t) for t in rows[:, 0]),
+        schedule_q=tuple((float(a), float(b), float(c), float(d)) for a, b, c, d in qs),
+        slack_weights=slack,
+    )
+    s.done()
+    return scenario
+
+
+def from_parameters(params: Mapping[str, Any], source: str = "<memory>") -> Config:
+    """Build a Config from the `ros__parameters` mapping (nested dicts, file units).
+
+    Raises:
+        ConfigError: unknown key, wrong type, out-of-range value (one line naming which).
+    """
+    root = _Section(params, "parameters")
+    sc = root.section("spacecraft")
+    spacecraft = Spacecraft(sc.vector("inertia_kgm2", 3), sc.number("wheel_inertia_kgm2"),  # type: ignore[arg-type]
+                            sc.number("torque_sign", 1.0), sc.text("model", "paper"))
+    sc.done()
+    ev = root.section("environment")
+    environment = Environment(
+        ev.number("mean_motion_rad_s"), ev.number("solar_constant_W_m2"), ev.number("albedo_factor"),
+        ev.number("earth_temperature_K"), ev.number("stefan_boltzmann_W_m2K4"), ev.number("earth_view_factor"),
+        ev.flag("rotating_hill", False), ev.flag("gravity_gradient", False))
+    ev.done()
+    th = root.section("thermal")
+    thermal = Thermal(th.number("mass_kg"), th.number("area_m2"), th.number("specific_heat_J_kgK"),
+                      th.number("absorptivity"), th.number("emissivity"), th.flag("clamp_view_factor", True))
+    th.done()
+    pw = root.section("power")
+    power = Power(pw.number("ideal_W_m2"), pw.number("degradation"), pw.number("panel_area_m2"),
+                  pw.number("load_W"))
+    pw.done()
+    li = root.section("limits")
+    limits = Limits(
+        wheel_accel_max_rad_s2=li.number("wheel_accel_max_rad_s2"),
+        omega_dot_max_rad_s2=math.radians(li.number("omega_dot_max_deg_s2")),
+        omega_max_rad_s=math.radians(li.number("omega_max_deg_s")),
+        psi_max_rad_s=li.number("psi_max_rad_s"),
+        exclusion_fov_rad=math.radians(li.number("exclusion_fov_deg")),
+        exclusion_buffer_rad=math.radians(li.number("exclusion_buffer_deg")),
+        comm_fov_rad=math.radians(li.number("comm_fov_deg")),
+        temperature_max_K=li.number("temperature_max_degC") + CELSIUS_OFFSET_K,
+        energy_min_J=li.number("energy_min_J"),
+    )
+    li.done()
+    co = root.section("constraints")
+    barriers: dict[str, BarrierGains] = {}
+    for group in ("exclusion_zone", "communication"):
+        s = co.section(group)
+        barriers[group] = _barrier(s, True)
+        s.done()
+    s = co.section("temperature")
+    barriers["temperature"] = _barrier(s, True)
+    d0, d1 = s.number("delta0_K_rad"), s.number("delta1_K_rad")
+    s.done()
+    s = co.section("battery")
+    barriers["battery"] = _barrier(s, True)
+    d2 = s.number("delta2_J_rad")
+    s.done()
+    for group in ("omega", "psi"):
+        s = co.section(group)
+        barriers[group] = _barrier(s, False)
+        s.done()
+    co.done()
+    fi = root.section("filter")
+    filter_options = FilterOptions(
+        preset=fi.text("preset"), sample_time_s=fi.number("sample_time_s"), zoh_margin=fi.number("zoh_margin"),
+        fallback=fi.text("fallback"), max_iterations=fi.integer("max_iterations"),
+        max_inner_iterations=fi.integer("max_inner_iterations"), eps_abs=fi.number("eps_abs"),
+        eps_primal_inf=fi.number("eps_primal_inf"), eps_dual_inf=fi.number("eps_dual_inf"),
+        check_tolerance=fi.number("check_tolerance"), pole_guard_rad=fi.number("pole_guard_rad"),
+        soften_weight=fi.number("soften_weight"), backup_solver=fi.text("backup_solver"),
+        solver=fi.text("solver", "active_set"))
+    fi.done()
+    ct = root.section("controller")
+    controller = ControllerGains(ct.number("kp"), ct.number("kd"))
+    ct.done()
+    it = root.section("integrator")
+    substeps = it.integer("substeps")
+    it.done()
+    sn = root.section("scenarios")
+    scenarios = {}
+    for name in list(sn.data):
+        scenarios[name] = _scenario(name, sn.section(name))
+    sn.done()
+    root.done()
+    return Config(spacecraft, environment, thermal, power, limits, barriers, Augmentation(d0, d1, d2),
+                  filter_options, controller, substeps, scenarios, source=source)
+
+
+def load(path: str | os.PathLike[str] | None = None, *, preset: str | None = None) -> Config:
+    """Load and validate the parameter file (default: `default_config_path()`).
+
+    Args:
+        path: YAML parameter file; None for the default one.
+        preset: override `filter.preset` ('robust' or 'paper').
+
+    Raises:
+        ConfigError: the file is missing or any value is invalid.
+    """
+    params, file = read_parameters(path)
+    cfg = from_parameters(params, source=str(file))
+    return cfg.with_preset(preset) if preset is not None else cfg
+
+
+__all__ = ["CONFIG_ENV", "default_config_path", "from_parameters", "load", "read_parameters"]

@@ -1,0 +1,396 @@
+"""Typed, frozen parameter sets, in model units (SI, rad, K), each checked on construction.
+
+Built by `rta_attitude.config.load` from the YAML file; nothing else converts units.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+from numpy.typing import NDArray
+
+from rta_attitude.errors import ConfigError
+
+CONSTRAINT_NAMES: tuple[str, ...] = (
+    "exclusion_zone", "communication", "temperature", "battery",
+    "omega_x", "omega_y", "omega_z", "psi_x", "psi_y", "psi_z",
+)  # fmt: skip
+"""Every safety constraint of the paper, by name, in report order."""
+
+BARRIER_GROUPS: tuple[str, ...] = (
+    "exclusion_zone", "communication", "temperature", "battery", "omega", "psi",
+)  # fmt: skip
+"""Keys of the `constraints:` section; `omega` and `psi` configure their three axes together."""
+
+PRESETS: tuple[str, ...] = ("robust", "paper")
+FALLBACKS: tuple[str, ...] = ("pass_through", "hold", "soften", "raise")
+BACKUP_SOLVERS: tuple[str, ...] = ("quadprog", "none")
+SOLVERS: tuple[str, ...] = ("active_set", "proxsuite")
+CONTROLLERS: tuple[str, ...] = ("pd", "none")
+PLANT_MODELS: tuple[str, ...] = ("gyrostat", "paper")
+"""gyrostat: the wheels' momentum in Euler's equations (-omega x (J omega - D psi)); paper: without it."""
+
+
+def _positive(where: str, value: float) -> None:
+    if not (math.isfinite(value) and value > 0):
+        raise ConfigError(f"{where} must be > 0, got {value!r}")
+
+
+def _nonneg(where: str, value: float) -> None:
+    if not (math.isfinite(value) and value >= 0):
+        raise ConfigError(f"{where} must be >= 0, got {value!r}")
+
+
+def _choice(where: str, value: str, allowed: tuple[str, ...]) -> None:
+    if value not in allowed:
+        raise ConfigError(f"{where} must be one of {', '.join(allowed)}, got {value!r}")
+
+
+@dataclass(frozen=True)
+class Spacecraft:
+    """Rigid body with three reaction wheels on its principal axes."""
+
+    inertia_kgm2: tuple[float, float, float]
+    """Principal moments J1, J2, J3, kg m^2."""
+    wheel_inertia_kgm2: float
+    """D, wheel spin-axis inertia, kg m^2."""
+    torque_sign: float = 1.0
+    """+1: tau = +D psi_dot (the paper); -1: a physical reaction torque."""
+    model: str = "paper"
+    """PLANT_MODELS: `gyrostat` (the wheels' gyroscopic torque included) or `paper` (dropped)."""
+
+    def __post_init__(self) -> None:
+        _choice("spacecraft.model", self.model, PLANT_MODELS)
+        for i, j in enumerate(self.inertia_kgm2):
+            _positive(f"spacecraft.inertia_kgm2[{i}]", j)
+        _positive("spacecraft.wheel_inertia_kgm2", self.wheel_inertia_kgm2)
+        if self.torque_sign not in (1.0, -1.0):
+            raise ConfigError(f"spacecraft.torque_sign must be 1.0 or -1.0, got {self.torque_sign!r}")
+
+    @property
+    def J(self) -> NDArray[np.float64]:
+        """Principal inertia as an array (3,), kg m^2."""
+        return np.array(self.inertia_kgm2, dtype=float)
+
+    @property
+    def control_gain(self) -> NDArray[np.float64]:
+        """d omega_dot / d u = sign D / J_i (3,), 1/s^2 per rad/s^2."""
+        return self.torque_sign * self.wheel_inertia_kgm2 / self.J
+
+
+@dataclass(frozen=True)
+class Environment:
+    """Orbit, sun and Earth radiation constants."""
+
+    mean_motion_rad_s: float
+    solar_constant_W_m2: float
+    albedo_factor: float
+    earth_temperature_K: float
+    stefan_boltzmann_W_m2K4: float
+    earth_view_factor: float
+    rotating_hill: bool = False
+    """The Hill frame turns at the mean motion (in the attitude kinematics); False: inertial, as the paper."""
+    gravity_gradient: bool = False
+    """Gravity-gradient torque of a circular orbit at the mean motion."""
+
+    def __post_init__(self) -> None:
+        for name in ("mean_motion_rad_s", "solar_constant_W_m2", "earth_temperature_K",
+                     "stefan_boltzmann_W_m2K4"):
+            _positive(f"environment.{name}", getattr(self, name))
+        for name in ("albedo_factor", "earth_view_factor"):
+            v = getattr(self, name)
+            if not 0 <= v <= 1:
+                raise ConfigError(f"environment.{name} must be in [0, 1], got {v!r}")
+
+
+@dataclass(frozen=True)
+class Thermal:
+    """Lumped thermal node of the -j_B face (no conduction)."""
+
+    mass_kg: float
+    area_m2: float
+    specific_heat_J_kgK: float
+    absorptivity: float
+    emissivity: float
+    clamp_view_factor: bool = True
+
+    def __post_init__(self) -> None:
+        for name in ("mass_kg", "area_m2", "specific_heat_J_kgK"):
+            _positive(f"thermal.{name}", getattr(self, name))
+        for name in ("absorptivity", "emissivity"):
+            v = getattr(self, name)
+            if not 0 <= v <= 1:
+                raise ConfigError(f"thermal.{name} must be in [0, 1], got {v!r}")
+
+
+@dataclass(frozen=True)
+class Power:
+    """Solar panel on +k_B and a constant load."""
+
+    ideal_W_m2: float
+    degradation: float
+    panel_area_m2: float
+    load_W: float
+
+    def __post_init__(self) -> None:
+        for name in ("ideal_W_m2", "panel_area_m2"):
+            _positive(f"power.{name}", getattr(self, name))
+        _nonneg("power.load_W", self.load_W)
+        if not 0 < self.degradation <= 1:
+            raise ConfigError(f"power.degradation must be in (0, 1], got {self.degradation!r}")
+
+    @property
+    def peak_W(self) -> float:
+        """Panel power with the sun on its normal, W."""
+        return self.ideal_W_m2 * self.degradation * self.panel_area_m2
+
+
+@dataclass(frozen=True)
+class Limits:
+    """Safety limits, model units."""
+
+    wheel_accel_max_rad_s2: float
+    omega_dot_max_rad_s2: float
+    omega_max_rad_s: float
+    psi_max_rad_s: float
+    exclusion_fov_rad: float
+    exclusion_buffer_rad: float
+    comm_fov_rad: float
+    temperature_max_K: float
+    energy_min_J: float
+
+    def __post_init__(self) -> None:
+        for name in ("wheel_accel_max_rad_s2", "omega_dot_max_rad_s2", "omega_max_rad_s",
+                     "psi_max_rad_s", "exclusion_fov_rad", "comm_fov_rad", "temperature_max_K"):
+            _positive(f"limits.{name}", getattr(self, name))
+        _nonneg("limits.exclusion_buffer_rad", self.exclusion_buffer_rad)
+        _nonneg("limits.energy_min_J", self.energy_min_J)
+        if self.exclusion_fov_rad / 2 + self.exclusion_buffer_rad >= math.pi:
+            raise ConfigError("limits: exclusion_fov/2 + exclusion_buffer must be < 180 deg")
+        if self.comm_fov_rad > 2 * math.pi:
+            raise ConfigError(f"limits.comm_fov must be <= 360 deg, got {self.comm_fov_rad!r} rad")
+
+    @property
+    def exclusion_angle_rad(self) -> float:
+        """Smallest allowed sensor-to-sun angle, FOV/2 + beta, rad."""
+        return self.exclusion_fov_rad / 2 + self.exclusion_buffer_rad
+
+    @property
+    def comm_angle_rad(self) -> float:
+        """Largest allowed antenna-to-Earth angle, FOV/2, rad."""
+        return self.comm_fov_rad / 2
+
+
+@dataclass(frozen=True)
+class BarrierGains:
+    """Gains of one safety constraint's barrier condition."""
+
+    enabled: bool = True
+    k1: float = 0.1
+    """First class-K gain (1/s): alpha_1(h) = k1 h."""
+    k2: float = 0.0
+    """Second class-K gain (1/s) for relative-degree-2 constraints (HOCBF); unused otherwise."""
+    bias: float = 0.0
+    """sigma, added to the final barrier condition."""
+    slack_weight: float = 0.0
+    """p > 0 makes the constraint soft, with cost p delta^2; 0 = hard."""
+    margin: float = 0.0
+    """Sampled-data allowance (units of h), `robust` preset only: the HOCBF keeps h >= margin, so
+    that the overshoot of a zero-order-hold step stays on the safe side of h = 0."""
+
+    def check(self, where: str) -> None:
+        """Raise ConfigError naming `where` if a gain is out of range."""
+        _positive(f"{where}.k1", self.k1)
+        _nonneg(f"{where}.k2", self.k2)
+        _nonneg(f"{where}.slack_weight", self.slack_weight)
+        _nonneg(f"{where}.margin", self.margin)
+        if not math.isfinite(self.bias):
+            raise ConfigError(f"{where}.bias must be finite, got {self.bias!r}")
+
+
+@dataclass(frozen=True)
+class Augmentation:
+    """Angle terms that lower the relative degree of temperature and battery (SPEC sec. 4)."""
+
+    delta0_K_rad: float = 1.0
+    delta1_K_rad: float = 0.5
+    delta2_J_rad: float = 1000.0
+
+    def __post_init__(self) -> None:
+        _nonneg("constraints.temperature.delta0_K_rad", self.delta0_K_rad)
+        _nonneg("constraints.temperature.delta1_K_rad", self.delta1_K_rad)
+        _nonneg("constraints.battery.delta2_J_rad", self.delta2_J_rad)
+
+
+@dataclass(frozen=True)
+class FilterOptions:
+    """How the ASIF filter builds and solves its QP."""
+
+    preset: str = "robust"
+    sample_time_s: float = 1.0
+    zoh_margin: float = 0.02
+    fallback: str = "soften"
+    max_iterations: int = 50
+    max_inner_iterations: int = 20
+    eps_abs: float = 1e-9
+    eps_primal_inf: float = 1e-12
+    eps_dual_inf: float = 1e-12
+    check_tolerance: float = 1e-6
+    pole_guard_rad: float = 1e-3
+    soften_weight: float = 1e8
+    backup_solver: str = "quadprog"
+    solver: str = "active_set"
+
+    def __post_init__(self) -> None:
+        _choice("filter.solver", self.solver, SOLVERS)
+        _choice("filter.preset", self.preset, PRESETS)
+        _choice("filter.backup_solver", self.backup_solver, BACKUP_SOLVERS)
+        _choice("filter.fallback", self.fallback, FALLBACKS)
+        _positive("filter.sample_time_s", self.sample_time_s)
+        if not 0 <= self.zoh_margin < 1:
+            raise ConfigError(f"filter.zoh_margin must be in [0, 1), got {self.zoh_margin!r}")
+        for name in ("max_iterations", "max_inner_iterations"):
+            v = getattr(self, name)
+            if not (isinstance(v, int) and 1 <= v <= 100_000):
+                raise ConfigError(f"filter.{name} must be an integer in [1, 100000], got {v!r}")
+        for name in ("eps_abs", "eps_primal_inf", "eps_dual_inf", "check_tolerance", "pole_guard_rad",
+                     "soften_weight"):
+            _positive(f"filter.{name}", getattr(self, name))
+
+
+@dataclass(frozen=True)
+class ControllerGains:
+    """PD attitude law u_des = psi_dot_max tanh(-kp dq - kd omega)."""
+
+    kp: float = 0.2
+    kd: float = 1.5
+
+    def __post_init__(self) -> None:
+        _nonneg("controller.kp", self.kp)
+        _nonneg("controller.kd", self.kd)
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """One named experiment: initial state, primary controller, command schedule, duration."""
+
+    name: str
+    description: str
+    duration_s: float
+    x0: NDArray[np.float64] = field(repr=False)
+    """Initial state (19,), model units."""
+    controller: str = "pd"
+    schedule_s: tuple[float, ...] = (0.0,)
+    """Start times of the rows of `schedule_q`, s, increasing, first 0."""
+    schedule_q: tuple[tuple[float, float, float, float], ...] = ((0.0, 0.0, 0.0, 1.0),)
+    """Commanded quaternions q_c, scalar last, unit norm."""
+    slack_weights: tuple[tuple[str, float], ...] | None = None
+    """If given, replaces every constraint's slack weight (others become hard)."""
+
+    def __post_init__(self) -> None:
+        where = f"scenarios.{self.name}"
+        _positive(f"{where}.duration_s", self.duration_s)
+        _choice(f"{where}.controller", self.controller, CONTROLLERS)
+        if self.schedule_s[0] != 0.0 or any(b <= a for a, b in zip(self.schedule_s, self.schedule_s[1:])):
+            raise ConfigError(f"{where}.command_schedule times must start at 0 and increase, got {self.schedule_s}")
+        if len(self.schedule_s) != len(self.schedule_q):
+            raise ConfigError(f"{where}.command_schedule is malformed")
+        if self.slack_weights is not None:
+            for name, w in self.slack_weights:
+                _choice(f"{where}.slack_weights", name, CONSTRAINT_NAMES[:4])
+                _nonneg(f"{where}.slack_weights.{name}", w)
+
+    def command_at(self, t_s: float) -> NDArray[np.float64]:
+        """The commanded quaternion q_c (4,) in force at time t_s (s)."""
+        k = int(np.searchsorted(np.asarray(self.schedule_s), t_s, side="right")) - 1
+        return np.array(self.schedule_q[max(k, 0)], dtype=float)
+
+
+@dataclass(frozen=True)
+class Config:
+    """Every parameter of rta_attitude, validated; build with `rta_attitude.config.load`."""
+
+    spacecraft: Spacecraft
+    environment: Environment
+    thermal: Thermal
+    power: Power
+    limits: Limits
+    barriers: dict[str, BarrierGains]
+    """Gains by group name (BARRIER_GROUPS); use `gains(name)` for one constraint."""
+    augmentation: Augmentation
+    filter: FilterOptions
+    controller: ControllerGains
+    substeps: int
+    scenarios: dict[str, Scenario]
+    source: str = "<memory>"
+
+    def __post_init__(self) -> None:
+        if not (isinstance(self.substeps, int) and self.substeps >= 1):
+            raise ConfigError(f"integrator.substeps must be an integer >= 1, got {self.substeps!r}")
+        for group in BARRIER_GROUPS:
+            if group not in self.barriers:
+                raise ConfigError(f"constraints.{group} is missing")
+            self.barriers[group].check(f"constraints.{group}")
+        for group in ("exclusion_zone", "communication", "temperature", "battery"):
+            if self.barriers[group].enabled:
+                _positive(f"constraints.{group}.k2", self.barriers[group].k2)
+        for group in ("omega", "psi"):
+            if self.barriers[group].slack_weight:
+                raise ConfigError(f"constraints.{group}.slack_weight must be 0 (hard), got "
+                                  f"{self.barriers[group].slack_weight!r}")
+
+    def gains(self, name: str) -> BarrierGains:
+        """Gains of one constraint by name (e.g. 'omega_y' reads the `omega` group)."""
+        if name not in CONSTRAINT_NAMES:
+            raise ConfigError(f"unknown constraint {name!r}; known: {', '.join(CONSTRAINT_NAMES)}")
+        return self.barriers[name.split("_")[0] if name[:3] in ("ome", "psi") else name]
+
+    @property
+    def u_max_rad_s2(self) -> NDArray[np.float64]:
+        """Bounds of the admissible set U (3,), rad/s^2: actuator and angular-acceleration limits.
+
+        |u_i| <= min(psi_dot_max, (J_i omega_dot_max - |J_j - J_k| omega_max^2) / D).
+        """
+        J = self.spacecraft.J
+        L = self.limits
+        dJ = np.abs(np.array([J[1] - J[2], J[2] - J[0], J[0] - J[1]]))
+        accel = (J * L.omega_dot_max_rad_s2 - dJ * L.omega_max_rad_s**2) / self.spacecraft.wheel_inertia_kgm2
+        return np.minimum(L.wheel_accel_max_rad_s2, accel)
+
+    @property
+    def slacked_constraints(self) -> tuple[str, ...]:
+        """Names of the enabled constraints that carry a slack (reported, not counted as failures)."""
+        return tuple(n for n in ("exclusion_zone", "communication", "temperature", "battery")
+                     if self.barriers[n].enabled and self.barriers[n].slack_weight > 0)
+
+    def with_preset(self, preset: str) -> Config:
+        """A copy using another filter preset ('robust' or 'paper')."""
+        return replace(self, filter=replace(self.filter, preset=preset))
+
+    def with_solver(self, solver: str) -> Config:
+        """A copy using another QP solver ('proxsuite' or 'active_set')."""
+        return replace(self, filter=replace(self.filter, solver=solver))
+
+    def with_fallback(self, fallback: str) -> Config:
+        """A copy using another fallback policy."""
+        return replace(self, filter=replace(self.filter, fallback=fallback))
+
+    def for_scenario(self, scenario: Scenario) -> Config:
+        """A copy whose slack weights are the scenario's, if it names any."""
+        if scenario.slack_weights is None:
+            return self
+        weights = dict(scenario.slack_weights)
+        barriers = dict(self.barriers)
+        for group in ("exclusion_zone", "communication", "temperature", "battery"):
+            barriers[group] = replace(barriers[group], slack_weight=float(weights.get(group, 0.0)))
+        return replace(self, barriers=barriers)
+
+    def scenario(self, name: str) -> Scenario:
+        """A scenario by name; '-' and '_' are interchangeable."""
+        key = name.replace("-", "_")
+        if key not in self.scenarios:
+            known = ", ".join(s.replace("_", "-") for s in self.scenarios)
+            raise ConfigError(f"unknown scenario {name!r}; known: {known}")
+        return self.scenarios[key]

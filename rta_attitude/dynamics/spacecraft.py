@@ -1,0 +1,321 @@
+"""The spacecraft plant, written once: compiled one-state code that simulate, the plant node, the
+Monte Carlo and the filter's barriers all call.
+
+State x (19,), `dynamics.state`: q (Hill -> body, scalar last), omega (body rate w.r.t. inertial space,
+rad/s), psi (the wheels' momentum state, rad/s), T (K), E (J), theta_S (rad), Clohessy-Wiltshire (6).
+Control u = psi_dot (3,), rad/s^2; the body feels the torque D u.
+
+    q_dot      = 1/2 Xi(q) (omega - A(q) [0, 0, n_f])            n_f: Hill frame rate (0: Hill inertial)
+    J omega_dot = -omega x (J omega - D psi) + D u + tau_gg       gyrostat (`wheel_gyroscopic`)
+    J omega_dot = -omega x  J omega          + D u + tau_gg       the paper's model (no wheel momentum)
+    tau_gg     = 3 n^2 r x (J r),  r = A(q) [1, 0, 0]             gravity gradient (optional)
+    psi_dot    = u
+    theta_S_dot = -n;  r_S = [cos theta_S, sin theta_S, 0] (Hill);  r_E = [-1, 0, 0] (Hill)
+    T_dot      = (alpha A S max(0, c_S) + (alpha A S A_f + sigma eps A T_E^4) F_E - sigma eps A T^4) / (m c_p)
+                 F_E = F max(0, c_E) (clamped; c_E unclamped if not), c_S, c_E: -j_B face to sun, Earth
+    E_dot      = P_I I_d A_p max(0, c_panel) - P_out               c_panel: +k_B panel to the sun
+    CW         : unforced Clohessy-Wiltshire at mean motion n
+
+psi is the paper's "wheel speed" with the paper's sign (psi = -Omega, Omega the wheel's spin rate
+about its axis in inertial space) and J the inertia without the rotors' spin-axis part; with those
+readings the gyrostat equation above is exact for torque-commanded wheels whose motor torque is -D u
+(docs/decisions.md, "the gyrostat"). The paper's model drops the wheel term (-omega x (-D psi)).
+
+Parameters reach the kernels by name, as one record of PLANT_DTYPE (`plant_record`): a structured
+NumPy array whose fields the compiled code reads as attributes (docs/decisions.md says why). The
+paper model's arithmetic is kept operation for operation from the first implementation, so the
+`paper` preset reproduces its numbers.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+from numpy.typing import NDArray
+
+from rta_attitude.config.schema import Config
+from rta_attitude.dynamics.quaternion import JIT, attitude_matrix
+from rta_attitude.dynamics.state import STATE_SIZE
+
+Array = NDArray[np.float64]
+
+PLANT_DTYPE = np.dtype([
+    ("inertia_kgm2", np.float64, (3,)),        # J1 J2 J3
+    ("wheel_inertia_kgm2", np.float64),        # D
+    ("control_gain", np.float64, (3,)),        # d omega_dot / d u = D / J_i
+    ("wheel_gyroscopic", np.uint8),            # 1: gyrostat term -omega x (-D psi); 0: the paper's model
+    ("frame_rate_rad_s", np.float64),          # n_f, rate of the Hill frame in the kinematics (0: inertial)
+    ("gravity_gradient", np.uint8),            # 1: tau_gg = 3 n^2 r x J r
+    ("mean_motion_rad_s", np.float64),         # n: sun motion, CW, gravity gradient
+    ("heat_capacity_J_K", np.float64),         # m c_p
+    ("earth_view_factor", np.float64),         # F
+    ("clamp_view_factor", np.uint8),           # F_E = F max(0, c_E) (1) or F c_E (0)
+    ("sigma_eps_A_W_K4", np.float64),          # sigma eps A
+    ("solar_W", np.float64),                   # alpha A S
+    ("albedo_W", np.float64),                  # alpha A S A_f
+    ("earth_T4_K4", np.float64),               # T_E^4
+    ("panel_peak_W", np.float64),              # P_I I_d A_p
+    ("load_W", np.float64),                    # P_out
+    ("wheel_accel_max_rad_s2", np.float64),    # actuator saturation of u
+])  # fmt: skip
+"""The plant's parameters, in model units, as the compiled code reads them."""
+
+
+def plant_record(cfg: Config) -> NDArray[np.void]:
+    """The PLANT_DTYPE record (shape (1,)) of a configuration; constants formed as the first
+    implementation formed them (so its numbers are reproduced)."""
+    sc, th, env, pw = cfg.spacecraft, cfg.thermal, cfg.environment, cfg.power
+    rec = np.zeros(1, PLANT_DTYPE)
+    p = rec[0]
+    p["inertia_kgm2"] = sc.inertia_kgm2
+    p["wheel_inertia_kgm2"] = sc.wheel_inertia_kgm2
+    p["control_gain"] = sc.control_gain
+    p["wheel_gyroscopic"] = 1 if sc.model == "gyrostat" else 0
+    p["frame_rate_rad_s"] = env.mean_motion_rad_s if env.rotating_hill else 0.0
+    p["gravity_gradient"] = 1 if env.gravity_gradient else 0
+    p["mean_motion_rad_s"] = env.mean_motion_rad_s
+    p["heat_capacity_J_K"] = th.mass_kg * th.specific_heat_J_kgK
+    p["earth_view_factor"] = env.earth_view_factor
+    p["clamp_view_factor"] = 1 if th.clamp_view_factor else 0
+    p["sigma_eps_A_W_K4"] = env.stefan_boltzmann_W_m2K4 * th.emissivity * th.area_m2
+    p["solar_W"] = th.absorptivity * th.area_m2 * env.solar_constant_W_m2
+    p["albedo_W"] = th.absorptivity * th.area_m2 * env.solar_constant_W_m2 * env.albedo_factor
+    p["earth_T4_K4"] = env.earth_temperature_K**4
+    p["panel_peak_W"] = pw.peak_W
+    p["load_W"] = pw.load_W
+    p["wheel_accel_max_rad_s2"] = cfg.limits.wheel_accel_max_rad_s2
+    return rec
+
+
+# ----------------------------------------------------------------------------- geometry
+
+
+@numba.njit(**JIT)
+def sun_hill(theta_S_rad: float) -> tuple[float, float]:
+    """(cos, sin) of theta_S: the unit vector to the sun in Hill is [cos, sin, 0] (SPEC sec. 2,
+    [resolved]: the paper prints [cos, cos, 0], not a unit vector)."""
+    return math.cos(theta_S_rad), math.sin(theta_S_rad)
+
+
+EARTH_HILL = (-1.0, 0.0, 0.0)
+"""Unit vector from the spacecraft to the Earth (and the ground station) in Hill: -x (radial in)."""
+
+
+@numba.njit(**JIT)
+def positive_part(c: float) -> float:
+    """max(0, c) as numpy's maximum(0.0, c): 0.0 for c <= 0 (also -0.0), NaN stays NaN."""
+    return c if (c > 0.0 or c != c) else 0.0
+
+
+@numba.njit(**JIT)
+def omega_drift(x: Array, A: Array, p: np.void, out: Array) -> None:
+    """omega_dot at u = 0 (3,), rad/s^2: Euler's equations, the wheels' gyroscopic term (gyrostat) and
+    the gravity-gradient torque (if on). A = A(q) of x (used only with gravity gradient)."""
+    w1, w2, w3 = x[4], x[5], x[6]
+    J1, J2, J3 = p.inertia_kgm2[0], p.inertia_kgm2[1], p.inertia_kgm2[2]
+    t1 = (J2 - J3) * w2 * w3
+    t2 = (J3 - J1) * w3 * w1
+    t3 = (J1 - J2) * w1 * w2
+    if p.wheel_gyroscopic or p.gravity_gradient:
+        if p.wheel_gyroscopic:  # -omega x (-D psi) = D omega x psi
+            D = p.wheel_inertia_kgm2
+            p1, p2, p3 = x[7], x[8], x[9]
+            t1 += D * (w2 * p3 - w3 * p2)
+            t2 += D * (w3 * p1 - w1 * p3)
+            t3 += D * (w1 * p2 - w2 * p1)
+        if p.gravity_gradient:  # 3 n^2 r x (J r), r = zenith (+x_Hill) in body
+            k = 3.0 * p.mean_motion_rad_s * p.mean_motion_rad_s
+            r1, r2, r3 = A[0, 0], A[1, 0], A[2, 0]
+            t1 += k * (J3 - J2) * r2 * r3
+            t2 += k * (J1 - J3) * r3 * r1
+            t3 += k * (J2 - J1) * r1 * r2
+    out[0] = t1 / J1
+    out[1] = t2 / J2
+    out[2] = t3 / J3
+
+
+@numba.njit(**JIT)
+def thermal_rate(cos_sun: float, cos_earth: float, T_K: float, p: np.void) -> float:
+    """T_dot (K/s) of the -j_B face node given its sun and Earth incidence cosines."""
+    F_E = p.earth_view_factor * (positive_part(cos_earth) if p.clamp_view_factor else cos_earth)
+    q_solar = p.solar_W * positive_part(cos_sun)
+    q_albedo = p.albedo_W * F_E
+    q_ir = p.sigma_eps_A_W_K4 * F_E * p.earth_T4_K4
+    q_rejected = p.sigma_eps_A_W_K4 * math.pow(T_K, 4.0)
+    return (q_solar + q_albedo + q_ir - q_rejected) / p.heat_capacity_J_K
+
+
+@numba.njit(**JIT)
+def net_power(cos_panel_sun: float, p: np.void) -> float:
+    """E_dot (W): the +k_B panel's power minus the load."""
+    return p.panel_peak_W * positive_part(cos_panel_sun) - p.load_W
+
+
+# ----------------------------------------------------------------------------- the derivative and RK4
+
+
+@numba.njit(**JIT)
+def derivative(x: Array, u: Array, p: np.void, A: Array, wd: Array, f: Array) -> None:
+    """x_dot = f(x) + g u of one state (19,) into f; A (3, 3) and wd (3,) are scratch."""
+    q1, q2, q3, q4, w1, w2, w3 = x[0], x[1], x[2], x[3], x[4], x[5], x[6]
+    attitude_matrix(q1, q2, q3, q4, A)
+    omega_drift(x, A, p, wd)
+    if p.frame_rate_rad_s != 0.0:  # attitude relative to the rotating Hill frame
+        nf = p.frame_rate_rad_s
+        w1, w2, w3 = w1 - nf * A[0, 2], w2 - nf * A[1, 2], w3 - nf * A[2, 2]
+    cs, sn = sun_hill(x[12])
+    # row 1 (j_B) and row 2 (k_B) of A(q): those body axes in Hill; the thermal face is -j_B (r_E = -x_Hill)
+    cos_sun = -(A[1, 0] * cs + A[1, 1] * sn)
+    cos_earth = A[1, 0]
+    c_panel = A[2, 0] * cs + A[2, 1] * sn
+    n = p.mean_motion_rad_s
+    cg = p.control_gain
+    f[0] = 0.5 * (q4 * w1 - q3 * w2 + q2 * w3)
+    f[1] = 0.5 * (q3 * w1 + q4 * w2 - q1 * w3)
+    f[2] = 0.5 * (-q2 * w1 + q1 * w2 + q4 * w3)
+    f[3] = -0.5 * (q1 * w1 + q2 * w2 + q3 * w3)
+    f[4] = wd[0] + cg[0] * u[0]
+    f[5] = wd[1] + cg[1] * u[1]
+    f[6] = wd[2] + cg[2] * u[2]
+    f[7] = 0.0 + u[0]
+    f[8] = 0.0 + u[1]
+    f[9] = 0.0 + u[2]
+    f[10] = thermal_rate(cos_sun, cos_earth, x[10], p)
+    f[11] = net_power(c_panel, p)
+    f[12] = -n
+    f[13], f[14], f[15] = x[16], x[17], x[18]
+    f[16] = 3 * n**2 * x[13] + 2 * n * x[17]
+    f[17] = -2 * n * x[16]
+    f[18] = -(n**2) * x[15]
+
+
+@numba.njit(**JIT)
+def saturate(u: Array, p: np.void, out: Array) -> None:
+    """The actuator: each wheel acceleration clipped to +-wheel_accel_max (NaN passes as in numpy.clip)."""
+    lim = p.wheel_accel_max_rad_s2
+    for a in range(3):
+        v = u[a]
+        out[a] = -lim if v < -lim else (lim if v > lim else v)
+
+
+@numba.njit(**JIT)
+def rk4_hold(x0: Array, u: Array, dt_s: float, substeps: int, p: np.void, out: Array) -> None:
+    """Hold u (3,) (saturated already) over dt_s from x0 (19,): `substeps` classical RK4 steps, the
+    quaternion renormalised after each. out (substeps, 19) receives the state after each substep;
+    out[-1] is x(t + dt)."""
+    n = x0.shape[0]
+    h = dt_s / substeps
+    half = 0.5 * h
+    sixth = h / 6.0
+    x = x0.copy()
+    k1, k2, k3, k4, y = np.empty(n), np.empty(n), np.empty(n), np.empty(n), np.empty(n)
+    A = np.empty((3, 3))
+    wd = np.empty(3)
+    for j in range(substeps):
+        derivative(x, u, p, A, wd, k1)
+        for i in range(n):
+            y[i] = x[i] + half * k1[i]
+        derivative(y, u, p, A, wd, k2)
+        for i in range(n):
+            y[i] = x[i] + half * k2[i]
+        derivative(y, u, p, A, wd, k3)
+        for i in range(n):
+            y[i] = x[i] + h * k3[i]
+        derivative(y, u, p, A, wd, k4)
+        for i in range(n):
+            x[i] = x[i] + sixth * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
+        norm = math.sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2] + x[3] * x[3])
+        for i in range(4):
+            x[i] = x[i] / norm
+        out[j, :] = x
+
+
+@numba.vectorize(["float64(float64, float64)"], cache=True)
+def wheel_accel_to_torque(u_rad_s2: float, D_kgm2: float) -> float:
+    """The body torque of a wheel command, tau = D u (N m): what crosses DDS (a ufunc: scalars, arrays,
+    compiled code)."""
+    return D_kgm2 * u_rad_s2
+
+
+@numba.vectorize(["float64(float64, float64)"], cache=True)
+def torque_to_wheel_accel(tau_Nm: float, D_kgm2: float) -> float:
+    """The wheel command of a body torque, u = tau / D (rad/s^2) (a ufunc)."""
+    return tau_Nm / D_kgm2
+
+
+@numba.njit(**JIT)
+def torque_round_trip(u: Array, p: np.void, out: Array) -> None:
+    """u -> tau = D u -> u = tau / D: the round trip every command makes over DDS (the nodes convert
+    with the same two functions, so a lockstep run over DDS equals the in-process one bit for bit)."""
+    D = p.wheel_inertia_kgm2
+    for a in range(3):
+        out[a] = torque_to_wheel_accel(wheel_accel_to_torque(u[a], D), D)
+
+
+@numba.njit(**JIT)
+def _derivatives(X: Array, U: Array, p: np.void, F: Array) -> None:
+    A, wd = np.empty((3, 3)), np.empty(3)
+    for k in range(X.shape[0]):
+        derivative(X[k], U[k], p, A, wd, F[k])
+
+
+@numba.njit(**JIT)
+def _omega_dots(X: Array, U: Array, p: np.void, W: Array) -> None:
+    A, wd = np.empty((3, 3)), np.empty(3)
+    for k in range(X.shape[0]):
+        attitude_matrix(X[k, 0], X[k, 1], X[k, 2], X[k, 3], A)
+        omega_drift(X[k], A, p, wd)
+        for a in range(3):
+            W[k, a] = wd[a] + p.control_gain[a] * U[k, a]
+
+
+def omega_dot(x: Array, u: Array, p: NDArray[np.void]) -> Array:
+    """Body angular accelerations (..., 3), rad/s^2, of states x (..., 19) under wheel accelerations u."""
+    x = np.asarray(x, dtype=float)
+    X = np.ascontiguousarray(x.reshape(-1, STATE_SIZE))
+    U = np.ascontiguousarray(np.broadcast_to(np.asarray(u, dtype=float), (*x.shape[:-1], 3)).reshape(-1, 3))
+    W = np.empty((X.shape[0], 3))
+    _omega_dots(X, U, p[0], W)
+    return W.reshape((*x.shape[:-1], 3))
+
+
+def state_derivative(x: Array, u: Array, p: NDArray[np.void]) -> Array:
+    """x_dot (..., 19) of states x (..., 19) with wheel accelerations u (..., 3) held (no saturation)."""
+    x = np.asarray(x, dtype=float)
+    X = np.ascontiguousarray(x.reshape(-1, STATE_SIZE))
+    U = np.ascontiguousarray(np.broadcast_to(np.asarray(u, dtype=float), (*x.shape[:-1], 3)).reshape(-1, 3))
+    F = np.empty_like(X)
+    _derivatives(X, U, p[0], F)
+    return F.reshape(x.shape)
+
+
+def integrate(x: Array, u: Array, dt_s: float, p: NDArray[np.void], substeps: int) -> tuple[Array, Array]:
+    """Saturate u and hold it over dt_s from one state (Python face of `saturate` + `rk4_hold`).
+
+    Args:
+        x: state (19,).
+        u: wheel accelerations (3,), rad/s^2 (saturated here at the actuator limit).
+        dt_s: hold time, s.
+        p: the PLANT_DTYPE record array (1,) of `plant_record`.
+        substeps: RK4 substeps.
+
+    Returns:
+        (x at t + dt (19,), the substep states (substeps, 19)).
+    """
+    x = np.ascontiguousarray(x, dtype=float)
+    if x.shape != (STATE_SIZE,):
+        raise ValueError(f"integrate takes one state ({STATE_SIZE},), got {x.shape}")
+    us = np.empty(3)
+    saturate(np.ascontiguousarray(u, dtype=float), p[0], us)
+    out = np.empty((substeps, STATE_SIZE))
+    rk4_hold(x, us, float(dt_s), substeps, p[0], out)
+    return out[-1].copy(), out
+
+
+__all__ = [
+    "EARTH_HILL", "JIT", "PLANT_DTYPE", "derivative", "integrate", "net_power", "omega_dot", "omega_drift",
+    "plant_record", "positive_part", "rk4_hold", "saturate", "state_derivative", "sun_hill", "thermal_rate",
+    "torque_round_trip", "torque_to_wheel_accel", "wheel_accel_to_torque",
+]  # fmt: skip

@@ -1,0 +1,263 @@
+"""Active Set Invariance Filter: the minimal change of u_des that keeps every barrier condition.
+
+    min_{u, s}  ||u - u_des||^2 + ||s||^2
+    s.t.        BC_i(x, u) + s_i / sqrt(p_i) >= 0     slacked constraints (delta_i = s_i / sqrt(p_i))
+                BC_i(x, u)                   >= 0     hard constraints
+                lo(x) <= u <= hi(x)                   admissible set U (and, in the `robust` preset,
+                                                      the one-step-ahead ZOH bounds on omega and psi)
+
+BC_i(x, u) = drift_i(x) + gain_i(x) . u is defined in `rta_attitude.constraints` (one module per
+constraint). The slack is scaled (cost s^2 instead of p delta^2: p = 1e12 would ruin the Hessian's
+conditioning), every row is normalised to unit norm, and every solution is checked against the rows
+before it is used. Fast path: u0 = clip(u_des, lo, hi) is the exact QP solution whenever it meets
+every row, so the solver is not called then. The call runs compiled (`filter.pipeline`, one
+pipeline whatever the solver); this module is its Python face: `AsifFilter` holds the records, and
+`FilterResult` reads the result record (one state, or a batch with a leading axis).
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from rta_attitude.config.schema import CONSTRAINT_NAMES, Config
+from rta_attitude.constraints import ConstraintSet
+from rta_attitude.dynamics.state import STATE_SIZE
+from rta_attitude.errors import SolverError
+from rta_attitude.filter import outcome
+from rta_attitude.filter.pipeline import (
+    RESULT_DTYPE,
+    filter_many,
+    filter_record,
+    filter_state,
+    new_workspace,
+)
+from rta_attitude.kernel_cache import drop_stale_caches
+
+Array = NDArray[np.float64]
+log = logging.getLogger(__name__)
+
+STATUS_PASS, STATUS_SOLVED, STATUS_FALLBACK = outcome.STATUS_NAMES
+"""The names of a call's status."""
+
+
+class FilterResult:
+    """What filter call(s) did: a view of RESULT_DTYPE record(s), shape () for one state or (N,).
+
+    Array fields follow `names` on their last axis (m) or are per axis of u (3): u, u_des, h, psi0,
+    psi1, bc (barrier conditions at u, slack not included), slack, intervening (rows active at the
+    solution), uncontrollable, box_active, lo, hi. Text fields: status ('pass', 'solved', 'fallback'),
+    fallback (the policy applied, 'non_finite_u_des', 'invalid_state' or ''), solver_status.
+    """
+
+    def __init__(self, record: NDArray[np.void], policy: str) -> None:
+        self.record = record
+        self.policy = policy
+        self.names: tuple[str, ...] = CONSTRAINT_NAMES
+
+    def _field(self, name: str) -> NDArray[np.generic]:
+        return self.record[name]
+
+    u = property(lambda self: self._field("u"))
+    u_des = property(lambda self: self._field("u_des"))
+    h = property(lambda self: self._field("h"))
+    psi0 = property(lambda self: self._field("psi0"))
+    psi1 = property(lambda self: self._field("psi1"))
+    bc = property(lambda self: self._field("bc"))
+    slack = property(lambda self: self._field("slack"))
+    lo = property(lambda self: self._field("lo"))
+    hi = property(lambda self: self._field("hi"))
+    intervening = property(lambda self: self._field("intervening").astype(bool))
+    uncontrollable = property(lambda self: self._field("uncontrollable").astype(bool))
+    box_active = property(lambda self: self._field("box_active").astype(bool))
+    status_code = property(lambda self: self._field("status"))
+    qp_failed = property(lambda self: self._field("qp_failed").astype(bool))
+
+    @property
+    def iterations(self) -> int | NDArray[np.int64]:
+        it = self.record["iterations"]
+        return int(it) if np.ndim(it) == 0 else it
+
+    @property
+    def solve_time_s(self) -> float | Array:
+        t = self.record["solve_time_s"]
+        return float(t) if np.ndim(t) == 0 else t
+
+    def _text(self, fn: object) -> str | NDArray[np.str_]:
+        if self.record.ndim == 0:
+            return fn(self.record)  # type: ignore[operator]
+        return np.array([fn(r) for r in self.record], dtype=str)  # type: ignore[operator]
+
+    @property
+    def status(self) -> str | NDArray[np.str_]:
+        return self._text(lambda r: outcome.STATUS_NAMES[int(r["status"])])
+
+    @property
+    def fallback(self) -> str | NDArray[np.str_]:
+        def text(r: np.void) -> str:
+            reason = int(r["fallback"])
+            return self.policy if reason == outcome.POLICY_ACTED else outcome.FALLBACK_REASONS[reason]
+
+        return self._text(text)
+
+    @property
+    def solver_status(self) -> str | NDArray[np.str_]:
+        def text(r: np.void) -> str:
+            first = outcome.solve_text(int(r["solver"]), int(r["solve_result"]), int(r["backup_result"]))
+            if int(r["soft_result"]) != outcome.NOT_SOLVED:
+                first += "+soften:" + outcome.solve_text(int(r["solver"]), int(r["soft_result"]))
+            return first
+
+        return self._text(text)
+
+    @property
+    def intervened(self) -> bool | NDArray[np.bool_]:
+        """u differs from u_des because of any row or the box."""
+        out = self.intervening.any(axis=-1) | self.box_active.any(axis=-1)
+        return bool(out) if np.ndim(out) == 0 else out
+
+    def __getitem__(self, k: int) -> FilterResult:
+        """Call k of a batch."""
+        return FilterResult(self.record[k], self.policy)
+
+    def __len__(self) -> int:
+        return len(self.record)
+
+
+@dataclass
+class FilterCounters:
+    """Running totals of a filter's calls (a node publishes these)."""
+
+    calls: int = 0
+    fast_path: int = 0
+    solved: int = 0
+    fallbacks: int = 0
+    solver_failures: int = 0
+    backup_solves: int = 0
+    """Calls in which proxsuite failed and the backup solver was asked."""
+    invalid_states: int = 0
+    """Calls with a non-finite state or a quaternion norm outside (0.5, 1.5): answered u = 0."""
+    by_status: dict[str, int] = field(default_factory=dict)
+
+    def add(self, record: NDArray[np.void]) -> None:
+        """Count the calls of result record(s) (shape () or (N,))."""
+        status = np.atleast_1d(record["status"])
+        self.calls += len(status)
+        counts = [int(np.count_nonzero(status == code)) for code in range(len(outcome.STATUS_NAMES))]
+        self.fast_path += counts[outcome.PASS]
+        self.solved += counts[outcome.SOLVED]
+        self.fallbacks += counts[outcome.FALLBACK]
+        self.solver_failures += int(np.count_nonzero(record["qp_failed"]))
+        self.backup_solves += int(np.count_nonzero(np.atleast_1d(record["backup_result"]) != outcome.NOT_SOLVED))
+        self.invalid_states += int(np.count_nonzero(np.atleast_1d(record["fallback"]) == outcome.INVALID_STATE))
+        for code, n in enumerate(counts):
+            if n:
+                name = outcome.STATUS_NAMES[code]
+                self.by_status[name] = self.by_status.get(name, 0) + n
+
+
+class AsifFilter:
+    """The ASIF safety filter of one configuration; call `filter(x, u_des)` or `filter_batch(X, U)`.
+
+    Builds its records once (and loads or compiles the kernels, so no call waits for a compiler). Not
+    thread-safe (one workspace).
+    """
+
+    def __init__(self, cfg: Config) -> None:
+        self.cfg = cfg
+        self.record = filter_record(cfg)
+        self.constraints = ConstraintSet(cfg)
+        self.names = CONSTRAINT_NAMES
+        self.u_max = cfg.u_max_rad_s2
+        self.options = cfg.filter
+        self.enabled = self.constraints.enabled
+        self.slack_weights = self.constraints.slack_weights
+        self.slacked = self.enabled & (self.slack_weights > 0)
+        self.counters = FilterCounters()
+        self._ws = new_workspace()
+        self._out = np.zeros(1, RESULT_DTYPE)
+        compile_kernels(cfg)
+
+    def filter(self, x: Array, u_des: Array) -> FilterResult:
+        """Filter one desired command.
+
+        Args:
+            x: state (19,), model units.
+            u_des: desired wheel accelerations (3,), rad/s^2 (non-finite entries are treated as 0 and
+                the call is counted as a fallback).
+
+        Returns:
+            FilterResult (one record) with u_act and the per-constraint record.
+
+        Raises:
+            SolverError: the QP failed and the fallback policy is 'raise'.
+        """
+        t0 = time.perf_counter()
+        x = np.asarray(x, dtype=float)
+        u_des = np.asarray(u_des, dtype=float)
+        if x.shape != (STATE_SIZE,) or u_des.shape != (3,):
+            raise ValueError(f"filter takes x ({STATE_SIZE},) and u_des (3,), got {x.shape} and {u_des.shape}")
+        rec = self._out
+        filter_state(x, u_des, self.record[0], self._ws[0], rec[0])
+        res = rec[0].copy()
+        res["solve_time_s"] = time.perf_counter() - t0
+        result = FilterResult(np.asarray(res), self.options.fallback)
+        self.counters.add(result.record)
+        if res["raise_error"]:
+            raise SolverError(f"ASIF QP failed ({result.solver_status})")
+        return result
+
+    def filter_batch(self, x: Array, u_des: Array) -> FilterResult:
+        """Filter a batch: x (N, 19), u_des (N, 3); every state through the same compiled call as
+        `filter`, so a run inside a batch and a single run compute the same numbers.
+
+        Raises:
+            SolverError: a QP failed and the fallback policy is 'raise' (the first such state named).
+        """
+        x = np.ascontiguousarray(x, dtype=float)
+        u_des = np.ascontiguousarray(u_des, dtype=float)
+        if x.ndim != 2 or x.shape[1] != STATE_SIZE or u_des.shape != (x.shape[0], 3):
+            raise ValueError(f"filter_batch takes x (N, {STATE_SIZE}) and u_des (N, 3), got {x.shape} and "
+                             f"{u_des.shape}")
+        out = np.zeros(x.shape[0], RESULT_DTYPE)
+        filter_many(x, u_des, self.record, self._ws, out)
+        result = FilterResult(out, self.options.fallback)
+        self.counters.add(out)
+        if np.any(out["raise_error"]):
+            k = int(np.flatnonzero(out["raise_error"])[0])
+            raise SolverError(f"ASIF QP failed ({result[k].solver_status}) (state {k} of the batch)")
+        return result
+
+
+_kernels_ready = False
+"""compile_kernels has run in this process."""
+
+
+def compile_kernels(cfg: Config) -> float:
+    """Compile the filter's kernels, or load them from numba's on-disk cache (a fresh installation
+    compiles for tens of seconds; later processes load in about a second), once per process, by one
+    call of each on a dummy state. `AsifFilter()` calls it, so no filter call waits for a compiler.
+
+    Returns the seconds it took (0 once done in this process).
+    """
+    global _kernels_ready
+    if _kernels_ready:
+        return 0.0
+    _kernels_ready = True
+    t0 = time.perf_counter()
+    drop_stale_caches()
+    x = np.zeros(STATE_SIZE)
+    x[3], x[10], x[11] = 1.0, 273.15, 5000.0
+    rec = filter_record(cfg)
+    ws, out = new_workspace(), np.zeros(1, RESULT_DTYPE)
+    filter_state(x, np.zeros(3), rec[0], ws[0], out[0])
+    filter_many(x[None], np.zeros((1, 3)), rec, ws, out)
+    return time.perf_counter() - t0
+
+
+__all__ = ["STATUS_FALLBACK", "STATUS_PASS", "STATUS_SOLVED", "AsifFilter", "FilterCounters", "FilterResult",
+           "compile_kernels"]

@@ -1,0 +1,379 @@
+"""One filter call, compiled: the one pipeline every path runs (simulate, the filter node, the Monte
+Carlo), with the QP solver as a pluggable step.
+
+    prepare    the state is checked (finite, quaternion norm in (0.5, 1.5)) and its quaternion
+               normalised; rows and box (`constraints.rows`); u0 = clip(u_des, lo, hi) is the exact
+               QP solution if it meets every enabled row (the fast path, no solver)
+    assemble   min 1/2 |z - z0|^2 s.t. lower <= C z <= upper, z = [u; s]: rows normalised to unit norm,
+               one scaled slack per slacked row (delta = s / sqrt(p)), the box as the last rows
+    solve      `filter.solver`: the exact dual active-set method (`active_set`, compiled, in line) or
+               proxsuite (`proxsuite_qp`, Python, entered through numba's object mode: imported only
+               when chosen); every answer is checked against the rows
+    fallback   a failed QP: `pass_through` (u0), `hold` (u = 0 clipped to the box), `soften` (the QP
+               again with every row slacked; u0 if that fails too) or `raise` (flagged; Python raises)
+    finish     BC_i at the final u, which box bounds clipped u
+
+Parameters travel as one FILTER_DTYPE record (the filter's plant model, the constraints, the
+policy and solver settings); scratch as one WORKSPACE_DTYPE record; the result is one RESULT_DTYPE
+record (`filter.asif` reads it). `filter_many` runs the same call over a batch.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+from numpy.typing import NDArray
+
+from rta_attitude.config.schema import Config
+from rta_attitude.constraints.base import CONSTRAINT_DTYPE, N_CONSTRAINTS, TABLE_DTYPE, constraint_record
+from rta_attitude.constraints.geometry import CONTEXT_DTYPE
+from rta_attitude.constraints.rows import rows
+from rta_attitude.dynamics.quaternion import JIT
+from rta_attitude.dynamics.spacecraft import PLANT_DTYPE, plant_record
+from rta_attitude.dynamics.state import STATE_SIZE
+from rta_attitude.filter import active_set, outcome, proxsuite_qp
+from rta_attitude.filter.outcome import (
+    ACTIVE_SET,
+    FALLBACK,
+    HOLD,
+    INVALID_STATE,
+    NO_FALLBACK,
+    NON_FINITE_U_DES,
+    NOT_SOLVED,
+    PASS,
+    POLICY_ACTED,
+    RAISE,
+    SOFTEN,
+    SOLVE_CHECK_FAILED,
+    SOLVE_OK,
+    SOLVED,
+)
+
+Array = NDArray[np.float64]
+M = N_CONSTRAINTS
+
+BIG = active_set.BIG
+"""Stand-in for an infinite bound (proxsuite's convention)."""
+MIN_ROW_NORM = 1e-12
+"""Rows whose gradient in u is smaller than this do not depend on u and are not sent to the QP."""
+ACTIVE_MULTIPLIER = 1e-9
+"""A row whose multiplier exceeds this at the solution is active (it shapes u)."""
+
+FILTER_DTYPE = np.dtype([
+    ("plant", PLANT_DTYPE),                  # the filter's model of the spacecraft
+    ("constraints", CONSTRAINT_DTYPE),
+    ("policy", np.int8),                     # outcome.POLICIES code
+    ("solver", np.int8),                     # outcome.SOLVERS code
+    ("backup_solver", np.int8),              # outcome.BACKUP_SOLVERS code (proxsuite only)
+    ("check_tolerance", np.float64),         # a solution must meet every row to this
+    ("soften_weight", np.float64),           # slack weight of every row in the soften fallback
+    ("max_active_set_iter", np.int64),
+    ("eps_abs", np.float64),                 # proxsuite settings
+    ("eps_primal_inf", np.float64),
+    ("eps_dual_inf", np.float64),
+    ("max_iterations", np.int64),
+    ("max_inner_iterations", np.int64),
+])  # fmt: skip
+"""Everything one filter call reads, by name."""
+
+RESULT_DTYPE = np.dtype([
+    ("u", np.float64, (3,)),                 # u_act, rad/s^2: finite, inside the box
+    ("u_des", np.float64, (3,)),             # as received
+    ("h", np.float64, (M,)),                 # physical h at x
+    ("psi0", np.float64, (M,)),              # HOCBF levels at x
+    ("psi1", np.float64, (M,)),
+    ("bc", np.float64, (M,)),                # barrier conditions at u (slack not included)
+    ("slack", np.float64, (M,)),             # delta_i of slacked rows
+    ("intervening", np.uint8, (M,)),         # rows active at the solution
+    ("uncontrollable", np.uint8, (M,)),      # rows violated whatever u is (no gradient in u)
+    ("box_active", np.uint8, (3,)),          # axes the box clipped
+    ("lo", np.float64, (3,)),                # the box
+    ("hi", np.float64, (3,)),
+    ("status", np.int8),                     # outcome.STATUS_NAMES code
+    ("fallback", np.int8),                   # outcome.FALLBACK_REASONS code
+    ("solver", np.int8),                     # the solver of the first QP (outcome.SOLVERS code)
+    ("solve_result", np.int8),               # outcome.SOLVE_RESULTS code of the first QP, NOT_SOLVED if none
+    ("backup_result", np.int8),              # quadprog's re-solve of it (proxsuite), NOT_SOLVED if none
+    ("soft_result", np.int8),                # the soften fallback's QP, NOT_SOLVED if none
+    ("qp_failed", np.uint8),                 # the first QP failed (the policy acted)
+    ("raise_error", np.uint8),               # policy `raise` and the QP failed: Python raises
+    ("iterations", np.int64),                # solver iterations of every solve of the call
+    ("solve_time_s", np.float64),            # wall time of the whole call (set by the Python face)
+])  # fmt: skip
+"""What one filter call did, for one state (a batch: a leading axis)."""
+
+WORKSPACE_DTYPE = np.dtype([
+    ("ctx", CONTEXT_DTYPE),
+    ("table", TABLE_DTYPE),
+    ("x", np.float64, (STATE_SIZE,)),        # the state, quaternion normalised
+    ("u_target", np.float64, (3,)),          # u_des with non-finite entries set to 0
+    ("gnorm", np.float64, (M,)),             # |dBC/du| of each row
+])  # fmt: skip
+
+
+def filter_record(cfg: Config) -> NDArray[np.void]:
+    """The FILTER_DTYPE record (1,) of a configuration."""
+    rec = np.zeros(1, FILTER_DTYPE)
+    f = rec[0]
+    f["plant"] = plant_record(cfg)[0]
+    f["constraints"] = constraint_record(cfg)[0]
+    o = cfg.filter
+    f["policy"] = outcome.FALLBACKS.index(o.fallback)
+    f["solver"] = outcome.SOLVERS.index(o.solver)
+    f["backup_solver"] = outcome.BACKUP_SOLVERS.index(o.backup_solver)
+    f["check_tolerance"], f["soften_weight"] = o.check_tolerance, o.soften_weight
+    f["max_active_set_iter"] = active_set.MAX_ACTIVE_SET_ITER
+    f["eps_abs"], f["eps_primal_inf"], f["eps_dual_inf"] = o.eps_abs, o.eps_primal_inf, o.eps_dual_inf
+    f["max_iterations"], f["max_inner_iterations"] = o.max_iterations, o.max_inner_iterations
+    return rec
+
+
+def new_workspace() -> NDArray[np.void]:
+    """A workspace record array (1,)."""
+    return np.zeros(1, WORKSPACE_DTYPE)
+
+
+# ----------------------------------------------------------------------------- steps
+
+
+@numba.njit(**JIT)
+def prepare(x_in: Array, u_des: Array, f: np.void, ws: np.void, r: np.void) -> tuple[bool, bool, bool]:
+    """Validity, rows, box and the fast-path test of one state. Returns (valid, u_des finite, QP needed).
+    For an invalid state the rows are zero and the box is U."""
+    x, t = ws.x, ws.table
+    c = f.constraints
+    valid = True
+    for i in range(STATE_SIZE):
+        x[i] = x_in[i]
+        if not math.isfinite(x[i]):
+            valid = False
+    q_norm = math.sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2] + x[3] * x[3]) if valid else 0.0
+    if not (0.5 < q_norm < 1.5):
+        valid = False
+    if valid:
+        for i in range(4):
+            x[i] = x[i] / q_norm
+    else:  # evaluate a harmless placeholder; the call is answered as invalid
+        for i in range(STATE_SIZE):
+            x[i] = 0.0
+        x[3] = 1.0
+        x[10] = 273.15
+    rows(x, f.plant, c, ws.ctx, t)
+    for i in range(M):
+        if not math.isfinite(t.drift[i]):
+            valid = False
+        for a in range(3):
+            if not math.isfinite(t.gain[i, a]):
+                valid = False
+    for a in range(3):
+        if not (math.isfinite(t.lo[a]) and math.isfinite(t.hi[a])):
+            valid = False
+    finite_des = True
+    for a in range(3):
+        r.u_des[a] = u_des[a]
+        if math.isfinite(u_des[a]):
+            ws.u_target[a] = u_des[a]
+        else:
+            ws.u_target[a] = 0.0
+            finite_des = False
+    if not valid:
+        for i in range(M):
+            t.drift[i] = 0.0
+            ws.gnorm[i] = 0.0
+            r.uncontrollable[i] = 0
+            for a in range(3):
+                t.gain[i, a] = 0.0
+        for a in range(3):
+            t.lo[a] = -c.u_max_rad_s2[a]
+            t.hi[a] = c.u_max_rad_s2[a]
+        return False, finite_des, False
+    need = not finite_des
+    tol = f.check_tolerance
+    for i in range(M):
+        g0, g1, g2 = t.gain[i, 0], t.gain[i, 1], t.gain[i, 2]
+        ws.gnorm[i] = math.sqrt(g0 * g0 + g1 * g1 + g2 * g2)
+        on = c.gains[i].enabled != 0
+        depends = ws.gnorm[i] > MIN_ROW_NORM
+        r.uncontrollable[i] = 1 if (on and not depends and t.drift[i] < 0) else 0
+        if on and depends:
+            bc0 = t.drift[i]
+            for a in range(3):
+                bc0 += t.gain[i, a] * min(max(ws.u_target[a], t.lo[a]), t.hi[a])
+            if bc0 < -tol * max(1.0, ws.gnorm[i]):
+                need = True
+    return True, finite_des, need
+
+
+@numba.njit(**JIT)
+def assemble(f: np.void, ws: np.void, soften: bool
+             ) -> tuple[Array, Array, Array, Array, NDArray[np.int64], NDArray[np.int64], Array]:
+    """The QP of the prepared state: min 1/2 |z - z0|^2 s.t. lower <= C z <= upper, z = [u (3); s].
+
+    Rows of disabled constraints and rows that do not depend on u are left out; each slacked row
+    (slack weight > 0, or every row if soften) gets a variable s with delta = s / sqrt(p). Rows are
+    normalised to unit norm; the last three rows are the box.
+
+    Returns (C (r+3, n), lower, upper (r+3,), z0 (n,), row_of (r,) constraint of each row,
+    slack_var (m,) variable of each constraint's slack or -1, scale (n,) delta = scale * s).
+    """
+    t = ws.table
+    g = f.constraints.gains
+    r = 0
+    ns = 0
+    for i in range(M):
+        if g[i].enabled and ws.gnorm[i] > MIN_ROW_NORM:
+            r += 1
+            if g[i].slack_weight > 0 or soften:
+                ns += 1
+    n = 3 + ns
+    C = np.zeros((r + 3, n))
+    lower = np.full(r + 3, -BIG)
+    upper = np.full(r + 3, BIG)
+    row_of = np.empty(r, dtype=np.int64)
+    slack_var = np.full(M, -1, dtype=np.int64)
+    scale = np.zeros(n)
+    k = 0
+    v = 3
+    for i in range(M):
+        if not (g[i].enabled and ws.gnorm[i] > MIN_ROW_NORM):
+            continue
+        row_of[k] = i
+        for a in range(3):
+            C[k, a] = t.gain[i, a]
+        if g[i].slack_weight > 0 or soften:
+            p = g[i].slack_weight if g[i].slack_weight > 0 else f.soften_weight
+            scale[v] = 1.0 / math.sqrt(p)
+            C[k, v] = scale[v]
+            slack_var[i] = v
+            v += 1
+        ss = 0.0
+        for j in range(n):
+            ss += C[k, j] * C[k, j]
+        norm = math.sqrt(ss)
+        for j in range(n):
+            C[k, j] = C[k, j] / norm
+        lower[k] = -t.drift[i] / norm
+        k += 1
+    for a in range(3):
+        C[r + a, a] = 1.0
+        lower[r + a] = t.lo[a]
+        upper[r + a] = t.hi[a]
+    z0 = np.zeros(n)
+    for a in range(3):
+        z0[a] = ws.u_target[a]
+    return C, lower, upper, z0, row_of, slack_var, scale
+
+
+@numba.njit(**JIT)
+def solve(C: Array, lower: Array, upper: Array, z0: Array, f: np.void, r: np.void
+          ) -> tuple[Array, Array, int, int]:
+    """The solver step: (z, multipliers in proxsuite's sign convention, SOLVE_RESULTS code, backup code).
+    A claimed solution that misses a row by more than check_tolerance counts as SOLVE_CHECK_FAILED."""
+    backup = NOT_SOLVED
+    if f.solver == ACTIVE_SET:
+        z, mult, code, iters = active_set.solve(C, lower, upper, z0, f.max_active_set_iter)
+    else:
+        z = np.empty(z0.shape[0])
+        mult = np.empty(C.shape[0])
+        with numba.objmode(code="int64", iters="int64", backup="int64"):
+            code, iters, backup = proxsuite_qp.solve(C, lower, upper, z0, f, z, mult)
+    r.iterations += iters
+    if code == SOLVE_OK and not active_set.rows_hold(C, lower, upper, z, f.check_tolerance):
+        code = SOLVE_CHECK_FAILED
+    return z, mult, code, backup
+
+
+@numba.njit(**JIT)
+def extract(z: Array, mult: Array, row_of: NDArray[np.int64], slack_var: NDArray[np.int64], scale: Array,
+            ws: np.void, r: np.void) -> None:
+    """u (clipped to the box), the slacks and the active rows from a QP solution."""
+    t = ws.table
+    for a in range(3):
+        r.u[a] = min(max(z[a], t.lo[a]), t.hi[a])
+    for k in range(row_of.shape[0]):
+        i = row_of[k]
+        r.intervening[i] = 1 if abs(mult[k]) > ACTIVE_MULTIPLIER else 0
+        if slack_var[i] >= 0:
+            r.slack[i] = scale[slack_var[i]] * z[slack_var[i]]
+
+
+@numba.njit(**JIT)
+def finish(ws: np.void, r: np.void) -> None:
+    """BC_i at the final u (slack not included), the box flags, and the table copied into the result."""
+    t = ws.table
+    for i in range(M):
+        r.bc[i] = t.drift[i] + (t.gain[i, 0] * r.u[0] + t.gain[i, 1] * r.u[1] + t.gain[i, 2] * r.u[2])
+        r.h[i], r.psi0[i], r.psi1[i] = t.h[i], t.psi0[i], t.psi1[i]
+    for a in range(3):
+        r.lo[a], r.hi[a] = t.lo[a], t.hi[a]
+        u, ut = r.u[a], ws.u_target[a]
+        r.box_active[a] = 1 if ((u <= t.lo[a] and ut < t.lo[a]) or (u >= t.hi[a] and ut > t.hi[a])) else 0
+
+
+# ----------------------------------------------------------------------------- the call
+
+
+@numba.njit(**JIT)
+def filter_state(x: Array, u_des: Array, f: np.void, ws: np.void, r: np.void) -> None:
+    """One whole filter call: state x (19,), desired wheel accelerations u_des (3,) -> result record r."""
+    t = ws.table
+    for i in range(M):
+        r.slack[i] = 0.0
+        r.intervening[i] = 0
+    r.solver = f.solver
+    r.solve_result = r.backup_result = r.soft_result = NOT_SOLVED
+    r.qp_failed = r.raise_error = 0
+    r.iterations = 0
+    valid, finite_des, need = prepare(x, u_des, f, ws, r)
+    if not valid:
+        # no barrier can be trusted: the wheels hold their speed (u = 0), keeping the body rates
+        r.u[0] = r.u[1] = r.u[2] = 0.0
+        r.status, r.fallback = FALLBACK, INVALID_STATE
+        finish(ws, r)
+        for i in range(M):
+            r.h[i] = r.psi0[i] = r.psi1[i] = r.bc[i] = np.nan
+        return
+    for a in range(3):
+        r.u[a] = min(max(ws.u_target[a], t.lo[a]), t.hi[a])
+    if not need:
+        r.status, r.fallback = PASS, NO_FALLBACK
+        finish(ws, r)
+        return
+    C, lower, upper, z0, row_of, slack_var, scale = assemble(f, ws, False)
+    z, mult, code, backup = solve(C, lower, upper, z0, f, r)
+    r.solve_result, r.backup_result = code, backup
+    ok = code == SOLVE_OK or backup == SOLVE_OK
+    reason = NO_FALLBACK if finite_des else NON_FINITE_U_DES
+    if not ok:
+        r.qp_failed = 1
+        reason = POLICY_ACTED
+        if f.policy == RAISE:
+            r.raise_error = 1
+        elif f.policy == SOFTEN:
+            C, lower, upper, z0, row_of, slack_var, scale = assemble(f, ws, True)
+            z, mult, soft, soft_backup = solve(C, lower, upper, z0, f, r)
+            ok = soft == SOLVE_OK or soft_backup == SOLVE_OK
+            r.soft_result = SOLVE_OK if ok else soft
+        if not ok and f.policy == HOLD:
+            for a in range(3):
+                r.u[a] = min(max(0.0, t.lo[a]), t.hi[a])
+    if ok:
+        extract(z, mult, row_of, slack_var, scale, ws, r)
+    r.fallback = reason
+    r.status = FALLBACK if reason != NO_FALLBACK else SOLVED
+    finish(ws, r)
+
+
+@numba.njit(**JIT)
+def filter_many(X: Array, U_des: Array, f: NDArray[np.void], ws: NDArray[np.void], R: NDArray[np.void]) -> None:
+    """`filter_state` of states X (N, 19) with commands U_des (N, 3) into results R (N,)."""
+    for k in range(X.shape[0]):
+        filter_state(X[k], U_des[k], f[0], ws[0], R[k])
+
+
+__all__ = [
+    "ACTIVE_MULTIPLIER", "BIG", "FILTER_DTYPE", "MIN_ROW_NORM", "RESULT_DTYPE", "WORKSPACE_DTYPE", "assemble",
+    "extract", "filter_many", "filter_record", "filter_state", "finish", "new_workspace", "prepare", "solve",
+]  # fmt: skip

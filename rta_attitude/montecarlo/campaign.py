@@ -1,0 +1,61 @@
+"""The Monte Carlo campaign: sample, run, classify (the library entry point of `rta-attitude montecarlo`)."""
+
+from __future__ import annotations
+
+import math
+import time
+from typing import Any
+
+from rta_attitude.config.schema import Config
+from rta_attitude.constraints import ConstraintSet
+from rta_attitude.errors import ConfigError
+from rta_attitude.montecarlo import BACKENDS, DEFAULT_CHUNK_RUNS
+from rta_attitude.montecarlo.classify import classify
+from rta_attitude.montecarlo.report import PAPER_RESULTS, MonteCarloResult, format_table, summary, write_outputs
+from rta_attitude.montecarlo.runner import BatchOutcome, run_dask, run_local, run_runs
+from rta_attitude.montecarlo.sampling import rejected, sample_initial_states
+
+
+def _cpu_s() -> float:
+    """User + system CPU seconds of this process and its reaped children."""
+    import resource
+
+    me, kids = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return me.ru_utime + me.ru_stime + kids.ru_utime + kids.ru_stime
+
+
+def montecarlo(cfg: Config, runs: int, duration_s: float, seed: int, workers: int = 1, backend: str = "local",
+               scheduler: str | Any | None = None, chunk_runs: int | None = None,
+               progress: bool = False) -> MonteCarloResult:
+    """Sample, run and classify (the library entry point of the CLI).
+
+    Raises:
+        ConfigError: bad arguments.
+    """
+    if backend not in BACKENDS:
+        raise ConfigError(f"backend must be one of {', '.join(BACKENDS)}, got {backend!r}")
+    if not (duration_s > 0 and math.isfinite(duration_s)):
+        raise ConfigError(f"duration must be > 0 s, got {duration_s!r}")
+    if workers < 1:
+        raise ConfigError(f"workers must be >= 1, got {workers}")
+    if backend == "dask" and not scheduler:
+        raise ConfigError("the dask backend needs --scheduler ADDRESS (e.g. tcp://127.0.0.1:8786)")
+    x0, redraws = sample_initial_states(runs, seed, cfg)
+    t0 = time.perf_counter()
+    cpu0 = _cpu_s()
+    if backend == "local":
+        outcome = run_local(cfg, x0, duration_s, workers, chunk_runs, progress)
+    else:
+        outcome = run_dask(cfg, x0, duration_s, scheduler, chunk_runs or DEFAULT_CHUNK_RUNS, progress)
+    wall = time.perf_counter() - t0
+    cpu = _cpu_s() - cpu0
+    slacked = ConstraintSet(cfg).slacked
+    result = MonteCarloResult(cfg, seed, duration_s, x0, redraws, outcome, slacked, wall, backend, workers,
+                              cpu_s=cpu if backend == "local" else math.nan)
+    result.unrecoverable, result.rules = classify(x0, outcome.violated_samples & result.counted, cfg, duration_s)
+    return result
+
+
+
+__all__ = ["PAPER_RESULTS", "BatchOutcome", "MonteCarloResult", "classify", "format_table", "montecarlo",
+           "rejected", "run_dask", "run_local", "run_runs", "sample_initial_states", "summary", "write_outputs"]

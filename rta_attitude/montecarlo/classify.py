@@ -1,0 +1,147 @@
+"""Which Monte Carlo failures were physically unavoidable: rules that bound what any admissible command
+sequence could do from an initial state (docs/montecarlo.md)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numpy.typing import NDArray
+
+from rta_attitude.config.schema import CONSTRAINT_NAMES, Config
+from rta_attitude.constraints import ConstraintSet
+from rta_attitude.dynamics.state import ENERGY, OMEGA, PSI, TEMP
+
+Array = NDArray[np.float64]
+
+UNRECOVERABLE_RULES: tuple[str, ...] = ("battery_energy", "temperature_heating", "exclusion_zone_escape",
+                                        "wheel_momentum")
+
+
+CLASSIFY_STEP_S = 0.05
+"""Time step of the temperature lower-bound integration, s."""
+CLASSIFY_MARGIN_K = 1e-3
+"""The temperature bound must exceed T_max by this before a failure counts as unavoidable, K."""
+
+
+def unavoidable(x0: Array, cfg: Config, duration_s: float = math.inf) -> dict[str, NDArray[np.bool_]]:
+    """Constraints that no admissible command sequence can keep from x0, by rule (n, m) each.
+
+    Every rule bounds what the best possible trajectory could do, generously (it ignores the
+    other constraints, the acceleration limits where stated, and the filter): if even that bound
+    breaks a limit, the failure is physically unrecoverable. Any trajectory that keeps every
+    constraint has |omega_i| <= omega_max, so a body axis turns relative to a direction at most at
+    Omega = sqrt(3) omega_max (+ n for the moving sun).
+
+    - battery_energy: the +k_B panel turns towards the sun at Omega from t = 0; E_dot <=
+      P_peak max(0, cos theta_SI(t)) - P_out with theta_SI(t) >= theta_SI(0) - Omega t. E falls until
+      cos theta_SI = P_out / P_peak; if the bound on E drops below E_min first, so does E.
+    - temperature_heating: the -j_B face turns away from the sun and the Earth at Omega; the heat
+      input is at least that of the bounding angles, so T >= the solution of
+      T' = (Q_min(t) - sigma eps A T^4) / (m c_p) (comparison principle); a peak above T_max counts.
+    - exclusion_zone_escape: theta_EZ(0) and its rate; |theta_ddot| <= a_max = sqrt(3) omega_dot_max
+      + 2 Omega^2 / sin(limit) + n^2, so theta_EZ >= limit is lost if theta(0) - theta_dot(0)^2 /
+      (2 a_max) < limit while approaching.
+    - wheel_momentum: about body axis i, J_i omega_i - sign D psi_i changes only through the
+      gyroscopic torque, so stopping the body about i moves the wheel to psi_i(0) - sign J_i omega_i(0)
+      / D; where that lies beyond psi_max, and keeping omega_i inside its limit needs the rate
+      stopped (|omega_i(0)| > omega_max: not in the sampled set), psi_i is lost.
+
+    Args:
+        x0: initial states (n, 19).
+        cfg: configuration.
+        duration_s: run length; a bound that needs longer is not used.
+
+    Returns:
+        rule name -> (n, m) bool, columns in CONSTRAINT_NAMES order.
+    """
+    n = len(x0)
+    constraints = ConstraintSet(cfg)
+    angles = constraints.angles(x0)
+    m = len(CONSTRAINT_NAMES)
+    L, env, th, pw = cfg.limits, cfg.environment, cfg.thermal, cfg.power
+    Omega = math.sqrt(3.0) * L.omega_max_rad_s
+    n_orb = env.mean_motion_rad_s
+    out = {r: np.zeros((n, m), dtype=bool) for r in UNRECOVERABLE_RULES}
+    col = {name: i for i, name in enumerate(CONSTRAINT_NAMES)}
+
+    # battery: energy lost before the panel can face the sun
+    rate = Omega + n_orb
+    theta0 = angles["panel_sun"]
+    P, P_out = pw.peak_W, pw.load_W
+    if P <= P_out:
+        loss = np.full(n, P_out - P) * duration_s if math.isfinite(duration_s) else np.full(n, np.inf)
+    else:
+        th_star = math.acos(P_out / P)
+        th_b = np.minimum(theta0, np.pi / 2)
+        dark = np.maximum(theta0 - np.pi / 2, 0.0)
+        lit = np.where(th_b > th_star, P_out * (th_b - th_star) - P * (np.sin(th_b) - math.sin(th_star)), 0.0)
+        loss = (P_out * dark + lit) / rate
+        t_star = np.maximum(theta0 - th_star, 0.0) / rate
+        loss = np.where(t_star <= duration_s, loss, 0.0)
+    out["battery_energy"][:, col["battery"]] = x0[:, ENERGY] - loss < L.energy_min_J
+
+    # temperature: lower bound of T while the face turns away at the largest rate
+    th_s0, th_e0 = angles["face_sun"], angles["face_earth"]
+    solar = th.absorptivity * th.area_m2 * env.solar_constant_W_m2
+    earth_coeff = (solar * env.albedo_factor
+                   + env.stefan_boltzmann_W_m2K4 * th.emissivity * th.area_m2 * env.earth_temperature_K**4)
+    heat_capacity = th.mass_kg * th.specific_heat_J_kgK
+    sea = env.stefan_boltzmann_W_m2K4 * th.emissivity * th.area_m2
+    T = x0[:, TEMP].copy()
+    T_peak = T.copy()
+    horizon = min(math.pi / min(rate, Omega), duration_s)
+    for k in range(math.ceil(horizon / CLASSIFY_STEP_S)):
+        t = k * CLASSIFY_STEP_S
+        q_min = (solar * np.maximum(0.0, np.cos(np.minimum(th_s0 + rate * t, np.pi)))
+                 + earth_coeff * env.earth_view_factor * np.maximum(0.0, np.cos(np.minimum(th_e0 + Omega * t, np.pi))))
+        T = T + CLASSIFY_STEP_S * (q_min - sea * T**4) / heat_capacity
+        np.maximum(T_peak, T, out=T_peak)
+    out["temperature_heating"][:, col["temperature"]] = T_peak > L.temperature_max_K + CLASSIFY_MARGIN_K
+
+    # exclusion zone: stopping distance of the approach
+    table = constraints.evaluate(x0)
+    h_ez = table["h"][:, col["exclusion_zone"]]
+    k1_ez = cfg.barriers["exclusion_zone"].k1
+    theta_dot = table["psi1"][:, col["exclusion_zone"]] - k1_ez * table["psi0"][:, col["exclusion_zone"]]
+    a_max = (math.sqrt(3.0) * L.omega_dot_max_rad_s2 + 2.0 * rate**2 / math.sin(L.exclusion_angle_rad)
+             + n_orb**2)
+    reach = h_ez - np.where(theta_dot < 0, theta_dot**2 / (2.0 * a_max), 0.0)
+    out["exclusion_zone_escape"][:, col["exclusion_zone"]] = reach < 0
+
+    # wheels: momentum exchanged in stopping the body about each axis
+    J = cfg.spacecraft.J
+    D = cfg.spacecraft.wheel_inertia_kgm2
+    sign = cfg.spacecraft.torque_sign
+    w0 = x0[:, OMEGA]
+    psi_stop = x0[:, PSI] - sign * J * w0 / D
+    must_stop = np.abs(w0) > L.omega_max_rad_s
+    for a, name in enumerate(("psi_x", "psi_y", "psi_z")):
+        out["wheel_momentum"][:, col[name]] = must_stop[:, a] & (np.abs(psi_stop[:, a]) > L.psi_max_rad_s)
+    return out
+
+
+def classify(x0: Array, violated: NDArray[np.bool_], cfg: Config,
+             duration_s: float = math.inf) -> tuple[NDArray[np.bool_], list[str]]:
+    """Which failures no admissible command could have avoided (see docs/montecarlo.md).
+
+    Args:
+        x0: initial states (n, 19).
+        violated: (n, m) constraints violated in each run (CONSTRAINT_NAMES order).
+        cfg: configuration.
+
+    Returns:
+        (unrecoverable (n,) bool, the rules that proved it per run ('' if none, ';'-joined)).
+    """
+    proofs = unavoidable(x0, cfg, duration_s)  # name -> (n, m) bool
+    rules: list[str] = []
+    out = np.zeros(len(x0), dtype=bool)
+    for k in range(len(x0)):
+        hit = [name for name, mask in proofs.items() if np.any(mask[k] & violated[k])]
+        rules.append(";".join(hit))
+        out[k] = bool(hit)
+    return out, rules
+
+
+
+__all__ = ["UNRECOVERABLE_RULES", "classify", "unavoidable"]

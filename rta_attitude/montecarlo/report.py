@@ -1,0 +1,218 @@
+"""The Monte Carlo's results: the paper's table beside ours, the classification, the output files."""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from rta_attitude.config.schema import CONSTRAINT_NAMES, Config
+from rta_attitude.constraints import ConstraintSet
+from rta_attitude.dynamics.state import STATE_NAMES
+from rta_attitude.files import atomic, output_dir, write_text
+from rta_attitude.montecarlo.classify import UNRECOVERABLE_RULES
+from rta_attitude.montecarlo.runner import BatchOutcome
+from rta_attitude.simulation.metrics import H_UNITS
+
+Array = NDArray[np.float64]
+
+PAPER_RESULTS: dict[str, Any] = {
+    "success_rate": 0.9832,
+    "violations_per_failed_run": {"1": 0.4167, "2": 0.3452, "3": 0.2143, "4+": 0.0238},
+    "by_constraint": {"exclusion_zone": 0.5119, "psi_y": 0.4762, "psi_z": 0.4048, "battery": 0.3810,
+                      "psi_x": 0.0476, "temperature": 0.0238, "omega_x": 0.0, "omega_y": 0.0, "omega_z": 0.0},
+}
+"""McQuinn et al. 2024, sec. Monte-Carlo Analysis: shares of the failed runs."""
+
+@dataclass
+class MonteCarloResult:
+    """Everything a Monte Carlo produced (arrays over runs)."""
+
+    cfg: Config
+    seed: int
+    duration_s: float
+    x0: Array
+    redraws: NDArray[np.int64]
+    outcome: BatchOutcome
+    slacked: tuple[str, ...]
+    wall_s: float
+    backend: str
+    workers: int
+    cpu_s: float = math.nan
+    """CPU time of this process and its finished worker processes during the runs (local backend), s."""
+    unrecoverable: NDArray[np.bool_] = field(default_factory=lambda: np.zeros(0, dtype=bool))
+    rules: list[str] = field(default_factory=list)
+
+    @property
+    def counted(self) -> NDArray[np.bool_]:
+        """(m,) constraints that decide success (enabled, not slacked)."""
+        cs = ConstraintSet.from_config(self.cfg)
+        return cs.enabled & (cs.slack_weights == 0)
+
+    def failed(self, substeps: bool = False) -> NDArray[np.bool_]:
+        v = self.outcome.violated_substeps if substeps else self.outcome.violated_samples
+        return np.any(v & self.counted, axis=1)
+
+
+def _shares(result: MonteCarloResult, substeps: bool) -> dict[str, Any]:
+    v = (result.outcome.violated_substeps if substeps else result.outcome.violated_samples) & result.counted
+    failed = np.asarray(v.any(axis=1), dtype=bool)
+    nf = int(failed.sum())
+    n = len(failed)
+    per_run = v[failed].sum(axis=1)
+    counts = {"1": int(np.sum(per_run == 1)), "2": int(np.sum(per_run == 2)), "3": int(np.sum(per_run == 3)),
+              "4+": int(np.sum(per_run >= 4))}
+    by = {name: int(v[failed, i].sum()) for i, name in enumerate(CONSTRAINT_NAMES) if result.counted[i]}
+    return {
+        "runs": n, "failed": nf, "success_rate": (n - nf) / n if n else math.nan,
+        "violations_per_failed_run": {k: (c / nf if nf else 0.0) for k, c in counts.items()},
+        "violations_per_failed_run_counts": counts,
+        "by_constraint": {k: (c / nf if nf else 0.0) for k, c in by.items()},
+        "by_constraint_counts": by,
+    }
+
+
+def summary(result: MonteCarloResult) -> dict[str, Any]:
+    """The JSON-ready summary: paper-style tables at samples and incl. substeps, counts, timing."""
+    o = result.outcome
+    failed = result.failed()
+    cs = ConstraintSet.from_config(result.cfg)
+    slacked = {}
+    for i, name in enumerate(CONSTRAINT_NAMES):
+        if name in result.slacked:
+            slacked[name] = {"violated_runs_samples": int(o.violated_samples[:, i].sum()),
+                             "violated_runs_incl_substeps": int(o.violated_substeps[:, i].sum()),
+                             "max_slack_rad": float(o.max_comm_slack.max()) if len(o.max_comm_slack) else 0.0}
+    unrec = result.unrecoverable & failed
+    short = failed & ~result.unrecoverable
+    steps = round(result.duration_s / result.cfg.filter.sample_time_s)
+    return {
+        "paper": PAPER_RESULTS,
+        "at_samples": _shares(result, False),
+        "incl_substeps": _shares(result, True),
+        "slacked_constraints": slacked,
+        "classification": {
+            "failed": int(failed.sum()),
+            "physically_unrecoverable": int(unrec.sum()),
+            "filter_shortfall": int(short.sum()),
+            "shortfall_with_qp_failure": int((short & (o.fallback_steps > 0)).sum()),
+            "shortfall_without_qp_failure": int((short & (o.fallback_steps == 0)).sum()),
+            "worst_violation_without_qp_failure": {
+                name: float(o.min_h_samples[short & (o.fallback_steps == 0), i].min())
+                for i, name in enumerate(CONSTRAINT_NAMES)
+                if result.counted[i] and np.any(o.violated_samples[short & (o.fallback_steps == 0), i])},
+            "worst_violation_units": {name: H_UNITS[name] for name in CONSTRAINT_NAMES},
+            "by_rule": {r: int(sum(1 for k in np.flatnonzero(failed) if r in result.rules[k].split(";")))
+                        for r in UNRECOVERABLE_RULES},
+        },
+        "filter": {
+            "qp_state_steps": int(o.qp_steps.sum()),
+            "qp_share": float(o.qp_steps.sum() / (len(failed) * steps)) if len(failed) else 0.0,
+            "fallback_state_steps": int(o.fallback_steps.sum()),
+            "runs_with_fallback": int((o.fallback_steps > 0).sum()),
+            "qp_failures": int(o.qp_failures.sum()),
+            "runs_with_qp_failure": int((o.qp_failures > 0).sum()),
+            "fallback_policy": result.cfg.filter.fallback,
+            "solver": result.cfg.filter.solver,
+        },
+        "setup": {
+            "runs": len(failed), "duration_s": result.duration_s, "seed": result.seed,
+            "preset": result.cfg.filter.preset, "dt_s": result.cfg.filter.sample_time_s,
+            "substeps": result.cfg.substeps, "config": result.cfg.source, "backend": result.backend,
+            "workers": result.workers, "wall_s": result.wall_s,
+            "cpu_s": None if math.isnan(result.cpu_s) else result.cpu_s,
+            "redraws_total": int(result.redraws.sum()),
+            "constraints_counted": [n for i, n in enumerate(cs.names) if result.counted[i]],
+            "slacked": list(result.slacked),
+        },
+    }
+
+
+def format_table(s: dict[str, Any]) -> str:
+    """The paper's table beside ours (shares of failed runs), for a terminal."""
+    a, b, p = s["at_samples"], s["incl_substeps"], s["paper"]
+    setup = s["setup"]
+    cpu = f", {setup['cpu_s']:.0f} s CPU" if setup.get("cpu_s") is not None else ""
+    lines = [f"Monte Carlo: {setup['runs']} runs x {setup['duration_s']:.0f} s, preset {setup['preset']}, "
+             f"seed {setup['seed']}, {setup['wall_s']:.1f} s wall{cpu} "
+             f"({setup['backend']}, {setup['workers']} workers)",
+             f"{'':<28}{'paper':>10}{'at samples':>14}{'incl. substeps':>16}",
+             f"{'success rate':<28}{p['success_rate']:>10.2%}{a['success_rate']:>14.2%}{b['success_rate']:>16.2%}",
+             f"{'failed runs':<28}{'84':>10}{a['failed']:>14d}{b['failed']:>16d}",
+             "of the failed runs, violating"]
+    for k in ("1", "2", "3", "4+"):
+        lines.append(f"  {k + ' constraint(s)':<26}{p['violations_per_failed_run'][k]:>10.2%}"
+                     f"{a['violations_per_failed_run'][k]:>14.2%}{b['violations_per_failed_run'][k]:>16.2%}")
+    lines.append("of the failed runs, violating")
+    for name in CONSTRAINT_NAMES:
+        if name not in a["by_constraint"]:
+            continue
+        pv = p["by_constraint"].get(name)
+        ps = f"{pv:>10.2%}" if pv is not None else f"{'-':>10}"
+        lines.append(f"  {name:<26}{ps}{a['by_constraint'][name]:>14.2%}{b['by_constraint'][name]:>16.2%}")
+    for name, c in s["slacked_constraints"].items():
+        lines.append(f"{name + ' (slacked)':<28}{'-':>10}{c['violated_runs_samples']:>14d}"
+                     f"{c['violated_runs_incl_substeps']:>16d}  runs, max slack {c['max_slack_rad']:.3g} rad")
+    c, f = s["classification"], s["filter"]
+    lines.append(f"failed runs (at samples): {c['failed']} = {c['physically_unrecoverable']} physically unrecoverable "
+                 f"+ {c['filter_shortfall']} filter shortfall  (rules: "
+                 + ", ".join(f"{k} {v}" for k, v in c["by_rule"].items()) + ")")
+    worst = ", ".join(f"{k} {v:.3g} {c['worst_violation_units'][k]}"
+                      for k, v in c["worst_violation_without_qp_failure"].items())
+    lines.append(f"  shortfalls: {c['shortfall_with_qp_failure']} with an infeasible QP (fallback), "
+                 f"{c['shortfall_without_qp_failure']} with every QP feasible (sampled data; worst h: {worst or '-'})")
+    lines.append(f"filter: QP in {f['qp_share']:.1%} of state-steps, {f['qp_failures']} QP failures in "
+                 f"{f['runs_with_qp_failure']} runs, {f['fallback_state_steps']} fallback steps "
+                 f"({f['fallback_policy']}) in {f['runs_with_fallback']} runs; solver {f['solver']}")
+    return "\n".join(lines)
+
+
+def write_outputs(result: MonteCarloResult, out: Path, plot: bool = True) -> dict[str, Path]:
+    """summary.json, runs.csv and (optionally) initial_conditions.png in out. Returns the paths."""
+    output_dir(out)
+    s = summary(result)
+    paths = {"json": out / "summary.json", "csv": out / "runs.csv", "npz": out / "outcome.npz"}
+    write_text(paths["json"], json.dumps(s, indent=2) + "\n")
+    o = result.outcome
+    with atomic(paths["npz"]) as tmp:
+        np.savez_compressed(tmp, x0=result.x0, redraws=result.redraws, unrecoverable=result.unrecoverable,
+                            constraint_names=np.array(CONSTRAINT_NAMES), state_names=np.array(STATE_NAMES),
+                            **{k: getattr(o, k) for k in ("violated_samples", "violated_substeps",
+                                                          "first_violation_s", "min_h_samples", "qp_steps",
+                                                          "fallback_steps", "qp_failures", "max_comm_slack",
+                                                          "x_final")})
+    failed = result.failed()
+    failed_sub = result.failed(substeps=True)
+    with atomic(paths["csv"]) as tmp, tmp.open("w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(["run", *STATE_NAMES[:13], "redraws", "failed", "failed_incl_substeps", "unrecoverable",
+                    "unrecoverable_rules", "violated", "violated_incl_substeps", "first_violation_s", "qp_steps",
+                    "fallback_steps", "qp_failures", "max_comm_slack_rad",
+                    *[f"min_h_{n}" for n in CONSTRAINT_NAMES]])
+        for k in range(len(failed)):
+            vs = [n for i, n in enumerate(CONSTRAINT_NAMES) if o.violated_samples[k, i]]
+            vb = [n for i, n in enumerate(CONSTRAINT_NAMES) if o.violated_substeps[k, i]]
+            fv = o.first_violation_s[k][result.counted]
+            first = float(np.nanmin(fv)) if np.any(~np.isnan(fv)) else ""
+            rules = result.rules[k] if failed[k] else ""
+            w.writerow([k, *[repr(float(v)) for v in result.x0[k, :13]], int(result.redraws[k]), int(failed[k]),
+                        int(failed_sub[k]), int(result.unrecoverable[k] and failed[k]), rules,
+                        ";".join(vs), ";".join(vb), first, int(o.qp_steps[k]), int(o.fallback_steps[k]),
+                        int(o.qp_failures[k]), repr(float(o.max_comm_slack[k])),
+                        *[repr(float(v)) for v in o.min_h_samples[k]]])
+    if plot:
+        from rta_attitude.montecarlo.plots import plot_initial_conditions
+
+        paths["png"] = plot_initial_conditions(result.x0, failed, result.cfg, out / "initial_conditions.png",
+                                               title=f"{len(failed)} runs, preset {result.cfg.filter.preset}")
+    return paths
+
+
+
+__all__ = ["PAPER_RESULTS", "MonteCarloResult", "format_table", "summary", "write_outputs"]

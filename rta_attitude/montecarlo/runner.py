@@ -1,0 +1,308 @@
+"""Many runs of the closed loop: a compiled loop over runs of the one-state step, on local processes or
+a Dask cluster.
+
+Each run is `simulation.closed_loop.advance` from its initial state with u_des = 0 (no primary
+controller), so a run here equals `simulate` of the same state bit for bit (tested). Per run the
+compiled loop keeps only what the report needs: which constraints were violated at a sample or at
+an RK4 substep and when first, the smallest h at the samples, the filter's QP, fallback and failure
+counts, the largest slack, the final state (and, on request, the states at every sample).
+
+Runs are independent, so their results do not depend on the chunk or the worker they ran in: the
+local backend (`fork`ed processes) and the Dask backend give identical results.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+import multiprocessing as mp
+import os
+import sys
+from collections.abc import Callable
+from dataclasses import dataclass, fields
+from typing import Any
+
+import numba
+import numpy as np
+from numpy.typing import NDArray
+
+from rta_attitude.config.schema import Config
+from rta_attitude.constraints.base import N_CONSTRAINTS
+from rta_attitude.constraints.geometry import CONTEXT_DTYPE
+from rta_attitude.constraints.rows import safety_values
+from rta_attitude.dynamics.quaternion import JIT
+from rta_attitude.dynamics.state import STATE_SIZE
+from rta_attitude.errors import RtaError
+from rta_attitude.filter.outcome import FALLBACK, PASS
+from rta_attitude.filter.pipeline import RESULT_DTYPE, WORKSPACE_DTYPE
+from rta_attitude.montecarlo import DEFAULT_CHUNK_RUNS
+from rta_attitude.simulation.closed_loop import advance, loop_record
+
+Array = NDArray[np.float64]
+M = N_CONSTRAINTS
+PROGRESS_RUNS = 20
+"""Runs per compiled call, between two progress updates."""
+
+
+@dataclass
+class BatchOutcome:
+    """Per-run results (N runs, m constraints in CONSTRAINT_NAMES order).
+
+    Attributes:
+        violated_samples: (N, m) h < 0 at some sample t_k (the paper's criterion).
+        violated_substeps: (N, m) h < 0 at some sample or RK4 substep.
+        first_violation_s: (N, m) earliest sample or substep time with h < 0, NaN if none.
+        min_h_samples: (N, m) smallest h over the samples.
+        qp_steps, fallback_steps, qp_failures: (N,) steps that needed the QP, that ended in the
+            fallback, and whose first QP failed.
+        max_comm_slack: (N,) largest |delta| of the slacked constraints (rad for communication).
+        x_final: (N, 19) state at the end.
+        trajectory: (N, steps + 1, 19) states at the samples if recorded, else None.
+    """
+
+    violated_samples: NDArray[np.bool_]
+    violated_substeps: NDArray[np.bool_]
+    first_violation_s: Array
+    min_h_samples: Array
+    qp_steps: NDArray[np.int64]
+    fallback_steps: NDArray[np.int64]
+    qp_failures: NDArray[np.int64]
+    max_comm_slack: Array
+    x_final: Array
+    trajectory: Array | None = None
+
+
+@numba.njit(**JIT)
+def _mark(h: Array, t: float, sample: bool, k: int, viol_s: NDArray[np.bool_], viol_sub: NDArray[np.bool_],
+          first: Array) -> None:
+    for i in range(M):
+        if h[i] < 0:
+            if sample:
+                viol_s[k, i] = True
+            viol_sub[k, i] = True
+            if first[k, i] != first[k, i]:
+                first[k, i] = t
+
+
+@numba.njit(**JIT)
+def run_batch(X0: Array, steps: int, loop: NDArray[np.void], viol_s: NDArray[np.bool_],
+              viol_sub: NDArray[np.bool_], first: Array, min_h: Array, qp_steps: NDArray[np.int64],
+              fb_steps: NDArray[np.int64], qp_fail: NDArray[np.int64], max_slack: Array, x_final: Array,
+              traj: Array, record: bool) -> None:
+    """Run every initial state X0 (N, 19) for `steps` samples with u_des = 0; outputs with a leading N
+    (see BatchOutcome; traj (N, steps + 1, 19) is filled only if record)."""
+    lp = loop[0]
+    p, c = lp.plant, lp.filter.constraints
+    S = lp.substeps
+    dt = lp.dt_s
+    ws = np.zeros(1, WORKSPACE_DTYPE)
+    ctx = np.zeros(1, CONTEXT_DTYPE)
+    r = np.zeros(1, RESULT_DTYPE)
+    u_des, u = np.zeros(3), np.empty(3)
+    subs = np.empty((S, STATE_SIZE))
+    hs = np.empty((S, M))
+    h = np.empty(M)
+    slacked = np.zeros(M, dtype=np.bool_)
+    for i in range(M):
+        slacked[i] = c.gains[i].enabled != 0 and c.gains[i].slack_weight > 0
+    sub_t = np.empty(S)
+    for j in range(S):
+        sub_t[j] = dt * (j + 1) / S
+    for k in range(X0.shape[0]):
+        x = X0[k].copy()
+        if record:
+            traj[k, 0] = x
+        for i in range(M):
+            first[k, i] = np.nan
+            min_h[k, i] = np.inf
+        for step in range(steps):
+            t = step * dt
+            safety_values(x, p, c, ctx[0], h)
+            for i in range(M):
+                if h[i] < min_h[k, i]:
+                    min_h[k, i] = h[i]
+            _mark(h, t, True, k, viol_s, viol_sub, first)
+            advance(x, u_des, lp, ws[0], r[0], u, subs, hs, ctx[0])
+            status = r[0].status
+            if status != PASS:
+                qp_steps[k] += 1
+            if status == FALLBACK:
+                fb_steps[k] += 1
+            qp_fail[k] += r[0].qp_failed
+            for i in range(M):
+                if slacked[i] and abs(r[0].slack[i]) > max_slack[k]:
+                    max_slack[k] = abs(r[0].slack[i])
+            for j in range(S - 1):  # the last substep is the next sample, checked there
+                _mark(hs[j], t + sub_t[j], False, k, viol_s, viol_sub, first)
+            x[:] = subs[S - 1]
+            if record:
+                traj[k, step + 1] = x
+        safety_values(x, p, c, ctx[0], h)
+        for i in range(M):
+            if h[i] < min_h[k, i]:
+                min_h[k, i] = h[i]
+        _mark(h, steps * dt, True, k, viol_s, viol_sub, first)
+        x_final[k] = x
+
+
+def run_runs(cfg: Config, x0: Array, duration_s: float, record: bool = False,
+             progress: Callable[[int], None] | None = None) -> BatchOutcome:
+    """Run initial states x0 (N, 19) for duration_s in this process; progress(runs done) after each
+    group of PROGRESS_RUNS runs."""
+    x0 = np.ascontiguousarray(x0, dtype=float)
+    if x0.ndim != 2 or x0.shape[1] != STATE_SIZE:
+        raise ValueError(f"x0 must be (N, {STATE_SIZE}), got {x0.shape}")
+    steps = round(duration_s / cfg.filter.sample_time_s)
+    N = x0.shape[0]
+    out = BatchOutcome(np.zeros((N, M), dtype=bool), np.zeros((N, M), dtype=bool), np.full((N, M), np.nan),
+                       np.full((N, M), np.inf), np.zeros(N, dtype=np.int64), np.zeros(N, dtype=np.int64),
+                       np.zeros(N, dtype=np.int64), np.zeros(N), np.empty((N, STATE_SIZE)),
+                       np.empty((N, steps + 1, STATE_SIZE)) if record else None)
+    loop = loop_record(cfg, rta=True, pd=False)
+    traj = out.trajectory if out.trajectory is not None else np.empty((1, 1, STATE_SIZE))
+    for a in range(0, N, PROGRESS_RUNS):
+        b = min(a + PROGRESS_RUNS, N)
+        run_batch(x0[a:b], steps, loop, out.violated_samples[a:b], out.violated_substeps[a:b],
+                  out.first_violation_s[a:b], out.min_h_samples[a:b], out.qp_steps[a:b], out.fallback_steps[a:b],
+                  out.qp_failures[a:b], out.max_comm_slack[a:b], out.x_final[a:b],
+                  traj[a:b] if record else traj, record)
+        if progress is not None:
+            progress(b)
+    return out
+
+
+# ----------------------------------------------------------------------------- chunks and backends
+@dataclass(frozen=True)
+class ChunkTask:
+    """One chunk of runs for a worker (picklable)."""
+
+    cfg: Config
+    x0: Array
+    duration_s: float
+    start: int
+
+
+def run_chunk(task: ChunkTask, progress: Callable[[int], None] | None = None) -> tuple[int, BatchOutcome]:
+    """Simulate one chunk; returns (start index, outcome)."""
+    return task.start, run_runs(task.cfg, task.x0, task.duration_s, progress=progress)
+
+
+_COUNTER: Any = None
+
+
+def _init_worker(counter: Any) -> None:
+    global _COUNTER
+    _COUNTER = counter
+    os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+
+def _run_chunk_counted(task: ChunkTask) -> tuple[int, BatchOutcome]:
+    last = [0]
+
+    def tick(done: int) -> None:
+        with _COUNTER.get_lock():
+            _COUNTER.value += done - last[0]
+        last[0] = done
+
+    return run_chunk(task, tick)
+
+
+def merge(parts: list[tuple[int, BatchOutcome]]) -> BatchOutcome:
+    """One outcome from chunks (start, outcome), in run order."""
+    outs = [o for _, o in sorted(parts, key=lambda p: p[0])]
+    names = [f.name for f in fields(BatchOutcome) if f.name != "trajectory"]
+    return BatchOutcome(**{n: np.concatenate([getattr(o, n) for o in outs]) for n in names})  # type: ignore[arg-type]
+
+
+def split(runs: int, chunks: int) -> list[tuple[int, int]]:
+    """(start, end) of `chunks` near-equal chunks of `runs` runs."""
+    edges = np.linspace(0, runs, chunks + 1).round().astype(int)
+    return [(int(a), int(b)) for a, b in itertools.pairwise(edges) if b > a]
+
+
+class _NoBar:
+    def update(self, n: int) -> None:
+        pass
+
+    def close(self) -> None:
+        pass
+
+
+def progress_bar(total: int, show: bool) -> Any:
+    """A tqdm bar over runs (or one that shows nothing)."""
+    if not show:
+        return _NoBar()
+    from tqdm import tqdm
+
+    return tqdm(total=total, unit="run", desc="montecarlo", smoothing=0.1)
+
+
+def run_local(cfg: Config, x0: Array, duration_s: float, workers: int, chunk_runs: int | None = None,
+              progress: bool = False) -> BatchOutcome:
+    """Run every state on this machine: chunks over `workers` processes (1: in this process)."""
+    runs = x0.shape[0]
+    n_chunks = max(1, math.ceil(runs / chunk_runs)) if chunk_runs else max(1, min(workers, runs))
+    tasks = [ChunkTask(cfg, x0[a:b], duration_s, a) for a, b in split(runs, n_chunks)]
+    bar = progress_bar(runs, progress)
+    if workers <= 1:
+        parts = []
+        for t in tasks:
+            done = [0]
+
+            def tick(n: int, done: list[int] = done) -> None:
+                bar.update(n - done[0])
+                done[0] = n
+
+            parts.append(run_chunk(t, tick))
+        bar.close()
+        return merge(parts)
+    # compile (or load) the kernels once here: forked workers inherit them
+    run_runs(cfg, x0[:1], cfg.filter.sample_time_s)
+    ctx = mp.get_context("fork" if sys.platform.startswith("linux") else "spawn")
+    counter = ctx.Value("q", 0)
+    with ctx.Pool(processes=min(workers, len(tasks)), initializer=_init_worker, initargs=(counter,)) as pool:
+        pending = pool.map_async(_run_chunk_counted, tasks, chunksize=1)
+        seen = 0
+        while not pending.ready():
+            pending.wait(0.5)
+            v = counter.value
+            bar.update(v - seen)
+            seen = v
+        parts = pending.get()
+        bar.update(runs - seen)
+    bar.close()
+    return merge(parts)
+
+
+def run_dask(cfg: Config, x0: Array, duration_s: float, scheduler: str | Any, chunk_runs: int = DEFAULT_CHUNK_RUNS,
+             progress: bool = False) -> BatchOutcome:
+    """Run every state on a Dask cluster: one task per chunk of `chunk_runs` runs.
+
+    Args:
+        scheduler: the scheduler's address ('tcp://host:8786') or a distributed.Client.
+    """
+    try:
+        from distributed import Client, as_completed
+    except ImportError:  # pragma: no cover - dask is in requirements.txt
+        raise RtaError("the dask backend needs the 'distributed' package (pip install 'dask[distributed]')") from None
+    runs = x0.shape[0]
+    tasks = [ChunkTask(cfg, x0[a:b], duration_s, a) for a, b in split(runs, max(1, math.ceil(runs / chunk_runs)))]
+    own = not isinstance(scheduler, Client)
+    client: Client = Client(scheduler) if own else scheduler  # type: ignore[assignment]
+    try:
+        futures = client.map(run_chunk, tasks, pure=False)
+        bar = progress_bar(runs, progress)
+        parts = []
+        for fut in as_completed(futures):
+            start, out = fut.result()
+            parts.append((start, out))
+            bar.update(out.x_final.shape[0])
+        bar.close()
+    finally:
+        if own:
+            client.close()
+    return merge(parts)
+
+
+__all__ = ["BatchOutcome", "ChunkTask", "merge", "progress_bar", "run_batch", "run_chunk",
+           "run_dask", "run_local", "run_runs", "split"]

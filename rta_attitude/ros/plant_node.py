@@ -1,0 +1,307 @@
+"""plant_node: the spacecraft simulator. Publishes /clock, `state` and the inspection topics,
+takes body torques and integrates the core model (`dynamics.spacecraft.integrate`) one sample at a time.
+
+Stepping (`stepping` parameter):
+
+- lockstep (default): publish state(t_k), wait for the command stamped t_k, integrate to t_k+1,
+  repeat; a run over DDS equals `ClosedLoop.run()` of the same scenario. After the final state
+  the plant also waits for the chain's answer to it, so every message count of the run is known
+  and goes into the final `run_status`. No command within `command_timeout_s` (wall) is a deadline
+  miss: the plant applies `deadline_fallback` for that step and goes on (a dead filter never stalls
+  the loop; the first command of the run may take `startup_timeout_s`, and if none ever comes the
+  run fails). In a run without faults the timeout never fires, so lockstep stays deterministic.
+- realtime: a steady wall-clock timer with period dt / real_time_factor. At tick k+1 the plant
+  applies the command stamped t_k if it has arrived (zero-order hold over [t_k, t_k+1)), else it
+  counts a deadline miss and applies `deadline_fallback`. The loop never waits.
+
+`deadline_fallback`: `hold` repeats the last applied torque for up to `hold_max_steps` consecutive
+misses, then applies zero; `zero` applies zero at once.
+
+Commands are validated (topics.PLANT_COUNTERS, in run_status; each kind logged once per episode):
+not finite or wrong frame: rejected; stamp older than the current step: late, equal to the last
+applied: duplicate, newer: future; all dropped. A command outside the admissible set U is counted
+(`outside_u`; the plant is the spacecraft and applies it: without RTA the paper's PD law does exceed
+U); one beyond the actuator limit is applied saturated, as `dynamics.spacecraft.integrate` does (`saturated`).
+When a fault episode starts or ends the plant republishes run_status (`running`, with the counters).
+
+Start: the first state is published only after every writer of the plant matched the run's
+readers (topics.expected_readers). End: run_status `done` (or `failed: reason`, or
+`interrupted: SIGINT` on a signal), wait until all readers acknowledged, exit when `exit_when_done`
+(always after a signal).
+"""
+
+from __future__ import annotations
+
+import sys
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from rta_attitude.dynamics import spacecraft
+from rta_attitude.errors import MessageError
+from rta_attitude.kernel_cache import drop_stale_caches
+from rta_attitude.ros import convert, topics
+from rta_attitude.ros.spin import RtaNode, run
+
+STARTUP_POLL_S = 0.005
+WATCHDOG_PERIOD_S = 0.1
+"""Longest period of the lockstep command watchdog (shorter for a short command_timeout_s) [s]."""
+LIMIT_RTOL = 1e-9
+"""A command counts as beyond a limit when |u_i| > limit (1 + LIMIT_RTOL) (tau = D u and back rounds)."""
+QUIET_KINDS = ("outside_u", "saturated")
+"""Counted and logged once per episode, but do not republish run_status: without RTA they happen in
+fault-free runs (the paper's PD law exceeds U), and saturation is the actuator's normal behaviour."""
+
+
+class PlantNode(RtaNode):
+    """The simulated spacecraft; see the module docstring."""
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__(topics.PLANT, **kwargs)
+        self.counts.update({k: 0 for k in topics.PLANT_COUNTERS})
+        self.dt_s = self.cfg.filter.sample_time_s
+        self.steps = round(self.scenario.duration_s / self.dt_s)
+        self.lockstep = self.knobs["stepping"] == "lockstep"
+        self.u_admissible = self.cfg.u_max_rad_s2  # U (3,): the box the filter keeps u in
+        self.u_actuator = self.cfg.limits.wheel_accel_max_rad_s2  # where the wheels saturate
+        self.x = self.scenario.x0.copy()
+        self.k = 0
+        # compile (or load from numba's cache) the integrator before the first step needs it
+        self.plant = spacecraft.plant_record(self.cfg)
+        self.D = self.cfg.spacecraft.wheel_inertia_kgm2
+        t0 = self.wall_now_s()
+        drop_stale_caches()
+        spacecraft.integrate(self.x, np.zeros(3), self.dt_s, self.plant, 1)  # compile (or load) the integrator now
+        self.get_logger().info(f"plant integrator ready in {self.wall_now_s() - t0:.2f} s")
+        self.held_tau = np.zeros(3)
+        self.misses_in_a_row = 0
+        self.last_command_ns = -1
+        self.pending: tuple[int, np.ndarray] | None = None
+        self.latency_s: list[float] = []
+        self.published: dict[str, int] = {}
+        self.pubs = {name: self.create_publisher(topics.msg_class(spec.type_name), spec.name, self.qos(name))
+                     for name, spec in topics.TOPICS.items() if spec.publisher == topics.PLANT}  # fmt: skip
+        self.command_topic = topics.TORQUE_CMD
+        self.subscribe(self.command_topic, self._on_command)
+        self._sent_s = 0.0
+        self._progress_s = self.wall_now_s()
+        self._ended = False
+        self._running = False
+        self._started_s = 0.0
+        self._startup = self.wall_timer(STARTUP_POLL_S, self._check_ready)
+        self.get_logger().info(f"scenario {self.scenario.name}: {self.steps} steps of {self.dt_s:g} s, "
+                               f"{self.knobs['stepping']}, rta={'on' if self.rta else 'off'}; waiting for readers")
+
+    # ------------------------------------------------------------------ start
+    def _check_ready(self) -> None:
+        missing = [(self.pubs[n].topic_name, self.pubs[n].get_subscription_count(), want)
+                   for n in self.pubs if (want := topics.expected_readers(n, self.rta, self.record))
+                   and self.pubs[n].get_subscription_count() < want]  # fmt: skip
+        if missing:
+            if self.wall_now_s() - self._progress_s > self.knobs["startup_timeout_s"]:
+                self.destroy_timer(self._startup)
+                name, have, want = missing[0]
+                self._end(topics.RUN_FAILED + f": {name} has {have} of {want} readers after "
+                          f"{self.knobs['startup_timeout_s']:g} s")
+            return
+        self.destroy_timer(self._startup)
+        self._started_s = self.wall_now_s()
+        self._publish(topics.RUN_STATUS, convert.run_status_msg(0, topics.RUN_RUNNING, self._status_values()))
+        self.get_logger().info("readers matched; running")
+        self._running = True
+        self._publish_sample()
+        if self.lockstep:
+            period = min(WATCHDOG_PERIOD_S, self.knobs["command_timeout_s"] / 4)
+            self._watchdog = self.wall_timer(period, self._check_stall)
+        else:
+            self._ticker = self.wall_timer(self.dt_s / self.knobs["real_time_factor"], self._tick)
+
+    # ------------------------------------------------------------------ stepping
+    def _t_ns(self, k: int) -> int:
+        return convert.seconds_to_ns(k * self.dt_s)
+
+    def _publish(self, topic: str, msg: Any) -> None:
+        self.pubs[topic].publish(msg)
+        self.published[topic] = self.published.get(topic, 0) + 1
+
+    def _publish_sample(self) -> None:
+        """state(t_k) first (the loop waits on it), then /clock and the inspection views."""
+        t_ns, x = self._t_ns(self.k), self.x
+        self._sent_s = self.wall_now_s()
+        self._progress_s = self._sent_s
+        self._publish(topics.STATE, convert.state_msg(x, t_ns))
+        self._publish(topics.CLOCK, convert.clock_msg(t_ns))
+        if self.k % max(self.knobs["inspection_every"], 1) == 0 or self.k == self.steps:
+            self._publish(topics.ODOMETRY, convert.odometry_msg(x, t_ns))
+            self._publish(topics.TEMPERATURE, convert.temperature_msg(x, t_ns))
+            self._publish(topics.BATTERY, convert.battery_msg(x, t_ns, self.plant, self.knobs["battery_voltage_V"]))
+            self._publish(topics.SUN_VECTOR, convert.sun_vector_msg(x, t_ns))
+
+    def _step(self, tau_Nm: np.ndarray) -> None:
+        """Hold tau over [t_k, t_k+1) (the core saturates and integrates), publish the new sample."""
+        u = spacecraft.torque_to_wheel_accel(tau_Nm, self.D)
+        x_next, _ = spacecraft.integrate(self.x, u, self.dt_s, self.plant, self.cfg.substeps)
+        t_ns = self._t_ns(self.k)
+        self.held_tau = tau_Nm
+        self.k += 1
+        self.x = x_next
+        self._publish_sample()
+        self._publish(topics.TORQUE_APPLIED, convert.torque_msg(tau_Nm, t_ns))
+
+    def _on_command(self, msg: Any) -> None:
+        if self._ended or not self._running:
+            return
+        self.counts["commands"] += 1
+        try:
+            t_ns, tau = convert.torque_from_msg(msg)
+        except MessageError as exc:
+            self.faults.fault("rejected", f"{self.command_topic}: {exc}; dropped")
+            return
+        self.faults.clear("rejected")
+        expected = self._t_ns(self.k)
+        if t_ns != expected or (self.pending is not None and self.pending[0] == t_ns):
+            if t_ns == self.last_command_ns or t_ns == expected:  # (== expected here: already pending)
+                kind = "duplicate"
+            else:
+                kind = "late" if t_ns < expected else "future"
+            self.faults.fault(kind, f"{self.command_topic} stamped {t_ns / convert.NS_PER_S:g} s at step "
+                              f"t = {expected / convert.NS_PER_S:g} s; dropped")
+            return
+        self.faults.clear("duplicate", "late", "future")
+        u = np.abs(spacecraft.torque_to_wheel_accel(tau, self.D))
+        where = f"{self.command_topic} at t = {t_ns / convert.NS_PER_S:g} s (|u| = {np.round(u, 3).tolist()} rad/s^2)"
+        for kind, limit, what in (("outside_u", self.u_admissible, "is outside U; applied"),
+                                  ("saturated", self.u_actuator, "is beyond the actuator limit; saturated")):
+            if np.any(u > limit * (1 + LIMIT_RTOL)):
+                self.faults.fault(kind, f"{where} {what}")
+            else:
+                self.faults.clear(kind)
+        if not self.lockstep:
+            self.pending = (t_ns, tau)
+            return
+        self.last_command_ns = t_ns
+        self.latency_s.append(self.wall_now_s() - self._sent_s)
+        self._in_time()
+        if self.k == self.steps:  # the chain's answer to the final state: counts are now known
+            self._end(topics.RUN_DONE)
+        else:
+            self._step(tau)
+
+    def _in_time(self) -> None:
+        self.misses_in_a_row = 0
+        self.faults.clear("deadline_misses")
+
+    def _fallback(self, why: str) -> np.ndarray:
+        """A deadline miss: count it and return the torque `deadline_fallback` applies."""
+        self.misses_in_a_row += 1
+        hold = self.knobs["deadline_fallback"] == "hold" and self.misses_in_a_row <= self.knobs["hold_max_steps"]
+        self.counts["fallback_hold" if hold else "fallback_zero"] += 1
+        self.faults.fault("deadline_misses", f"no {self.command_topic} for t = {self.k * self.dt_s:g} s {why}; "
+                          f"applying {'the last torque' if hold else 'zero torque'} "
+                          f"({self.knobs['deadline_fallback']} fallback)")
+        return self.held_tau if hold else np.zeros(3)
+
+    def _tick(self) -> None:
+        if self._ended:
+            return
+        expected = self._t_ns(self.k)
+        if self.pending is not None and self.pending[0] == expected:
+            tau = self.pending[1]
+            self.last_command_ns = expected
+            self.latency_s.append(0.0)
+            self._in_time()
+        else:
+            tau = self._fallback("by the next tick")
+        self.pending = None
+        self._step(tau)
+        if self.k == self.steps:
+            self.destroy_timer(self._ticker)
+            self._end(topics.RUN_DONE)
+
+    def _check_stall(self) -> None:
+        if self._ended:
+            return
+        waited = self.wall_now_s() - self._progress_s
+        if self.counts["commands"] == 0:  # the chain has not answered yet: it may still be starting
+            if waited > self.knobs["startup_timeout_s"]:
+                self._end(topics.RUN_FAILED + f": no {self.command_topic} for t = {self.k * self.dt_s:g} s "
+                          f"within {self.knobs['startup_timeout_s']:g} s (startup_timeout_s)")
+            return
+        timeout = self.knobs["command_timeout_s"]
+        if waited <= timeout:
+            return
+        tau = self._fallback(f"within {timeout:g} s")
+        if self.k == self.steps:  # no answer to the final state: nothing left to apply
+            self._end(topics.RUN_DONE)
+        else:
+            self._step(tau)
+
+    def on_fault_change(self, kind: str, active: bool) -> None:
+        if self._running and not self._ended and kind not in QUIET_KINDS:
+            self._publish(topics.RUN_STATUS, convert.run_status_msg(self._t_ns(self.k), topics.RUN_RUNNING,
+                                                                    self._status_values()))
+
+    def on_stop(self) -> None:
+        """SIGINT/SIGTERM: end the run as `interrupted` (final run_status with this node's counts), then exit."""
+        if self._ended:  # the run had ended already (exit_when_done false, or a stop while flushing)
+            self.finish()
+            return
+        self._end(f"{topics.RUN_INTERRUPTED}: {self.stopping}")
+
+    # ------------------------------------------------------------------ end
+    def _status_values(self) -> dict[str, Any]:
+        values: dict[str, Any] = {
+            "scenario": self.scenario.name, "rta": self.rta, "stepping": self.knobs["stepping"],
+            "steps": self.steps, "step": self.k, "dt_s": self.dt_s, **self.counts,
+        }  # fmt: skip
+        if self._started_s:
+            values["wall_time_s"] = self.wall_now_s() - self._started_s
+        if self.lockstep and self.latency_s:
+            lat = np.asarray(self.latency_s)
+            values.update(latency_median_s=float(np.median(lat)), latency_p99_s=float(np.percentile(lat, 99)),
+                          latency_max_s=float(lat.max()))
+        return values
+
+    def _end(self, state: str) -> None:
+        """Publish the final run_status with the message counts, wait for acks, finish."""
+        if self._ended:
+            return
+        self._ended = True
+        values = self._status_values()
+        counts = dict(self.published)
+        counts[topics.RUN_STATUS] = counts.get(topics.RUN_STATUS, 0) + 1
+        faults = sum(self.counts[k] for k in ("rejected", "late", "duplicate", "future", "deadline_misses"))
+        if self.lockstep and state == topics.RUN_DONE and not faults:
+            # the filter answers every torque_des with one torque_cmd (and, with RTA, one filter_status);
+            # after a fault these counts are not known here, and the recorder waits for quiet instead
+            counts[topics.TORQUE_CMD] = counts[topics.TORQUE_DES] = self.counts["commands"]
+            if self.rta:
+                counts[topics.FILTER_STATUS] = self.counts["commands"]
+        for topic, n in counts.items():
+            values[topics.EXPECTED_PREFIX + self.resolve_topic_name(topic)] = n
+        self._publish(topics.RUN_STATUS, convert.run_status_msg(self._t_ns(self.k), state, values))
+        interrupted = state.startswith(topics.RUN_INTERRUPTED)
+        if self.knobs["exit_when_done"] or interrupted:
+            self.flush(self.knobs["stop_timeout_s"])
+        if state.startswith(topics.RUN_FAILED):
+            self.fail(f"run failed at step {self.k}: {state[len(topics.RUN_FAILED) + 2:]}")
+            return
+        self.get_logger().info(f"run {state}: {self.k} steps; counters: {self.faults.summary()}")
+        if self.knobs["exit_when_done"] or interrupted:
+            self.finish()
+
+    def published_counts(self) -> dict[str, int]:
+        return dict(self.published)
+
+    def own_publishers(self) -> list[Any]:
+        return list(self.pubs.values())
+
+
+def main(args: Sequence[str] | None = None) -> None:
+    """Console script `plant_node` (`ros2 run rta_attitude plant_node --ros-args ...`)."""
+    sys.exit(run(PlantNode, args, topics.NODE_NAMES[topics.PLANT]))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,213 @@
+"""bag_recorder_node: every topic of the run (topics.recorded) into one MCAP file that follows
+rosbag2's conventions (rta_attitude.recording.bag.BagWriter).
+
+Messages are recorded as rosbag2 does, as the serialized CDR bytes received (raw subscriptions, no
+decode and re-encode), with log and publish time = the message's own stamp (sim time), read from the
+leading header stamp of the bytes. Channels carry the writers' offered QoS and the type hash.
+
+At close the recorder adds an MCAP metadata record `rta_attitude` with the run's facts (scenario,
+rta, preset, config, duration_s, dt_s, namespace, and the final run_status values such as stepping
+and deadline misses), which `rta-attitude analyze` reads.
+
+End: after the plant's final run_status (`done`, `failed: ...` or `interrupted: ...`) the recorder
+waits until every topic with a known final count (`expected:<topic>` in run_status) has it, and,
+for topics without one (real-time runs, runs with faults), until no message came for
+`drain_quiet_s`; a topic whose publisher has gone (a killed node) is not waited for beyond that
+quiet time; at most `drain_timeout_s` in all. Then it closes the bag and, with `exit_when_done`,
+exits.
+
+SIGINT/SIGTERM: the recorder does not close at once, which would lose the messages published just
+before the signal and still in flight. It drains the same way (the plant, stopped too, publishes an
+`interrupted` run_status with its counts), for at most `stop_timeout_s`, then closes the bag
+(footer, summary and the metadata record: the file is complete) and exits 0.
+
+SIGKILL (nothing can run): the file has no footer. The writer flushes each MCAP chunk to the OS as
+it completes (`bag_chunk_kb`), so the bag is readable up to its last complete chunk;
+`rta_attitude.recording.bag.read_bag` reports it `truncated` and `rta-attitude analyze` says where the data
+ends.
+"""
+
+from __future__ import annotations
+
+import sys
+from collections.abc import Sequence
+from functools import partial
+from typing import Any
+
+from rclpy.serialization import deserialize_message
+from rclpy.timer import Timer
+
+from rta_attitude.errors import BagError, ConfigError, MessageError
+from rta_attitude.recording.bag import BagWriter, Qos
+from rta_attitude.ros import convert, topics
+from rta_attitude.ros.spin import RtaNode, run
+
+DRAIN_POLL_S = 0.02
+METADATA_NAME = "rta_attitude"
+
+
+def add_metadata(bag: BagWriter, name: str, data: dict[str, str]) -> None:
+    """Add an MCAP metadata record (BagWriter.add_metadata when it exists; until then its writer)."""
+    add = getattr(bag, "add_metadata", None)
+    if add is not None:
+        add(name, data)
+    else:  # rta_attitude.recording.bag has no public metadata API yet (see docs/ros_interface.md)
+        bag._writer.add_metadata(name, data)
+
+
+def bag_qos(spec: topics.QosSpec, lease_s: float = 0.0) -> Qos:
+    """The offered QoS profile recorded for `ros2 bag play` (rosbag2 metadata names), with the run's
+    liveliness lease where the topic has one (a replay then matches the nodes' readers)."""
+    lease = (0, 0)
+    if spec.liveliness and lease_s > 0:
+        ns = round(lease_s * 1e9)
+        lease = (ns // 1_000_000_000, ns % 1_000_000_000)
+    return Qos(history=spec.history, depth=spec.depth, reliability=spec.reliability, durability=spec.durability,
+               liveliness="automatic" if lease != (0, 0) else "system_default", liveliness_lease_duration=lease)
+
+
+class RecorderNode(RtaNode):
+    """The bag recorder; see the module docstring."""
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__(topics.RECORDER, **kwargs)
+        path = self.knobs["bag_path"]
+        if not path:
+            self.destroy_node()
+            raise ConfigError("parameter bag_path is required (the .mcap file to write)")
+        self.bag: BagWriter | None = None
+        self.received: dict[str, int] = {}
+        """Messages written per topic (absolute name)."""
+        self.expected: dict[str, int] | None = None
+        self.run_values: dict[str, Any] = {}
+        self._last_s = self.wall_now_s()
+        self._done_s = 0.0
+        self._drain: Timer | None = None
+        self._terminal = False
+        self.status_topic = self.resolve_topic_name(topics.RUN_STATUS)
+        self._status_type = topics.msg_class(topics.TOPICS[topics.RUN_STATUS].type_name)
+        specs = {self.resolve_topic_name(spec.name): spec for spec in topics.recorded(self.rta)}
+        for name, spec in specs.items():
+            self.received[name] = 0
+            self.subscribe(spec.name, partial(self._on_message, name), raw=True,
+                           peer=topics.PLANT if spec.name == topics.STATE else "")
+        # the file is created last, so a node that fails to start leaves no half-written bag
+        bag = BagWriter(path, overwrite=self.knobs["bag_overwrite"], chunk_size=self.knobs["bag_chunk_kb"] * 1024)
+        for name, spec in specs.items():
+            bag.add_topic(name, spec.type_name, bag_qos(spec.qos, self.knobs["liveliness_lease_s"]))
+        self.bag = bag
+        self.get_logger().info(f"recording {len(self.received)} topics to {path}")
+
+    def _on_message(self, topic: str, data: bytes) -> None:
+        if self.bag is None:
+            return
+        try:
+            t_ns = convert.cdr_stamp_ns(data)
+        except MessageError as exc:
+            self.faults.fault("not_recorded", f"{topic}: {exc}")
+            return
+        self.faults.clear("not_recorded")
+        try:
+            self.bag.write(topic, data, t_ns)
+        except BagError as exc:  # a full disk or a vanished directory: nothing more can be recorded
+            self.bag = None
+            self.fail(str(exc))
+            return
+        self.received[topic] += 1
+        self._last_s = self.wall_now_s()
+        if topic == self.status_topic:
+            self._on_status(data)
+
+    def _on_status(self, data: bytes) -> None:
+        try:
+            state, values = convert.run_status_from_msg(deserialize_message(data, self._status_type))
+        except MessageError as exc:
+            self.get_logger().warning(f"run_status ignored ({exc})")
+            return
+        self.run_values = {"run_state": state, **{k: v for k, v in values.items()
+                                                  if not k.startswith(topics.EXPECTED_PREFIX)}}
+        if state == topics.RUN_RUNNING:
+            return
+        self._terminal = True
+        self.expected = {k[len(topics.EXPECTED_PREFIX):]: int(v) for k, v in values.items()
+                         if k.startswith(topics.EXPECTED_PREFIX)}
+        self._start_drain()
+
+    def _start_drain(self) -> None:
+        if self._drain is None:
+            self._done_s = self.wall_now_s()
+            self._drain = self.wall_timer(DRAIN_POLL_S, self._check_drained)
+
+    def on_stop(self) -> None:
+        """SIGINT/SIGTERM: drain (at most stop_timeout_s), close the bag, finish."""
+        if self.bag is None:  # closed already (exit_when_done false)
+            self.finish()
+            return
+        self._start_drain()
+
+    def _check_drained(self) -> None:
+        if self.bag is None:
+            return
+        now = self.wall_now_s()
+        expected = self.expected or {}
+        short = {t: (self.received.get(t, 0), n) for t, n in expected.items() if self.received.get(t, 0) < n}
+        # a short topic whose publisher has left cannot deliver more (a killed node): no waiting for it
+        waiting = [t for t in short if self.count_publishers(t) > 0]
+        unknown = any(t not in expected for t in self.received)
+        settled = now - self._last_s >= self.knobs["drain_quiet_s"]
+        if self.stopping and not self._terminal:
+            # stopped before the plant's final run_status: wait for it while the plant is still there (a
+            # killed plant stays matched until Fast DDS's participant lease expires: its liveliness tells)
+            if self.count_publishers(self.status_topic) > 0 and topics.PLANT not in self.lost:
+                waiting.append(self.status_topic)
+        limit = self.knobs["stop_timeout_s"] if self.stopping else self.knobs["drain_timeout_s"]
+        timed_out = now - self._done_s > limit
+        if not timed_out and (waiting or not (settled or (not short and not unknown))):
+            return
+        if short:
+            self.get_logger().warning("closing with missing messages: " + ", ".join(
+                f"{t} {have}/{want}" for t, (have, want) in sorted(short.items())))
+        self.close()
+        if self.knobs["exit_when_done"] or self.stopping:
+            self.finish()
+
+    def metadata(self) -> dict[str, str]:
+        """The `rta_attitude` metadata record: run facts as strings."""
+        facts: dict[str, Any] = {
+            "scenario": self.scenario.name, "rta": self.rta, "preset": self.cfg.filter.preset,
+            "config": self.cfg.source, "duration_s": float(self.scenario.duration_s),
+            "dt_s": float(self.cfg.filter.sample_time_s), "namespace": self.get_namespace(),
+        }  # fmt: skip
+        facts.update({k: v for k, v in self.run_values.items() if k not in facts})
+        return {k: (str(v).lower() if isinstance(v, bool) else repr(v) if isinstance(v, float) else str(v))
+                for k, v in facts.items()}
+
+    def close(self) -> None:
+        """Finalize the bag (idempotent): metadata record, summary, footer."""
+        if self.bag is None:
+            return
+        bag, self.bag = self.bag, None
+        try:
+            try:
+                add_metadata(bag, METADATA_NAME, self.metadata())
+            finally:
+                bag.close()
+        except BagError as exc:
+            self.get_logger().error(str(exc))
+            self.exit_code = 1
+            return
+        total = sum(self.received.values())
+        self.get_logger().info(f"bag closed: {bag.path} ({total} messages, {self.counts.get('not_recorded', 0)} "
+                               "not recorded)")
+
+    def published_counts(self) -> dict[str, int]:
+        return {}
+
+
+def main(args: Sequence[str] | None = None) -> None:
+    """Console script `bag_recorder_node` (`ros2 run rta_attitude bag_recorder_node --ros-args ...`)."""
+    sys.exit(run(RecorderNode, args, topics.NODE_NAMES[topics.RECORDER]))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,435 @@
+"""What every node shares: the base node class, the startup gate and `main`.
+
+`run(factory, args)` is each console script's body: check the `--params-file` files, rclpy.init
+(without rclpy's own signal handlers), build the node, spin until it finishes or a signal arrives,
+then `close()`, destroy_node and try_shutdown. A configuration or runtime error of ours is one log
+line and exit code 1, no traceback (a missing or unreadable `--params-file` too, which rcl would
+otherwise report with a traceback from rclpy.init).
+
+Signals: SIGINT and SIGTERM do not tear the context down at once (rclpy's default), which would lose
+what the node published but its readers have not acknowledged yet. The first one asks the node to
+stop (`RtaNode.request_stop`): the plant ends the run as `interrupted` and publishes its final
+run_status, the recorder takes the last messages in flight and closes the bag, controller and filter
+wait (at most `stop_timeout_s`) until their readers acknowledged everything they published; then the
+node finishes and exits 0. A second signal, or `stop_timeout_s` + STOP_MARGIN_S, stops at once.
+
+Startup gate: a writer whose readers have not matched yet would lose its first messages (volatile
+durability). `PublishGate` holds messages until the publisher has matched the run's expected
+readers (topics.expected_readers), polling on a steady timer so the executor keeps running (all
+nodes can share one executor); past `startup_timeout_s` the node fails with a line naming the
+topic and the counts.
+"""
+
+from __future__ import annotations
+
+import signal
+import sys
+from collections.abc import Callable, Sequence
+from functools import partial
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import rclpy
+from rclpy.clock import Clock, ClockType, JumpThreshold, TimeJump
+from rclpy.context import Context
+from rclpy.duration import Duration
+from rclpy.event_handler import (
+    QoSLivelinessChangedInfo,
+    QoSRequestedIncompatibleQoSInfo,
+    SubscriptionEventCallbacks,
+)
+from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.publisher import Publisher
+from rclpy.signals import SignalHandlerOptions
+from rclpy.task import Future
+from rclpy.timer import Timer
+
+from rta_attitude.errors import ConfigError, MessageError, RtaError
+from rta_attitude.ros import convert, parameters, topics
+from rta_attitude.ros.faults import FaultLog, StampOrder
+
+GATE_POLL_S = 0.005
+"""How often a closed gate checks its publisher's matches [s]."""
+SPIN_TIMEOUT_S = 0.1
+"""spin_once timeout of main's loop: a signal is noticed within this time [s] (the EventsExecutor's
+own spin() does not return on SIGINT in rclpy 7.1)."""
+STOP_MARGIN_S = 2.0
+"""After a stop request, main gives the node stop_timeout_s + this before it stops spinning anyway [s]."""
+
+
+class RtaNode(Node):
+    """Base of the four nodes: parameters from the core YAML, a `finished` future, failure path.
+
+    Args:
+        role: topics.PLANT, CONTROLLER, FILTER or RECORDER.
+        **kwargs: passed to rclpy Node (e.g. parameter_overrides, cli_args, context).
+
+    Raises:
+        ConfigError: invalid parameters (the node is destroyed first).
+    """
+
+    def __init__(self, role: str, **kwargs: Any) -> None:
+        kwargs.setdefault("namespace", topics.DEFAULT_NAMESPACE)
+        super().__init__(topics.NODE_NAMES[role], automatically_declare_parameters_from_overrides=True, **kwargs)
+        self.role = role
+        self.exit_code = 0
+        self.finished = Future()
+        self.steady = Clock(clock_type=ClockType.STEADY_TIME)
+        try:
+            self.cfg, self.knobs = parameters.load(self, topics.knobs_for(role))
+            self.scenario = self.cfg.scenario(self.knobs["scenario"])
+        except RtaError:
+            self.destroy_node()
+            raise
+        self.cfg = self.cfg.for_scenario(self.scenario)
+        self.rta: bool = self.knobs["rta"]
+        self.record: bool = self.knobs["record"]
+        self.stopping = ""
+        """The signal name once a stop was requested ('' before)."""
+        self.counts: dict[str, int] = {}
+        """Fault counters by kind (FaultLog increments them; nodes publish or log them)."""
+        self.faults = FaultLog(self.get_logger(), self.counts, self.on_fault_change)
+        self.gates: dict[str, PublishGate] = {}
+        self.lost: set[str] = set()
+        """Peers (roles) whose writer lost its liveliness and has not shown a sign of life since."""
+        self.counts.setdefault("clock_jumps", 0)
+        # a backward jump of /clock (a replay that starts over) resets the stamp screens
+        self._jump_handle = self.get_clock().create_jump_callback(
+            JumpThreshold(min_forward=None, min_backward=Duration(nanoseconds=-1), on_clock_change=False),
+            post_callback=self._on_clock_jump)
+
+    def qos(self, topic: str) -> Any:
+        """The QoS profile of one of the run's topics, with this run's liveliness lease."""
+        return topics.qos_profile(topics.TOPICS[topic].qos, self.knobs["liveliness_lease_s"])
+
+    def subscribe(self, topic: str, callback: Callable[[Any], None], peer: str = "", raw: bool = False) -> Any:
+        """Subscribe to one of the run's topics; with `peer` (the writer's role), report that peer lost once
+        when its writer loses liveliness (`on_peer_lost`), and back when it shows a sign of life."""
+        spec = topics.TOPICS[topic]
+        events = SubscriptionEventCallbacks(
+            liveliness=partial(self._on_liveliness, peer) if peer else None,
+            incompatible_qos=partial(self._on_incompatible, spec.name))
+        return self.create_subscription(topics.msg_class(spec.type_name), spec.name, callback, self.qos(topic),
+                                        raw=raw, event_callbacks=events)
+
+    def _on_incompatible(self, topic: str, info: QoSRequestedIncompatibleQoSInfo) -> None:
+        policy = getattr(info.last_policy_kind, "name", str(info.last_policy_kind))
+        hint = (f" (this node requests a liveliness lease of {self.knobs['liveliness_lease_s']:g} s: give the "
+                "writer an automatic lease at most that long, or set liveliness_lease_s:=0 here)"
+                if "LIVELINESS" in policy else "")
+        self.faults.fault("incompatible_qos", f"a writer of {self.resolve_topic_name(topic)} offers an incompatible "
+                          f"QoS ({policy}) and is not matched{hint}")
+
+    def _on_liveliness(self, peer: str, info: QoSLivelinessChangedInfo) -> None:
+        if info.not_alive_count_change > 0 and info.alive_count == 0:
+            if peer not in self.lost:
+                self.lost.add(peer)
+                self.faults.fault(f"{peer}_lost", f"the {peer} shows no sign of life for "
+                                  f"{self.knobs['liveliness_lease_s']:g} s (killed or hung)")
+                self.on_peer_lost(peer)
+        elif info.alive_count_change > 0 and peer in self.lost:
+            self.lost.discard(peer)
+            self.faults.clear(f"{peer}_lost")
+
+    def on_peer_lost(self, peer: str) -> None:
+        """A peer's writer lost its liveliness (reported once by then). Nodes override it."""
+
+    def _on_clock_jump(self, jump: TimeJump) -> None:
+        if jump.delta.nanoseconds >= 0:
+            return
+        self.counts["clock_jumps"] += 1
+        self.get_logger().info(f"/clock jumped back by {-jump.delta.nanoseconds / 1e9:g} s (a replay started "
+                               "over?): stamp screens reset")
+        self.on_clock_jump()
+
+    def on_clock_jump(self) -> None:
+        """/clock jumped backwards: reset stamp screens and pending work. Nodes override it."""
+
+    def wall_timer(self, period_s: float, callback: Callable[[], None]) -> Timer:
+        """A timer on the steady clock (independent of use_sim_time)."""
+        return self.create_timer(period_s, callback, clock=self.steady)
+
+    def wall_now_s(self) -> float:
+        """Steady time [s]."""
+        return self.steady.now().nanoseconds * 1e-9
+
+    def gate(self, topic: str, publisher: Publisher) -> PublishGate:
+        """A PublishGate for one of this node's publishers, expecting the run's readers of `topic`."""
+        expected = topics.expected_readers(topic, self.rta, self.record)
+        self.gates[topic] = PublishGate(self, publisher, expected, self.knobs["startup_timeout_s"])
+        return self.gates[topic]
+
+    def on_fault_change(self, kind: str, active: bool) -> None:
+        """A fault episode of `kind` started (active) or ended; the plant republishes run_status."""
+
+    def message_stamp(self, msg: Any, kind: str) -> int | None:
+        """The header stamp of msg in ns, or None (fault `kind` raised, message dropped) if unusable."""
+        try:
+            return convert.stamp_ns(msg.header.stamp)
+        except MessageError as exc:
+            self.faults.fault(kind, f"{exc}; dropped")
+            return None
+
+    def unit_state(self, msg: Any, t_ns: int) -> np.ndarray:
+        """The state (19,) of a state message, its quaternion renormalised within
+        `quaternion_tolerance` (fault `state_renormalised` raised or cleared).
+
+        Raises:
+            MessageError: the message holds no usable state.
+        """
+        _, x = convert.state_from_msg(msg)
+        x, renormalised = convert.unit_attitude(x, self.knobs["quaternion_tolerance"])
+        if renormalised:
+            self.faults.fault("state_renormalised", f"state quaternion of t = {t_ns / convert.NS_PER_S:g} s "
+                              "renormalised")
+        else:
+            self.faults.clear("state_renormalised")
+        return x
+
+    def admit_state_stamp(self, t_ns: int, order: StampOrder) -> bool:
+        """Screen a state's stamp: duplicates, out-of-order stamps and (on /clock) states older than
+        `max_state_age_s` are dropped and counted as one fault episode each; an admitted stamp is
+        taken into `order`. Returns True if the state may be used."""
+        kind = order.check(t_ns)
+        if kind:
+            self.faults.fault(f"state_{kind}", f"stamp {t_ns / convert.NS_PER_S:g} s, newest "
+                              f"{(order.newest_ns or 0) / convert.NS_PER_S:g} s; dropped")
+            return False
+        max_age = self.knobs["max_state_age_s"]
+        if max_age > 0 and self.uses_sim_time():
+            age = (self.get_clock().now().nanoseconds - t_ns) / convert.NS_PER_S
+            if age > max_age:
+                self.faults.fault("state_stale", f"state of t = {t_ns / convert.NS_PER_S:g} s is {age:g} s old "
+                                  f"(max_state_age_s {max_age:g}); dropped")
+                return False
+        order.take(t_ns)
+        self.faults.clear("state_duplicate", "state_out_of_order", "state_stale")
+        return True
+
+    def uses_sim_time(self) -> bool:
+        """True when the node's clock follows /clock (use_sim_time) and /clock has been heard."""
+        clock = self.get_clock()
+        return bool(self.get_parameter("use_sim_time").value) and bool(getattr(clock, "ros_time_is_active", False))
+
+    def flush(self, timeout_s: float) -> bool:
+        """Wait until every reader acknowledged what this node's publishers sent (at most timeout_s in
+        total). Returns True if all did."""
+        deadline = self.wall_now_s() + timeout_s
+        ok = True
+        for pub in self.own_publishers():
+            left = max(deadline - self.wall_now_s(), 0.0)
+            ok = pub.wait_for_all_acked(Duration(nanoseconds=int(left * 1e9))) and ok
+        return ok
+
+    def own_publishers(self) -> list[Publisher]:
+        """The run's publishers of this node (not rclpy's /rosout and /parameter_events)."""
+        return [gate.publisher for gate in self.gates.values()]
+
+    def request_stop(self, reason: str) -> None:
+        """SIGINT/SIGTERM: stop cleanly (idempotent): log, then `on_stop`."""
+        if self.stopping:
+            return
+        self.stopping = reason
+        self.get_logger().info(f"{reason}: stopping")
+        self.on_stop()
+
+    def on_stop(self) -> None:
+        """What a stop request does (after `stopping` is set). Default: wait (at most stop_timeout_s) until
+        the readers acknowledged what this node published, then finish. Nodes override it."""
+        self.flush(self.knobs["stop_timeout_s"])
+        self.finish()
+
+    def published_counts(self) -> dict[str, int]:
+        """Messages published per topic (relative name) through this node's gates."""
+        return {topic: gate.sent for topic, gate in self.gates.items()}
+
+    def fail(self, reason: str) -> None:
+        """Log one error line, set exit code 1 and finish."""
+        self.get_logger().error(reason)
+        self.exit_code = 1
+        self.finish()
+
+    def finish(self) -> None:
+        """Mark the node done (main stops spinning); idempotent."""
+        if not self.finished.done():
+            self.finished.set_result(self.exit_code)
+
+    def close(self) -> None:
+        """Release resources before destroy_node (the recorder closes its bag here). Logs one line with
+        what the node published and its fault counters."""
+        sent = ", ".join(f"{t} {n}" for t, n in sorted(self.published_counts().items()))
+        self.get_logger().info(f"published: {sent or 'nothing'}; counters: {self.faults.summary()}")
+
+
+class PublishGate:
+    """Publish through this: messages wait until the publisher matched `expected` subscriptions.
+
+    Once open the gate stays open (later publishes go straight through).
+    """
+
+    def __init__(self, node: RtaNode, publisher: Publisher, expected: int, timeout_s: float) -> None:
+        self.node, self.publisher, self.expected = node, publisher, expected
+        self.timeout_s = timeout_s
+        self.is_open = expected <= 0
+        self._queue: list[Any] = []
+        self._timer: Timer | None = None
+        self._since = 0.0
+        self.sent = 0
+        """Messages handed to the publisher (not counting those still held)."""
+
+    def matched(self) -> bool:
+        """True (and open from now on) once the expected readers are matched."""
+        if not self.is_open and self.publisher.get_subscription_count() >= self.expected:
+            self.is_open = True
+        return self.is_open
+
+    def publish(self, msg: Any) -> None:
+        if self.is_open or self.matched():
+            self.publisher.publish(msg)
+            self.sent += 1
+            return
+        self._queue.append(msg)
+        if self._timer is None:
+            self._since = self.node.wall_now_s()
+            self._timer = self.node.wall_timer(GATE_POLL_S, self._poll)
+
+    def _poll(self) -> None:
+        if self.matched():
+            for msg in self._queue:
+                self.publisher.publish(msg)
+            self.sent += len(self._queue)
+            self._queue.clear()
+        elif self.node.wall_now_s() - self._since > self.timeout_s:
+            have = self.publisher.get_subscription_count()
+            self.node.fail(f"{self.publisher.topic_name}: {have} of {self.expected} expected readers after "
+                           f"{self.timeout_s:g} s (is every node of the run up? set record:=false without a recorder)")
+        else:
+            return
+        if self._timer is not None:
+            self.node.destroy_timer(self._timer)
+            self._timer = None
+
+
+def make_executor(kind: str, context: Context | None = None) -> Executor:
+    """'events': rclpy's C++ EventsExecutor (rclpy.experimental; several times less overhead per
+    callback than the Python executors); 'single': SingleThreadedExecutor."""
+    if kind == "events":
+        from rclpy.experimental import EventsExecutor
+
+        return EventsExecutor(context=context)
+    return SingleThreadedExecutor(context=context)
+
+
+def check_params_files(args: Sequence[str]) -> None:
+    """Check every `--params-file FILE` of a ROS command line before rcl reads it: the file must exist
+    and be YAML. (rcl would report either with a traceback from rclpy.init.)
+
+    Raises:
+        ConfigError: one line naming the file and what is wrong.
+    """
+    import yaml
+
+    args = list(args)
+    for i, arg in enumerate(args):
+        if arg != "--params-file":
+            continue
+        if i + 1 >= len(args):
+            raise ConfigError("--params-file needs a file name")
+        path = Path(args[i + 1])
+        if not path.is_file():
+            raise ConfigError(f"--params-file {str(path)!r} does not exist (a YAML parameter file is required)")
+        try:
+            yaml.safe_load(path.read_text())
+        except yaml.YAMLError as exc:
+            line = getattr(getattr(exc, "problem_mark", None), "line", None)
+            where = f" at line {line + 1}" if line is not None else ""
+            raise ConfigError(f"--params-file {str(path)!r} is not valid YAML{where}") from None
+        except OSError as exc:
+            raise ConfigError(f"--params-file {str(path)!r} cannot be read ({exc.strerror})") from None
+
+
+def _error(name: str, text: str) -> None:
+    """One error line on stderr in rclpy's format, for errors before or without a node."""
+    print(f"[ERROR] [{name}]: {text}", file=sys.stderr, flush=True)
+
+
+def run(factory: Callable[[], RtaNode], args: Sequence[str] | None = None, name: str = "rta_attitude") -> int:
+    """Check the command line, init rclpy, build the node, spin until it finishes or is stopped by
+    SIGINT/SIGTERM (see the module docstring), shut down cleanly.
+
+    Args:
+        factory: builds the node (after rclpy.init).
+        args: command line (default sys.argv), with `--ros-args ...`.
+        name: logger name for errors raised before the node exists.
+
+    Returns:
+        Exit code: 0, or 1 after a configuration or runtime error (logged as one line).
+    """
+    from rclpy._rclpy_pybind11 import RCLError
+
+    argv = list(args) if args is not None else list(sys.argv)
+    received: list[int] = []
+    previous = {s: signal.signal(s, lambda signum, frame: received.append(signum))
+                for s in (signal.SIGINT, signal.SIGTERM)}
+    node: RtaNode | None = None
+    executor: Executor | None = None
+    code = 0
+    try:
+        check_params_files(argv)
+        rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
+    except ConfigError as exc:
+        _error(name, str(exc))
+        _restore(previous)
+        return 1
+    except RCLError as exc:
+        _error(name, f"ROS arguments rejected: {str(exc).splitlines()[0]}")
+        _restore(previous)
+        return 1
+    try:
+        node = factory()
+        executor = make_executor(node.knobs["executor"])
+        executor.add_node(node)
+        hard_stop = float("inf")
+        while rclpy.ok() and not node.finished.done():
+            if received and not node.stopping:
+                node.request_stop(signal.Signals(received[0]).name)
+                hard_stop = node.wall_now_s() + node.knobs["stop_timeout_s"] + STOP_MARGIN_S
+                continue
+            if len(received) > 1 or node.wall_now_s() > hard_stop:
+                node.get_logger().warning("stopped before the node finished (second signal or stop timeout)")
+                break
+            executor.spin_once(timeout_sec=SPIN_TIMEOUT_S)
+        code = node.exit_code
+    except (KeyboardInterrupt, ExternalShutdownException):
+        code = node.exit_code if node is not None else 0
+    except RtaError as exc:
+        (node.get_logger() if node is not None else rclpy.logging.get_logger(name)).error(str(exc))
+        code = 1
+    except Exception:
+        if rclpy.ok() and not received:
+            raise
+        code = node.exit_code if node is not None else 0  # a signal while starting: a clean stop
+    finally:
+        if executor is not None:
+            executor.shutdown()
+        if node is not None:
+            try:
+                node.close()
+            except RtaError as exc:
+                node.get_logger().error(str(exc))
+                code = 1
+            node.destroy_node()
+        rclpy.try_shutdown()
+        _restore(previous)
+    return code
+
+
+def _restore(previous: dict[signal.Signals, Any]) -> None:
+    for s, handler in previous.items():
+        signal.signal(s, handler)
+
+
+__all__ = ["GATE_POLL_S", "SPIN_TIMEOUT_S", "STOP_MARGIN_S", "PublishGate", "RtaNode", "check_params_files",
+           "make_executor", "run"]

@@ -1,0 +1,383 @@
+"""The ROS vocabulary in one place: node names, topics, their types and QoS, who publishes and who
+subscribes, diagnostic keys and the node-only parameters ("knobs").
+
+Pure Python: nothing here imports rclpy at module level, so the launcher and bag analysis can use
+the names without starting ROS. `qos_profile` builds the rclpy profile lazily.
+
+QoS policy (see docs/ros_interface.md):
+
+- every topic the closed loop or the bag needs is RELIABLE + KEEP_ALL + VOLATILE: in lockstep a lost
+  message stalls the loop, and the recorder must see every message (KEEP_ALL lets a slow reader push
+  back on the writer instead of losing samples). Writers wait at startup until the expected readers
+  are matched (`expected_readers`), so VOLATILE loses nothing;
+- `run_status` is RELIABLE + TRANSIENT_LOCAL, keep_last 10: late joiners see the run's state;
+- `attitude_command` is an operator input: RELIABLE + VOLATILE keep_last 10 on the reader, which
+  accepts both volatile and transient-local (latched) reliable writers.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+# ----------------------------------------------------------------------------- nodes
+
+DEFAULT_NAMESPACE = "/rta"
+"""Namespace of every node unless remapped (`--ros-args -r __ns:=/other`)."""
+PACKAGE = "rta_attitude"
+PLANT, CONTROLLER, FILTER, RECORDER = "plant", "controller", "filter", "recorder"
+NODE_NAMES: dict[str, str] = {
+    PLANT: "plant", CONTROLLER: "pd_controller", FILTER: "asif_filter", RECORDER: "bag_recorder",
+}  # fmt: skip
+"""ROS node name of each role."""
+EXECUTABLES: dict[str, str] = {
+    PLANT: "plant_node", CONTROLLER: "pd_controller_node", FILTER: "asif_filter_node",
+    RECORDER: "bag_recorder_node",
+}  # fmt: skip
+"""Console scripts (`ros2 run rta_attitude <name>`) of each role."""
+MODULES: dict[str, str] = {
+    PLANT: "rta_attitude.ros.plant_node", CONTROLLER: "rta_attitude.ros.controller_node",
+    FILTER: "rta_attitude.ros.filter_node", RECORDER: "rta_attitude.ros.recorder_node",
+}  # fmt: skip
+"""Python modules of each role (`python -m <module> --ros-args ...`)."""
+
+BODY_FRAME = "body"
+"""frame_id of body-frame vectors (torques) and Odometry.child_frame_id."""
+HILL_FRAME = "hill"
+"""frame_id of Hill-frame quantities (Odometry pose, sun vector)."""
+
+# ----------------------------------------------------------------------------- QoS
+
+
+@dataclass(frozen=True)
+class QosSpec:
+    """A QoS profile as plain data (rclpy-free); depth is ignored for keep_all."""
+
+    reliability: str = "reliable"
+    durability: str = "volatile"
+    history: str = "keep_all"
+    depth: int = 0
+    liveliness: bool = False
+    """Automatic liveliness with the lease of the `liveliness_lease_s` knob (writers and the run's readers
+    alike): a reader learns within the lease that a writer's process died (SIGKILL) or hangs, where
+    without a lease it keeps the writer matched until Fast DDS's participant lease (20 s) expires."""
+
+
+STREAM_QOS = QosSpec()
+"""Lockstep and recorded data: reliable, keep all, volatile."""
+STATE_QOS = QosSpec(liveliness=True)
+"""`state`: as STREAM_QOS, plus automatic liveliness with the run's lease, so that controller, filter and
+recorder learn within the lease that the plant died. Only `state` has it: a reader that requests a lease
+does not match a writer without one, and torque_des must match any primary controller's writer (the
+filter covers a dead controller with `desired_timeout_s`)."""
+STATUS_QOS = QosSpec(durability="transient_local", history="keep_last", depth=10)
+"""run_status: late joiners get the latest statuses."""
+COMMAND_QOS = QosSpec(history="keep_last", depth=10)
+"""attitude_command reader: reliable, volatile (accepts volatile and latched writers)."""
+
+
+def qos_profile(spec: QosSpec, lease_s: float = 0.0) -> Any:
+    """The rclpy QoSProfile of a QosSpec (imports rclpy); `lease_s` > 0 sets automatic liveliness with
+    that lease on specs that have `liveliness` (a reader's requested lease must be >= the writer's, so
+    every node of a run uses the same knob)."""
+    from rclpy.duration import Duration
+    from rclpy.qos import DurabilityPolicy, HistoryPolicy, LivelinessPolicy, QoSProfile, ReliabilityPolicy
+
+    keep_all = spec.history == "keep_all"
+    profile = QoSProfile(
+        history=HistoryPolicy.KEEP_ALL if keep_all else HistoryPolicy.KEEP_LAST,
+        depth=max(spec.depth, 1),
+        reliability=ReliabilityPolicy.RELIABLE if spec.reliability == "reliable" else ReliabilityPolicy.BEST_EFFORT,
+        durability=(DurabilityPolicy.TRANSIENT_LOCAL if spec.durability == "transient_local"
+                    else DurabilityPolicy.VOLATILE),
+    )
+    if spec.liveliness and lease_s > 0:
+        profile.liveliness = LivelinessPolicy.AUTOMATIC
+        profile.liveliness_lease_duration = Duration(nanoseconds=round(lease_s * 1e9))
+    return profile
+
+
+# ----------------------------------------------------------------------------- topics
+
+
+@dataclass(frozen=True)
+class TopicSpec:
+    """One topic of the run.
+
+    Attributes:
+        name: relative name (resolved under the node namespace) or absolute (`/clock`).
+        type_name: `pkg/msg/Type`.
+        qos: writer profile (readers use the same unless noted).
+        publisher: role that publishes it ('' = external, e.g. an operator).
+        readers: roles that subscribe, as (role, only_with_rta, only_without_rta) rules.
+        content: one line for docs and `--help`.
+    """
+
+    name: str
+    type_name: str
+    qos: QosSpec
+    publisher: str
+    readers: tuple[tuple[str, bool, bool], ...]
+    content: str
+
+
+CLOCK = "/clock"
+STATE = "state"
+ATTITUDE_COMMAND = "attitude_command"
+TORQUE_DES = "torque_des"
+TORQUE_CMD = "torque_cmd"
+FILTER_STATUS = "filter_status"
+TORQUE_APPLIED = "torque_applied"
+ODOMETRY = "odometry"
+TEMPERATURE = "temperature"
+BATTERY = "battery"
+SUN_VECTOR = "sun_vector"
+RUN_STATUS = "run_status"
+
+_ALL = ((RECORDER, False, False),)
+TOPICS: dict[str, TopicSpec] = {
+    t.name: t
+    for t in (
+        TopicSpec(CLOCK, "rosgraph_msgs/msg/Clock", STREAM_QOS, PLANT, _ALL,
+                  "simulation time t_k, one per step (nodes run with use_sim_time)"),
+        TopicSpec(STATE, "sensor_msgs/msg/JointState", STATE_QOS, PLANT,
+                  ((CONTROLLER, False, False), (FILTER, True, False), *_ALL),
+                  "the whole state: name = STATE_NAMES, position = values (model units), stamp = t_k"),
+        TopicSpec(ATTITUDE_COMMAND, "geometry_msgs/msg/QuaternionStamped", COMMAND_QOS, "",
+                  ((CONTROLLER, False, False), *_ALL),
+                  "operator override of q_c (Hill -> body, x y z w), in force from its stamp on"),
+        TopicSpec(TORQUE_DES, "geometry_msgs/msg/Vector3Stamped", STREAM_QOS, CONTROLLER,
+                  ((FILTER, False, False), *_ALL),
+                  "desired body torque D u_des [N m], frame body, stamp = the state it answers"),
+        TopicSpec(TORQUE_CMD, "geometry_msgs/msg/Vector3Stamped", STREAM_QOS, FILTER,
+                  ((PLANT, False, False), *_ALL),
+                  "filtered body torque D u_act [N m] (without RTA: torque_des passed through), same stamp"),
+        TopicSpec(FILTER_STATUS, "diagnostic_msgs/msg/DiagnosticArray", STREAM_QOS, FILTER, _ALL,
+                  "per constraint h, Psi, BC, slack, intervening; QP status, fallback, solve time"),
+        TopicSpec(TORQUE_APPLIED, "geometry_msgs/msg/Vector3Stamped", STREAM_QOS, PLANT, _ALL,
+                  "torque the plant held over [t_k, t_k + dt) before saturation (ZOH, deadline fallback)"),
+        TopicSpec(ODOMETRY, "nav_msgs/msg/Odometry", STREAM_QOS, PLANT, _ALL,
+                  "inspection: attitude (body in Hill), body rates, CW position/velocity"),
+        TopicSpec(TEMPERATURE, "sensor_msgs/msg/Temperature", STREAM_QOS, PLANT, _ALL,
+                  "inspection: -j_B face temperature [degC]"),
+        TopicSpec(BATTERY, "sensor_msgs/msg/BatteryState", STREAM_QOS, PLANT, _ALL,
+                  "inspection: battery energy as charge [Ah] at the nominal voltage"),
+        TopicSpec(SUN_VECTOR, "geometry_msgs/msg/Vector3Stamped", STREAM_QOS, PLANT, _ALL,
+                  "inspection: unit vector to the sun, frame hill"),
+        TopicSpec(RUN_STATUS, "diagnostic_msgs/msg/DiagnosticArray", STATUS_QOS, PLANT, _ALL,
+                  "run state (running, done, failed), step counts, deadline misses, expected counts"),
+    )
+}  # fmt: skip
+"""Every topic of a run, by (relative) name."""
+
+INSPECTION_TOPICS: tuple[str, ...] = (ODOMETRY, TEMPERATURE, BATTERY, SUN_VECTOR)
+
+
+def msg_class(type_name: str) -> Any:
+    """The rclpy message class of `pkg/msg/Type` (imports the message package)."""
+    import importlib
+
+    pkg, _, name = type_name.split("/")
+    return getattr(importlib.import_module(f"{pkg}.msg"), name)
+
+
+def subscribed(role: str, rta: bool) -> list[TopicSpec]:
+    """Topics a role subscribes to in a run with/without RTA."""
+    out = []
+    for spec in TOPICS.values():
+        for who, only_rta, only_plain in spec.readers:
+            if who == role and not (only_rta and not rta) and not (only_plain and rta):
+                out.append(spec)
+    return out
+
+
+def published(role: str, rta: bool) -> list[TopicSpec]:
+    """Topics a role publishes (filter_status only with RTA: without, the filter passes through)."""
+    return [t for t in TOPICS.values() if t.publisher == role and (rta or t.name != FILTER_STATUS)]
+
+
+def recorded(rta: bool) -> list[TopicSpec]:
+    """Topics the recorder writes to the bag: all of the run's (filter_status only with RTA)."""
+    return [t for t in subscribed(RECORDER, rta) if rta or t.name != FILTER_STATUS]
+
+
+def expected_readers(topic: str, rta: bool, record: bool) -> int:
+    """How many of the run's own nodes subscribe to `topic`; a writer waits for this many matches
+    before its first message (tools such as `ros2 topic echo` only add readers)."""
+    n = 0
+    for who, only_rta, only_plain in TOPICS[topic].readers:
+        if (only_rta and not rta) or (only_plain and rta) or (who == RECORDER and not record):
+            continue
+        n += 1
+    return n
+
+
+# ----------------------------------------------------------------------------- diagnostics
+
+STATUS_HARDWARE_ID = "rta_attitude"
+QP_STATUS_NAME = "filter"
+"""filter_status: the entry of the filter call (QP status, fallback, box, timing, counters); one entry
+per constraint follows, named like the constraint (params.CONSTRAINT_NAMES). rta_attitude.recording.analysis
+reads this layout."""
+CONSTRAINT_STATUS_PREFIX = ""
+INPUT_COUNTERS: tuple[str, ...] = (
+    "state_rejected", "state_renormalised", "state_stale", "state_duplicate", "state_out_of_order",
+    "torque_des_rejected", "torque_des_duplicate", "torque_des_out_of_order", "torque_des_late",
+    "torque_des_missing", "unpaired_dropped", "output_guard", "plant_lost", "clock_jumps",
+)  # fmt: skip
+"""The filter node's input counters (running totals, in every filter_status):
+
+- `state_rejected`: a state whose values are unusable (NaN/inf, wrong length or names, quaternion norm
+  beyond `quaternion_tolerance`) but whose stamp is valid: filtered as an invalid state (the core's
+  `invalid_state` fallback, u = 0), so the plant still gets a command for that step;
+- `state_renormalised`: quaternion norm off 1 by more than UNIT_NORM_EPS, within `quaternion_tolerance`;
+- `state_stale`: older than the /clock time by more than `max_state_age_s` (dropped, not answered);
+- `state_duplicate` / `state_out_of_order`: stamp equal to / older than the newest state taken (dropped);
+- `torque_des_rejected`: NaN/inf or wrong frame with a valid stamp: filtered as non-finite u_des (the core's
+  `non_finite_u_des` fallback);
+- `torque_des_duplicate` / `torque_des_out_of_order`: stamp equal to / older than the newest taken (dropped);
+- `torque_des_late`: arrived for a state already answered without it (dropped);
+- `torque_des_missing`: a state answered with u_des = 0 because no torque_des came (`desired_timeout_s`,
+  or at once when the controller's publisher is gone);
+- `unpaired_dropped`: unpaired messages dropped beyond MAX_PENDING per topic; messages whose stamp
+  itself is invalid are counted as `*_rejected` and dropped;
+- `output_guard`: a filter output that was not finite or not inside U, replaced by u = 0 (never expected);
+- `plant_lost`: the plant's `state` writer lost its liveliness (no sign of life for `liveliness_lease_s`:
+  the process was killed or hangs); the states that wait for their torque_des are dropped (no command is
+  sent to a dead plant);
+- `clock_jumps`: /clock jumped backwards (a replay restarted): the stamp screens were reset.
+"""
+INPUT_SOURCE_KEY = "u_des_source"
+"""filter_status key: where this call's u_des came from: `torque_des`, or `missing` (u_des = 0 after a
+timeout or with the controller gone)."""
+QP_KEYS: tuple[str, ...] = (
+    "status", "solver_status", "iterations", "fallback", "solve_time_s", "preset",
+    "u_des_x", "u_des_y", "u_des_z", "u_x", "u_y", "u_z", "box_active_x", "box_active_y", "box_active_z",
+    "calls", "fast_path", "solved", "fallbacks", "solver_failures", "backup_solves", "invalid_states",
+    INPUT_SOURCE_KEY, *INPUT_COUNTERS,
+)  # fmt: skip
+"""Keys of the `filter` entry: status ('pass', 'solved', 'fallback'), proxsuite status, iterations,
+fallback policy applied ('none' if none), solve time [s], preset, u_des and u [rad/s^2], box flags,
+the filter's running counters (core: calls .. invalid_states), the source of u_des and the node's
+input counters (INPUT_COUNTERS)."""
+NO_FALLBACK = "none"
+CONSTRAINT_KEYS: tuple[str, ...] = ("h", "psi0", "psi1", "bc", "slack", "intervening", "uncontrollable", "slacked")
+"""Keys of each constraint entry (floats as repr, exact; flags 'true'/'false')."""
+
+RUN_STATUS_NAME = "plant/run"
+RUN_RUNNING, RUN_DONE, RUN_FAILED, RUN_INTERRUPTED = "running", "done", "failed", "interrupted"
+"""run_status states: `running` (at the start, and again when a plant fault episode starts or ends),
+then one final `done`, `failed: reason` or `interrupted: SIGINT|SIGTERM`."""
+PLANT_COUNTERS: tuple[str, ...] = (
+    "commands", "rejected", "late", "duplicate", "future", "outside_u", "saturated", "deadline_misses",
+    "fallback_zero", "fallback_hold",
+)  # fmt: skip
+"""The plant's counters in run_status: commands received; `rejected` (NaN/inf or wrong frame, not
+applied); `late` (stamp older than the current step: answered after a deadline miss); `duplicate` (a
+second command for a step already applied); `future` (stamp newer than the current step);
+`outside_u` (a command outside the admissible set U, |u_i| > u_max,i: applied as it is, which only
+happens without RTA or with a broken filter); `saturated` (beyond the actuator limit psi_dot_max:
+the wheels saturate it, as `simulation.integrate` does); `deadline_misses` (no command for t_k in
+time: realtime by t_k+1, lockstep within `command_timeout_s`) and the fallback applied each time
+(`fallback_zero`, `fallback_hold`)."""
+EXPECTED_PREFIX = "expected:"
+"""run_status keys `expected:<topic>` give the final message count of a topic, when known."""
+
+# ----------------------------------------------------------------------------- knobs
+
+
+@dataclass(frozen=True)
+class Knob:
+    """A node-only parameter (not part of the core YAML).
+
+    Numbers must lie in [minimum, maximum] (`positive`: > minimum); `check_knob` enforces it.
+    """
+
+    name: str
+    default: Any
+    roles: tuple[str, ...]
+    description: str
+    choices: tuple[str, ...] = ()
+    minimum: float = 0.0
+    positive: bool = False
+    maximum: float | None = None
+
+    @property
+    def allowed(self) -> str:
+        """The allowed values in words, for error messages and docs."""
+        if self.choices:
+            return "one of " + ", ".join(self.choices)
+        kind = {bool: "true or false", int: "an integer", float: "a float", str: "a string"}[type(self.default)]
+        if not isinstance(self.default, (int, float)) or isinstance(self.default, bool):
+            return kind
+        low = f"{'>' if self.positive else '>='} {self.minimum:g}"
+        return f"{kind} {low}" + (f" and < {self.maximum:g}" if self.maximum is not None else "")
+
+
+_EVERY = (PLANT, CONTROLLER, FILTER, RECORDER)
+KNOBS: tuple[Knob, ...] = (
+    Knob("config_file", "", _EVERY, "parameter file the nodes read their defaults from ('' = installed one)"),
+    Knob("scenario", "paper_example", _EVERY, "scenario name from the parameter file"),
+    Knob("rta", True, _EVERY, "true: the filter runs; false: the plant applies torque_des"),
+    Knob("record", True, _EVERY, "a bag_recorder_node takes part (writers wait for its subscriptions)"),
+    Knob("startup_timeout_s", 30.0, _EVERY, "wall time to wait for the run's readers to match [s]", positive=True),
+    Knob("stop_timeout_s", 3.0, _EVERY,
+         "after SIGINT/SIGTERM (plant: also at the end of the run): longest wait for readers to acknowledge "
+         "what the node published (recorder: for the last messages) [s]"),
+    Knob("executor", "events", _EVERY, "events: rclpy's C++ EventsExecutor; single: SingleThreadedExecutor",
+         ("events", "single")),
+    Knob("liveliness_lease_s", 2.0, _EVERY,
+         "automatic liveliness lease of `state` (the plant offers it, its readers request it): a plant that "
+         "shows no sign of life for this long (killed, hung) is reported lost once; 0 = no lease. Readers "
+         "do not match a writer with a longer lease or none (a one-line warning says so) [s]"),
+    Knob("quaternion_tolerance", 0.01, (CONTROLLER, FILTER),
+         "state and attitude_command: | |q| - 1 | up to this is renormalised (counted), beyond it rejected",
+         positive=True, maximum=0.5),
+    Knob("max_state_age_s", 2.0, (CONTROLLER, FILTER),
+         "with use_sim_time: a state older than the /clock time by more than this is stale (dropped); 0 = off"),
+    Knob("desired_timeout_s", 1.0, (FILTER,),
+         "a state without torque_des this long (wall) is filtered with u_des = 0 (at once if the controller "
+         "is gone) [s]", positive=True),
+    Knob("stepping", "lockstep", (PLANT,), "lockstep (deterministic) or realtime (wall-clock timer)",
+         ("lockstep", "realtime")),
+    Knob("real_time_factor", 1.0, (PLANT,), "realtime: sim seconds per wall second", positive=True),
+    Knob("command_timeout_s", 5.0, (PLANT,),
+         "lockstep: wall time to wait for the command of a step before a deadline miss (the first command "
+         "of the run may take startup_timeout_s) [s]", positive=True),
+    Knob("deadline_fallback", "hold", (PLANT,),
+         "no command for t_k in time (deadline miss): hold the last applied torque, or apply zero",
+         ("hold", "zero")),
+    Knob("hold_max_steps", 1, (PLANT,),
+         "deadline_fallback hold: consecutive misses for which the last torque is held; zero after that"),
+    Knob("inspection_every", 1, (PLANT,), "publish the inspection topics every n-th step", minimum=1),
+    Knob("battery_voltage_V", 8.0, (PLANT,), "nominal bus voltage for BatteryState (display only) [V]",
+         positive=True),
+    Knob("exit_when_done", True, (PLANT, RECORDER), "exit after the run ends (plant) / the bag is closed"),
+    Knob("bag_path", "", (RECORDER,), "MCAP file to write (required)"),
+    Knob("bag_overwrite", False, (RECORDER,), "replace an existing bag file"),
+    Knob("bag_chunk_kb", 256, (RECORDER,), "uncompressed KiB per MCAP chunk: a killed recorder loses at most one",
+         minimum=1),
+    Knob("drain_timeout_s", 10.0, (RECORDER,), "after run_status done: longest wait for the last messages [s]"),
+    Knob("drain_quiet_s", 0.3, (RECORDER,), "after done, topics without a known count: close after this quiet [s]"),
+)  # fmt: skip
+"""Node-only parameters; every other parameter comes from the core YAML."""
+SYSTEM_PARAMETERS: tuple[str, ...] = ("use_sim_time", "start_type_description_service")
+"""Parameters rclpy declares itself (never part of the core config)."""
+
+
+def knobs_for(role: str) -> tuple[Knob, ...]:
+    """The knobs a role declares."""
+    return tuple(k for k in KNOBS if role in k.roles)
+
+
+__all__ = [
+    "ATTITUDE_COMMAND", "BATTERY", "BODY_FRAME", "CLOCK", "COMMAND_QOS", "CONSTRAINT_KEYS",
+    "CONSTRAINT_STATUS_PREFIX", "CONTROLLER", "DEFAULT_NAMESPACE", "EXECUTABLES", "EXPECTED_PREFIX", "FILTER",
+    "FILTER_STATUS", "HILL_FRAME", "INPUT_COUNTERS", "INPUT_SOURCE_KEY", "INSPECTION_TOPICS", "KNOBS", "MODULES",
+    "NODE_NAMES", "NO_FALLBACK", "ODOMETRY", "PACKAGE", "PLANT", "PLANT_COUNTERS", "QP_KEYS", "QP_STATUS_NAME",
+    "RECORDER", "RUN_DONE", "RUN_FAILED", "RUN_INTERRUPTED", "RUN_RUNNING", "RUN_STATUS",
+    "RUN_STATUS_NAME", "STATE", "STATE_QOS", "STATUS_HARDWARE_ID", "STATUS_QOS", "STREAM_QOS", "SUN_VECTOR",
+    "SYSTEM_PARAMETERS",
+    "TEMPERATURE", "TOPICS", "TORQUE_APPLIED", "TORQUE_CMD", "TORQUE_DES", "Knob", "QosSpec", "TopicSpec",
+    "expected_readers", "knobs_for", "msg_class", "published", "qos_profile", "recorded", "subscribed",
+]  # fmt: skip

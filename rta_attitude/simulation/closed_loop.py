@@ -1,0 +1,216 @@
+"""Sampled-data closed loop: controller -> filter -> zero-order hold -> RK4 plant, compiled.
+
+At each sample t_k = k dt: u_des = controller(x_k, q_c(t_k)) crosses the torque interface (u -> tau =
+D u -> u), as over DDS; u = filter(x_k, u_des) (or u_des without RTA), across the interface again;
+the actuator saturates u at psi_dot_max; the plant holds it over [t_k, t_k + dt] with `substeps` RK4
+steps (`dynamics.spacecraft.rk4_hold`); the safety values of every substep are kept, so violations
+between samples are seen. `advance` is that step (filter, actuator, plant, checks) for one state:
+`simulate` and the Monte Carlo (`montecarlo.runner`) both run it, so a Monte Carlo run equals
+`simulate` of its initial state bit for bit, and the nodes run its parts (the filter node
+`filter_state`, the plant node `integrate`), so a lockstep run over DDS equals it too.
+
+Parameters: one LOOP_DTYPE record (the true plant, the filter with its own plant model, the
+controller, RTA on/off, dt and substeps).
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import replace
+
+import numba
+import numpy as np
+from numpy.typing import NDArray
+
+from rta_attitude.config.schema import CONSTRAINT_NAMES, Config, Scenario
+from rta_attitude.constraints.base import N_CONSTRAINTS
+from rta_attitude.constraints.geometry import CONTEXT_DTYPE
+from rta_attitude.constraints.rows import safety_values
+from rta_attitude.dynamics.controller import CONTROLLER_DTYPE, controller_record, pd_command
+from rta_attitude.dynamics.quaternion import JIT
+from rta_attitude.dynamics.spacecraft import (
+    PLANT_DTYPE,
+    attitude_matrix,
+    omega_drift,
+    plant_record,
+    rk4_hold,
+    saturate,
+    torque_round_trip,
+)
+from rta_attitude.dynamics.state import STATE_SIZE
+from rta_attitude.filter.asif import AsifFilter, FilterResult
+from rta_attitude.filter.pipeline import FILTER_DTYPE, RESULT_DTYPE, WORKSPACE_DTYPE, filter_record, filter_state
+from rta_attitude.simulation.trajectory import Trajectory, substep_minima
+
+Array = NDArray[np.float64]
+log = logging.getLogger(__name__)
+M = N_CONSTRAINTS
+
+LOOP_DTYPE = np.dtype([
+    ("plant", PLANT_DTYPE),          # the spacecraft that is simulated
+    ("filter", FILTER_DTYPE),        # the filter, with its own model of the plant
+    ("controller", CONTROLLER_DTYPE),
+    ("rta", np.uint8),               # 0: u_des goes to the plant unfiltered
+    ("dt_s", np.float64),            # sample time (zero-order hold)
+    ("substeps", np.int64),          # RK4 steps per sample
+])  # fmt: skip
+
+
+def loop_record(cfg: Config, rta: bool = True, pd: bool = True) -> NDArray[np.void]:
+    """The LOOP_DTYPE record (1,) of a configuration (pd False: no primary controller, u_des = 0)."""
+    rec = np.zeros(1, LOOP_DTYPE)
+    rec[0]["plant"] = plant_record(cfg)[0]
+    rec[0]["filter"] = filter_record(cfg)[0]
+    rec[0]["controller"] = controller_record(cfg, pd)[0]
+    rec[0]["rta"], rec[0]["dt_s"], rec[0]["substeps"] = rta, cfg.filter.sample_time_s, cfg.substeps
+    return rec
+
+
+@numba.njit(**JIT)
+def advance(x: Array, u_des: Array, lp: np.void, ws: np.void, r: np.void, u: Array, subs: Array, hs: Array,
+            ctx: np.void) -> None:
+    """One sample of the loop from state x (19,) with the desired command u_des (3,), already across
+    the torque interface: filter (result r) if RTA, torque interface, actuator saturation (u), RK4
+    hold (subs (substeps, 19): the states after each substep, the last is x(t + dt)) and the safety
+    values of every substep (hs (substeps, m))."""
+    p = lp.plant
+    if lp.rta:
+        filter_state(x, u_des, lp.filter, ws, r)
+        torque_round_trip(r.u, p, u)
+    else:
+        for a in range(3):
+            u[a] = u_des[a]
+    saturate(u, p, u)
+    rk4_hold(x, u, lp.dt_s, lp.substeps, p, subs)
+    for j in range(lp.substeps):
+        safety_values(subs[j], p, lp.filter.constraints, ctx, hs[j])
+
+
+@numba.njit(**JIT)
+def _command_at(times: Array, t_s: float) -> int:
+    """Row of the command schedule in force at t_s (numpy.searchsorted(side='right') - 1, at least 0)."""
+    k = 0
+    while k < times.shape[0] and times[k] <= t_s:
+        k += 1
+    return max(k - 1, 0)
+
+
+@numba.njit(**JIT)
+def run_scenario(x0: Array, steps: int, sched_t: Array, sched_q: Array, loop: NDArray[np.void], X: Array,
+                 H: Array, Hsub: Array, Q_C: Array, U_DES: Array, U: Array, W_DOT: Array, R: NDArray[np.void]
+                 ) -> None:
+    """Simulate `steps` samples from x0 with the controller tracking the command schedule (sched_t (K,),
+    sched_q (K, 4)); fills X (steps + 1, 19), H (steps + 1, m) at the samples, Hsub (steps, substeps, m),
+    Q_C, U_DES, U, W_DOT (steps, ...) and the filter results R (steps,)."""
+    lp = loop[0]
+    p = lp.plant
+    ws = np.zeros(1, WORKSPACE_DTYPE)
+    ctx = np.zeros(1, CONTEXT_DTYPE)
+    u_des = np.empty(3)
+    A, wd = np.empty((3, 3)), np.empty(3)
+    subs = np.empty((lp.substeps, STATE_SIZE))
+    X[0] = x0
+    safety_values(X[0], p, lp.filter.constraints, ctx[0], H[0])
+    for k in range(steps):
+        t = k * lp.dt_s
+        Q_C[k] = sched_q[_command_at(sched_t, t)]
+        pd_command(X[k], Q_C[k], lp.controller, u_des)
+        torque_round_trip(u_des, p, U_DES[k])
+        advance(X[k], U_DES[k], lp, ws[0], R[k], U[k], subs, Hsub[k], ctx[0])
+        attitude_matrix(X[k, 0], X[k, 1], X[k, 2], X[k, 3], A)
+        omega_drift(X[k], A, p, wd)
+        for a in range(3):
+            W_DOT[k, a] = wd[a] + p.control_gain[a] * U[k, a]
+        X[k + 1] = subs[lp.substeps - 1]
+        H[k + 1] = Hsub[k, lp.substeps - 1]
+
+
+class ClosedLoop:
+    """Controller + optional filter + plant for one scenario; `run()` it.
+
+    Args:
+        cfg: configuration.
+        scenario: the scenario (initial state, controller, command schedule, duration).
+        rta: filter on (True) or u_des passed straight to the plant.
+    """
+
+    def __init__(self, cfg: Config, scenario: Scenario, rta: bool = True) -> None:
+        self.cfg = cfg.for_scenario(scenario)
+        self.scenario = scenario
+        self.rta = rta
+        self.filter = AsifFilter(self.cfg)  # also compiles (or loads) the kernels
+        self.loop = loop_record(self.cfg, rta, pd=scenario.controller == "pd")
+
+    def run(self, dt_s: float | None = None) -> Trajectory:
+        """Simulate the whole scenario; dt defaults to filter.sample_time_s."""
+        cfg = self.cfg
+        lp = self.loop.copy()
+        if dt_s is not None:
+            lp[0]["dt_s"] = dt_s
+        dt = float(lp[0]["dt_s"])
+        n = round(self.scenario.duration_s / dt)
+        S = cfg.substeps
+        X, H = np.empty((n + 1, STATE_SIZE)), np.empty((n + 1, M))
+        Hsub = np.empty((n, S, M))
+        q_c, u_des, u, w_dot = np.empty((n, 4)), np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 3))
+        R = np.zeros(n, RESULT_DTYPE)
+        sched_t = np.asarray(self.scenario.schedule_s, dtype=float)
+        sched_q = np.ascontiguousarray(self.scenario.schedule_q, dtype=float)
+        run_scenario(np.ascontiguousarray(self.scenario.x0, dtype=float), n, sched_t, sched_q, lp, X, H, Hsub, q_c,
+                     u_des, u, w_dot, R)
+        t = dt * np.arange(n + 1)
+        h_min, h_arg = substep_minima(H[:-1], np.moveaxis(Hsub, 1, 0), t[:-1], dt)
+        res = FilterResult(R, cfg.filter.fallback)
+        if self.rta:
+            self.filter.counters.add(R)
+            status, fallback = res.status, res.fallback
+            bc, slack, inter, box = res.bc, res.slack, res.intervening, res.box_active
+        else:
+            status, fallback = np.full(n, "off"), np.full(n, "")
+            bc, slack, inter, box = (np.zeros((n, M)), np.zeros((n, M)), np.zeros((n, M), dtype=bool),
+                                     np.zeros((n, 3), dtype=bool))
+        return Trajectory(
+            names=CONSTRAINT_NAMES, t_s=t, x=X, q_c=q_c, u_des=u_des, u=u, omega_dot=w_dot, h=H,
+            h_substep_min=h_min, h_substep_argmin_s=h_arg, bc=bc, slack=slack, intervening=inter,
+            box_active=box, status=np.asarray(status, dtype=str), fallback=np.asarray(fallback, dtype=str),
+            iterations=R["iterations"].copy() if self.rta else np.zeros(n, dtype=np.int64),
+            solve_time_s=np.zeros(n), rta=self.rta, preset=cfg.filter.preset, scenario=self.scenario.name,
+            meta={"config": cfg.source, "dt_s": dt, "substeps": S},
+        )  # fmt: skip
+
+
+def simulate(cfg: Config, scenario: str | Scenario, rta: bool = True, preset: str | None = None,
+             duration_s: float | None = None) -> Trajectory:
+    """Run a scenario (by name or object) in process, no DDS.
+
+    Args:
+        cfg: configuration.
+        scenario: scenario name (e.g. 'paper-example') or object.
+        rta: filter on (True) or u_des passed straight to the plant.
+        preset: override the filter preset ('robust' or 'paper').
+        duration_s: override the scenario's duration, s.
+    """
+    if preset is not None:
+        cfg = cfg.with_preset(preset)
+    scen = cfg.scenario(scenario) if isinstance(scenario, str) else scenario
+    if duration_s is not None:
+        scen = replace(scen, duration_s=float(duration_s))
+    return ClosedLoop(cfg, scen, rta).run()
+
+
+def compile_kernels(cfg: Config) -> float:
+    """Compile (or load from numba's cache) every kernel the closed loop, the nodes and the Monte Carlo
+    run, by one step of a scenario. Returns the seconds it took."""
+    import time
+
+    from rta_attitude.kernel_cache import drop_stale_caches
+
+    t0 = time.perf_counter()
+    drop_stale_caches()
+    name = next(iter(cfg.scenarios))
+    simulate(cfg, name, duration_s=cfg.filter.sample_time_s)
+    return time.perf_counter() - t0
+
+
+__all__ = ["LOOP_DTYPE", "ClosedLoop", "Trajectory", "advance", "compile_kernels", "loop_record", "run_scenario",
+           "simulate"]

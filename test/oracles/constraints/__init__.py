@@ -1,0 +1,120 @@
+"""Oracle (tests only): the first, numpy implementation of the safety constraints, one module each,
+gathered into an ordered, named set.
+
+| name            | h (safe >= 0)                 | enforced through                          | module            |
+|-----------------|-------------------------------|-------------------------------------------|-------------------|
+| exclusion_zone  | theta_EZ - FOV/2 - beta       | HOCBF                                     | exclusion_zone.py |
+| communication   | FOV/2 - theta_GS              | HOCBF (+ slack in the paper)              | communication.py  |
+| temperature     | T_max - T                     | HOCBF on the angle-augmented Psi_temp     | temperature.py    |
+| battery         | E - E_min                     | HOCBF on Psi_batt = h - delta2 theta_SI   | battery.py        |
+| omega_x/y/z     | omega_max^2 - omega_i^2       | CBF (+ ZOH bound in the robust preset)    | angular_rate.py   |
+| psi_x/y/z       | psi_max^2 - psi_i^2           | CBF (+ ZOH bound in the robust preset)    | wheel_speed.py    |
+
+Actuator and angular-acceleration limits are the box U of the filter (Config.u_max_rad_s2).
+
+These modules are the definition (vectorised over state batches, checked against finite
+differences). The filter evaluates their compiled one-state port, `rta_attitude/barrier_rows.py`
+(same formulas, tested equal to 1e-13 at random states and at the poles): a change to a barrier
+here must be made there too.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from oracles.constraints.angular_rate import AngularRate
+from oracles.constraints.base import Array, BarrierValues, Constraint, Context
+from oracles.constraints.battery import Battery
+from oracles.constraints.communication import Communication
+from oracles.constraints.exclusion_zone import ExclusionZone
+from oracles.constraints.temperature import Temperature
+from oracles.constraints.wheel_speed import WheelSpeed
+from rta_attitude.config.schema import CONSTRAINT_NAMES, Config
+
+
+@dataclass(frozen=True)
+class BarrierTable:
+    """Every constraint evaluated on a state batch; the last axis m follows ConstraintSet.names.
+
+    Attributes:
+        h, psi0, psi1, drift: (..., m); gain: (..., m, 3). BC_i(u) = drift_i + gain_i . u.
+    """
+
+    h: Array
+    psi0: Array
+    psi1: Array
+    drift: Array
+    gain: Array
+
+
+@dataclass(frozen=True)
+class ConstraintSet:
+    """The ordered, named safety constraints of one configuration."""
+
+    constraints: tuple[Constraint, ...]
+    cfg: Config
+
+    @classmethod
+    def from_config(cls, cfg: Config) -> ConstraintSet:
+        """All ten constraints of the paper, in CONSTRAINT_NAMES order (disabled ones included)."""
+        items: list[Constraint] = [
+            ExclusionZone.from_config(cfg), Communication.from_config(cfg),
+            Temperature.from_config(cfg), Battery.from_config(cfg),
+        ]  # fmt: skip
+        items += [AngularRate.from_config(cfg, i) for i in range(3)]
+        items += [WheelSpeed.from_config(cfg, i) for i in range(3)]
+        assert tuple(c.name for c in items) == CONSTRAINT_NAMES  # a programming error, not input
+        return cls(tuple(items), cfg)
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return tuple(c.name for c in self.constraints)
+
+    @property
+    def enabled(self) -> Array:
+        """(m,) bool."""
+        return np.array([c.gains.enabled for c in self.constraints])
+
+    @property
+    def slack_weights(self) -> Array:
+        """(m,) slack weight p_i; 0 for hard constraints."""
+        return np.array([c.gains.slack_weight for c in self.constraints], dtype=float)
+
+    def context(self, x: Array) -> Context:
+        return Context.from_state(x, self.cfg)
+
+    def safety_values(self, x: Array) -> Array:
+        """Physical h of every constraint (..., m); negative = violated."""
+        ctx = self.context(x)
+        return np.stack([c.safety_value(ctx) for c in self.constraints], axis=-1)
+
+    def evaluate(self, x: Array, ctx: Context | None = None) -> BarrierTable:
+        """h, Psi levels and the affine barrier conditions of every constraint."""
+        ctx = ctx if ctx is not None else self.context(x)
+        vals: list[BarrierValues] = [c.evaluate(ctx) for c in self.constraints]
+        return BarrierTable(
+            h=np.stack([v.h for v in vals], axis=-1),
+            psi0=np.stack([v.psi0 for v in vals], axis=-1),
+            psi1=np.stack([v.psi1 for v in vals], axis=-1),
+            drift=np.stack([v.drift for v in vals], axis=-1),
+            gain=np.stack([v.gain for v in vals], axis=-2),
+        )
+
+    def zoh_bounds(self, ctx: Context, dt_s: float, margin: float) -> tuple[Array, Array]:
+        """Intersection of the one-step-ahead rate and wheel-speed intervals on u (..., 3) each."""
+        lo = np.full((*ctx.batch_shape, 3), -np.inf)
+        hi = np.full((*ctx.batch_shape, 3), np.inf)
+        for c in self.constraints:
+            if isinstance(c, (AngularRate, WheelSpeed)) and c.gains.enabled:
+                a, b = c.zoh_bounds(ctx, dt_s, margin)
+                lo[..., c.axis] = np.maximum(lo[..., c.axis], a)
+                hi[..., c.axis] = np.minimum(hi[..., c.axis], b)
+        return lo, hi
+
+
+__all__ = [
+    "AngularRate", "BarrierTable", "BarrierValues", "Battery", "Communication", "Constraint",
+    "ConstraintSet", "Context", "ExclusionZone", "Temperature", "WheelSpeed",
+]  # fmt: skip
