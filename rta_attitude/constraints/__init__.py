@@ -34,8 +34,9 @@ from rta_attitude.constraints.base import (
 )
 from rta_attitude.constraints.geometry import CONTEXT_DTYPE
 from rta_attitude.constraints.rows import ANGLE_NAMES, pointing_angles, rows, safety_values
-from rta_attitude.dynamics.spacecraft import JIT, plant_record
+from rta_attitude.dynamics.spacecraft import plant_record
 from rta_attitude.dynamics.state import STATE_SIZE
+from rta_attitude.jit import JIT
 
 Array = NDArray[np.float64]
 

@@ -17,18 +17,18 @@ import numpy as np
 from numpy.typing import NDArray
 
 from rta_attitude.constraints.base import OMEGA_X
-from rta_attitude.dynamics.spacecraft import JIT
+from rta_attitude.jit import LEAF
 
 NAMES = ("omega_x", "omega_y", "omega_z")
 
 
-@numba.njit(**JIT)
+@numba.njit(**LEAF)
 def h(ctx: np.void, x: NDArray[np.float64], c: np.void, axis: int) -> float:
     """omega_max^2 - omega_axis^2 (rad^2/s^2); negative = too fast."""
     return c.omega_max_rad_s**2 - x[4 + axis] ** 2
 
 
-@numba.njit(**JIT)
+@numba.njit(**LEAF)
 def row(ctx: np.void, x: NDArray[np.float64], c: np.void, axis: int, t: np.void) -> None:
     """h and the CBF row of one axis into table t."""
     i = OMEGA_X + axis
@@ -44,7 +44,7 @@ def row(ctx: np.void, x: NDArray[np.float64], c: np.void, axis: int, t: np.void)
     t.drift[i] = -2.0 * w * ctx.omega_drift[axis] + g.k1 * hw + g.bias
 
 
-@numba.njit(**JIT)
+@numba.njit(**LEAF)
 def zoh_interval(ctx: np.void, x: NDArray[np.float64], c: np.void, axis: int) -> tuple[float, float]:
     """(lower, upper) on u_axis, rad/s^2, keeping |omega_axis(t + dt)| <= (1 - zoh_margin) omega_max."""
     dt = c.dt_s

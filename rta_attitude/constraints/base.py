@@ -26,7 +26,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from rta_attitude.config.schema import CONSTRAINT_NAMES, Config
-from rta_attitude.dynamics.spacecraft import JIT
+from rta_attitude.jit import LEAF
 
 Array = NDArray[np.float64]
 
@@ -103,7 +103,7 @@ def constraint_record(cfg: Config) -> NDArray[np.void]:
     return rec
 
 
-@numba.njit(**JIT)
+@numba.njit(**LEAF)
 def second_order(t: np.void, i: int, psi0: float, psi0_dot: float, psi0_ddot_drift: float, g: np.void) -> None:
     """HOCBF with linear class-K functions into row i of table t: Psi_0, Psi_1 = Psi_0' + k1 Psi_0 and
     the drift of BC = Psi_0'' + k1 Psi_0' + k2 Psi_1 + bias (the gain on u is the caller's)."""
@@ -113,7 +113,7 @@ def second_order(t: np.void, i: int, psi0: float, psi0_dot: float, psi0_ddot_dri
     t.drift[i] = psi0_ddot_drift + g.k1 * psi0_dot + g.k2 * psi1 + g.bias
 
 
-@numba.njit(**JIT)
+@numba.njit(**LEAF)
 def nan_max(a: float, b: float) -> float:
     """numpy.maximum of two floats (NaN propagates)."""
     if a != a or b != b:
@@ -121,7 +121,7 @@ def nan_max(a: float, b: float) -> float:
     return a if a > b else b
 
 
-@numba.njit(**JIT)
+@numba.njit(**LEAF)
 def nan_min(a: float, b: float) -> float:
     """numpy.minimum of two floats (NaN propagates)."""
     if a != a or b != b:

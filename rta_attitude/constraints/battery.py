@@ -19,20 +19,21 @@ from numpy.typing import NDArray
 
 from rta_attitude.constraints.base import BATTERY, second_order
 from rta_attitude.constraints.geometry import pointing
-from rta_attitude.dynamics.spacecraft import JIT, net_power
+from rta_attitude.dynamics.spacecraft import net_power
+from rta_attitude.jit import LEAF
 
 NAME = "battery"
 AXIS_BODY = (0.0, 0.0, 1.0)
 """Solar panel normal +k_B."""
 
 
-@numba.njit(**JIT)
+@numba.njit(**LEAF)
 def h(ctx: np.void, x: NDArray[np.float64], c: np.void) -> float:
     """E - E_min (J); negative = the battery is below its minimum."""
     return x[11] - c.energy_min_J
 
 
-@numba.njit(**JIT)
+@numba.njit(**LEAF)
 def row(ctx: np.void, x: NDArray[np.float64], c: np.void, p: np.void, t: np.void) -> None:
     """h, HOCBF levels and the barrier row of the battery into table t (p: the plant model)."""
     i = BATTERY

@@ -16,20 +16,20 @@ from numpy.typing import NDArray
 
 from rta_attitude.constraints.base import COMMUNICATION, second_order
 from rta_attitude.constraints.geometry import angle, pointing
-from rta_attitude.dynamics.spacecraft import JIT
+from rta_attitude.jit import LEAF
 
 NAME = "communication"
 AXIS_BODY = (0.0, 1.0, 0.0)
 """Antenna boresight +j_B."""
 
 
-@numba.njit(**JIT)
+@numba.njit(**LEAF)
 def h(ctx: np.void, x: NDArray[np.float64], c: np.void) -> float:
     """FOV/2 - theta_GS (rad); negative = the ground station is outside the antenna's cone."""
     return c.comm_angle_rad - angle(0.0, 1.0, 0.0, ctx.earth)
 
 
-@numba.njit(**JIT)
+@numba.njit(**LEAF)
 def row(ctx: np.void, x: NDArray[np.float64], c: np.void, t: np.void) -> None:
     """h, HOCBF levels and the barrier row of communication into table t."""
     i = COMMUNICATION

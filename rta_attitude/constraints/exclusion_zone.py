@@ -17,20 +17,20 @@ from numpy.typing import NDArray
 
 from rta_attitude.constraints.base import EXCLUSION_ZONE, second_order
 from rta_attitude.constraints.geometry import angle, pointing
-from rta_attitude.dynamics.spacecraft import JIT
+from rta_attitude.jit import LEAF
 
 NAME = "exclusion_zone"
 AXIS_BODY = (1.0, 0.0, 0.0)
 """Sensor boresight +i_B."""
 
 
-@numba.njit(**JIT)
+@numba.njit(**LEAF)
 def h(ctx: np.void, x: NDArray[np.float64], c: np.void) -> float:
     """theta_EZ - FOV/2 - beta (rad); negative = the sensor is inside the keep-out cone."""
     return angle(1.0, 0.0, 0.0, ctx.sun) - c.exclusion_angle_rad
 
 
-@numba.njit(**JIT)
+@numba.njit(**LEAF)
 def row(ctx: np.void, x: NDArray[np.float64], c: np.void, t: np.void) -> None:
     """h, HOCBF levels and the barrier row of the exclusion zone into table t."""
     i = EXCLUSION_ZONE

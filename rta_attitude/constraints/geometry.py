@@ -37,8 +37,9 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
-from rta_attitude.dynamics.quaternion import JIT, attitude_matrix
+from rta_attitude.dynamics.quaternion import attitude_matrix
 from rta_attitude.dynamics.spacecraft import omega_drift, sun_hill
+from rta_attitude.jit import LEAF
 
 Array = NDArray[np.float64]
 
@@ -58,7 +59,7 @@ CONTEXT_DTYPE = np.dtype([
 
 
 
-@numba.njit(**JIT)
+@numba.njit(**LEAF)
 def context(x: Array, p: np.void, rates: bool, ctx: np.void) -> None:
     """Fill ctx (CONTEXT_DTYPE) for state x (19,) with plant model p (PLANT_DTYPE). With rates False,
     only A, omega and the two targets (what the safety values need)."""
@@ -93,7 +94,7 @@ def context(x: Array, p: np.void, rates: bool, ctx: np.void) -> None:
         ctx.earth_acc[i] = A[i, 0] * edd0 + A[i, 1] * edd1
 
 
-@numba.njit(**JIT)
+@numba.njit(**LEAF)
 def angle(ex: float, ey: float, ez: float, r: Array) -> float:
     """theta = atan2(|e x r|, e . r) between a unit body axis e and a body-frame direction r, rad."""
     m0 = ey * r[2] - ez * r[1]
@@ -103,7 +104,7 @@ def angle(ex: float, ey: float, ez: float, r: Array) -> float:
     return math.atan2(math.sqrt(m0 * m0 + m1 * m1 + m2 * m2), c)
 
 
-@numba.njit(**JIT)
+@numba.njit(**LEAF)
 def pointing(ex: float, ey: float, ez: float, r: Array, rd: Array, rdd: Array, ctx: np.void,
              sin_guard: float) -> tuple[float, float, float, float, float, float, float, float]:
     """Angle kinematics of unit body axis e and target r (body axes, with inertial rates rd, rdd).

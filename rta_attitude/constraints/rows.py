@@ -36,12 +36,12 @@ from rta_attitude.constraints.base import (
     nan_min,
 )
 from rta_attitude.constraints.geometry import angle, context
-from rta_attitude.dynamics.spacecraft import JIT
+from rta_attitude.jit import LEAF
 
 Array = NDArray[np.float64]
 
 
-@numba.njit(**JIT)
+@numba.njit(**LEAF)
 def rows(x: Array, p: np.void, c: np.void, ctx: np.void, t: np.void) -> None:
     """Barrier rows and box of one state x (19,, unit quaternion) into table t (TABLE_DTYPE).
 
@@ -63,7 +63,7 @@ def rows(x: Array, p: np.void, c: np.void, ctx: np.void, t: np.void) -> None:
     box(ctx, x, c, t)
 
 
-@numba.njit(**JIT)
+@numba.njit(**LEAF)
 def box(ctx: np.void, x: Array, c: np.void, t: np.void) -> None:
     """t.lo, t.hi (3,), rad/s^2: U, and in the robust preset the one-step ZOH intervals of the enabled
     rate and wheel-speed constraints."""
@@ -90,7 +90,7 @@ def box(ctx: np.void, x: Array, c: np.void, t: np.void) -> None:
         t.hi[a] = hi_a
 
 
-@numba.njit(**JIT)
+@numba.njit(**LEAF)
 def safety_values(x: Array, p: np.void, c: np.void, ctx: np.void, out: Array) -> None:
     """Physical h of every constraint (CONSTRAINT_NAMES order) of state x into out; negative = violated."""
     context(x, p, False, ctx)
@@ -108,7 +108,7 @@ ANGLE_NAMES: tuple[str, ...] = ("sensor_sun", "antenna_earth", "face_sun", "face
 Earth incidence angles, the +k_B panel's sun incidence angle (rad)."""
 
 
-@numba.njit(**JIT)
+@numba.njit(**LEAF)
 def pointing_angles(x: Array, p: np.void, ctx: np.void, out: Array) -> None:
     """The ANGLE_NAMES angles of state x into out (5,), rad (the geometry the barriers act on)."""
     context(x, p, False, ctx)

@@ -26,20 +26,21 @@ from numpy.typing import NDArray
 
 from rta_attitude.constraints.base import TEMPERATURE, nan_max, second_order
 from rta_attitude.constraints.geometry import pointing
-from rta_attitude.dynamics.spacecraft import JIT, thermal_rate
+from rta_attitude.dynamics.spacecraft import thermal_rate
+from rta_attitude.jit import LEAF
 
 NAME = "temperature"
 AXIS_BODY = (0.0, -1.0, 0.0)
 """Outward normal of the thermal node's face, -j_B."""
 
 
-@numba.njit(**JIT)
+@numba.njit(**LEAF)
 def h(ctx: np.void, x: NDArray[np.float64], c: np.void) -> float:
     """T_max - T (K); negative = too hot."""
     return c.temperature_max_K - x[10]
 
 
-@numba.njit(**JIT)
+@numba.njit(**LEAF)
 def row(ctx: np.void, x: NDArray[np.float64], c: np.void, p: np.void, t: np.void) -> None:
     """h, HOCBF levels and the barrier row of the temperature into table t (p: the plant model)."""
     i = TEMPERATURE

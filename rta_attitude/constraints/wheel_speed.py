@@ -15,18 +15,18 @@ import numpy as np
 from numpy.typing import NDArray
 
 from rta_attitude.constraints.base import PSI_X
-from rta_attitude.dynamics.spacecraft import JIT
+from rta_attitude.jit import LEAF
 
 NAMES = ("psi_x", "psi_y", "psi_z")
 
 
-@numba.njit(**JIT)
+@numba.njit(**LEAF)
 def h(ctx: np.void, x: NDArray[np.float64], c: np.void, axis: int) -> float:
     """psi_max^2 - psi_axis^2 (rad^2/s^2); negative = the wheel is too fast."""
     return c.psi_max_rad_s**2 - x[7 + axis] ** 2
 
 
-@numba.njit(**JIT)
+@numba.njit(**LEAF)
 def row(ctx: np.void, x: NDArray[np.float64], c: np.void, axis: int, t: np.void) -> None:
     """h and the CBF row of one wheel into table t."""
     i = PSI_X + axis
@@ -42,7 +42,7 @@ def row(ctx: np.void, x: NDArray[np.float64], c: np.void, axis: int, t: np.void)
     t.drift[i] = g.k1 * hp + g.bias
 
 
-@numba.njit(**JIT)
+@numba.njit(**LEAF)
 def zoh_interval(ctx: np.void, x: NDArray[np.float64], c: np.void, axis: int) -> tuple[float, float]:
     """(lower, upper) on u_axis, rad/s^2, keeping |psi_axis(t + dt)| <= (1 - zoh_margin) psi_max."""
     limit = (1.0 - c.zoh_margin) * c.psi_max_rad_s

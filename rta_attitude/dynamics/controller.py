@@ -17,7 +17,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from rta_attitude.config.schema import Config
-from rta_attitude.dynamics.quaternion import JIT, error_vector
+from rta_attitude.dynamics.quaternion import error_vector
+from rta_attitude.jit import LEAF
 
 Array = NDArray[np.float64]
 
@@ -38,22 +39,26 @@ def controller_record(cfg: Config, pd: bool = True) -> NDArray[np.void]:
     return rec
 
 
-@numba.njit(**JIT)
+@numba.njit(**LEAF)
 def pd_command(x: Array, q_c: Array, k: np.void, out: Array) -> None:
     """Desired wheel accelerations (3,) into out, rad/s^2, at state x (19,) and command q_c (4,)."""
     if not k.pd:
         out[0] = out[1] = out[2] = 0.0
         return
-    dq = np.empty(3)
-    error_vector(x[0:4], q_c, dq)
+    error_vector(x[0:4], q_c, out)  # dq, then the command in place
     for a in range(3):
-        out[a] = k.wheel_accel_max_rad_s2 * math.tanh(-k.kp * dq[a] - k.kd * x[4 + a])
+        out[a] = k.wheel_accel_max_rad_s2 * math.tanh(-k.kp * out[a] - k.kd * x[4 + a])
+
+
+@numba.njit(**LEAF)
+def _pd_command(x: Array, q_c: Array, k: NDArray[np.void], out: Array) -> None:
+    pd_command(x, q_c, k[0], out)
 
 
 def desired_command(x: Array, q_c: Array, k: NDArray[np.void]) -> Array:
     """`pd_command` of one state (19,) and command (4,) with controller record k (1,): u_des (3,)."""
     out = np.empty(3)
-    pd_command(np.ascontiguousarray(x, dtype=float), np.ascontiguousarray(q_c, dtype=float), k[0], out)
+    _pd_command(np.ascontiguousarray(x, dtype=float), np.ascontiguousarray(q_c, dtype=float), k, out)
     return out
 
 

@@ -17,11 +17,12 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
+from rta_attitude.jit import LEAF
+
 Array = NDArray[np.float64]
-JIT = {"cache": True, "error_model": "numpy"}
 
 
-@numba.njit(**JIT)
+@numba.njit(**LEAF)
 def attitude_matrix(q1: float, q2: float, q3: float, q4: float, A: Array) -> None:
     """A(q) (3, 3), Hill -> body. Row i is body axis i in Hill; column j is Hill axis j in body."""
     s11, s22, s33, s44 = q1 * q1, q2 * q2, q3 * q3, q4 * q4
@@ -36,7 +37,7 @@ def attitude_matrix(q1: float, q2: float, q3: float, q4: float, A: Array) -> Non
     A[2, 2] = -s11 - s22 + s33 + s44
 
 
-@numba.njit(**JIT)
+@numba.njit(**LEAF)
 def product(q: Array, p: Array, out: Array) -> None:
     """Markley's product q (x) p (4,) into out."""
     qv0, qv1, qv2, q4 = q[0], q[1], q[2], q[3]
@@ -50,23 +51,27 @@ def product(q: Array, p: Array, out: Array) -> None:
     out[3] = q4 * p4 - (qv0 * pv0 + qv1 * pv1 + qv2 * pv2)
 
 
-@numba.njit(**JIT)
+@numba.njit(**LEAF)
 def error_vector(q: Array, q_c: Array, out: Array) -> None:
-    """Vector part of dq = q (x) q_c^-1 (3,) into out (q_c unit: its inverse is its conjugate)."""
-    conj = np.empty(4)
-    conj[0], conj[1], conj[2], conj[3] = -q_c[0], -q_c[1], -q_c[2], q_c[3]
-    dq = np.empty(4)
-    product(q, conj, dq)
-    out[0], out[1], out[2] = dq[0], dq[1], dq[2]
+    """Vector part of dq = q (x) q_c^-1 (3,) into out (q_c unit: its inverse is its conjugate); the
+    vector part of `product(q, conj(q_c))`, operation for operation."""
+    qv0, qv1, qv2, q4 = q[0], q[1], q[2], q[3]
+    pv0, pv1, pv2, p4 = -q_c[0], -q_c[1], -q_c[2], q_c[3]
+    c0 = qv1 * pv2 - qv2 * pv1
+    c1 = qv2 * pv0 - qv0 * pv2
+    c2 = qv0 * pv1 - qv1 * pv0
+    out[0] = q4 * pv0 + p4 * qv0 - c0
+    out[1] = q4 * pv1 + p4 * qv1 - c1
+    out[2] = q4 * pv2 + p4 * qv2 - c2
 
 
-@numba.njit(**JIT)
+@numba.njit(**LEAF)
 def _attitude_matrices(Q: Array, out: Array) -> None:
     for k in range(Q.shape[0]):
         attitude_matrix(Q[k, 0], Q[k, 1], Q[k, 2], Q[k, 3], out[k])
 
 
-@numba.njit(**JIT)
+@numba.njit(**LEAF)
 def _error_vectors(Q: Array, Qc: Array, out: Array) -> None:
     for k in range(Q.shape[0]):
         error_vector(Q[k], Qc[k], out[k])

@@ -36,8 +36,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from rta_attitude.config.schema import Config
-from rta_attitude.dynamics.quaternion import JIT, attitude_matrix
+from rta_attitude.dynamics.quaternion import attitude_matrix
 from rta_attitude.dynamics.state import STATE_SIZE
+from rta_attitude.jit import LEAF
 
 Array = NDArray[np.float64]
 
@@ -92,7 +93,7 @@ def plant_record(cfg: Config) -> NDArray[np.void]:
 # ----------------------------------------------------------------------------- geometry
 
 
-@numba.njit(**JIT)
+@numba.njit(**LEAF)
 def sun_hill(theta_S_rad: float) -> tuple[float, float]:
     """(cos, sin) of theta_S: the unit vector to the sun in Hill is [cos, sin, 0] (SPEC sec. 2,
     [resolved]: the paper prints [cos, cos, 0], not a unit vector)."""
@@ -103,13 +104,13 @@ EARTH_HILL = (-1.0, 0.0, 0.0)
 """Unit vector from the spacecraft to the Earth (and the ground station) in Hill: -x (radial in)."""
 
 
-@numba.njit(**JIT)
+@numba.njit(**LEAF)
 def positive_part(c: float) -> float:
     """max(0, c) as numpy's maximum(0.0, c): 0.0 for c <= 0 (also -0.0), NaN stays NaN."""
     return c if (c > 0.0 or c != c) else 0.0
 
 
-@numba.njit(**JIT)
+@numba.njit(**LEAF)
 def omega_drift(x: Array, A: Array, p: np.void, out: Array) -> None:
     """omega_dot at u = 0 (3,), rad/s^2: Euler's equations, the wheels' gyroscopic term (gyrostat) and
     the gravity-gradient torque (if on). A = A(q) of x (used only with gravity gradient)."""
@@ -136,18 +137,19 @@ def omega_drift(x: Array, A: Array, p: np.void, out: Array) -> None:
     out[2] = t3 / J3
 
 
-@numba.njit(**JIT)
+@numba.njit(**LEAF)
 def thermal_rate(cos_sun: float, cos_earth: float, T_K: float, p: np.void) -> float:
     """T_dot (K/s) of the -j_B face node given its sun and Earth incidence cosines."""
     F_E = p.earth_view_factor * (positive_part(cos_earth) if p.clamp_view_factor else cos_earth)
     q_solar = p.solar_W * positive_part(cos_sun)
     q_albedo = p.albedo_W * F_E
     q_ir = p.sigma_eps_A_W_K4 * F_E * p.earth_T4_K4
-    q_rejected = p.sigma_eps_A_W_K4 * math.pow(T_K, 4.0)
+    T2 = T_K * T_K
+    q_rejected = p.sigma_eps_A_W_K4 * (T2 * T2)
     return (q_solar + q_albedo + q_ir - q_rejected) / p.heat_capacity_J_K
 
 
-@numba.njit(**JIT)
+@numba.njit(**LEAF)
 def net_power(cos_panel_sun: float, p: np.void) -> float:
     """E_dot (W): the +k_B panel's power minus the load."""
     return p.panel_peak_W * positive_part(cos_panel_sun) - p.load_W
@@ -156,7 +158,7 @@ def net_power(cos_panel_sun: float, p: np.void) -> float:
 # ----------------------------------------------------------------------------- the derivative and RK4
 
 
-@numba.njit(**JIT)
+@numba.njit(**LEAF)
 def derivative(x: Array, u: Array, p: np.void, A: Array, wd: Array, f: Array) -> None:
     """x_dot = f(x) + g u of one state (19,) into f; A (3, 3) and wd (3,) are scratch."""
     q1, q2, q3, q4, w1, w2, w3 = x[0], x[1], x[2], x[3], x[4], x[5], x[6]
@@ -191,7 +193,7 @@ def derivative(x: Array, u: Array, p: np.void, A: Array, wd: Array, f: Array) ->
     f[18] = -(n**2) * x[15]
 
 
-@numba.njit(**JIT)
+@numba.njit(**LEAF)
 def saturate(u: Array, p: np.void, out: Array) -> None:
     """The actuator: each wheel acceleration clipped to +-wheel_accel_max (NaN passes as in numpy.clip)."""
     lim = p.wheel_accel_max_rad_s2
@@ -200,19 +202,30 @@ def saturate(u: Array, p: np.void, out: Array) -> None:
         out[a] = -lim if v < -lim else (lim if v > lim else v)
 
 
-@numba.njit(**JIT)
-def rk4_hold(x0: Array, u: Array, dt_s: float, substeps: int, p: np.void, out: Array) -> None:
+RK4_WORK_ROWS = 8
+"""Rows of `rk4_hold`'s scratch (RK4_WORK_ROWS, 19): x, k1..k4, the stage state, A(q) (9), omega drift (3)."""
+
+
+def rk4_work() -> Array:
+    """A scratch array for `rk4_hold` (one per caller; its contents do not carry over between calls)."""
+    return np.zeros((RK4_WORK_ROWS, STATE_SIZE))
+
+
+@numba.njit(**LEAF)
+def rk4_hold(x0: Array, u: Array, dt_s: float, substeps: int, p: np.void, out: Array, work: Array) -> None:
     """Hold u (3,) (saturated already) over dt_s from x0 (19,): `substeps` classical RK4 steps, the
     quaternion renormalised after each. out (substeps, 19) receives the state after each substep;
-    out[-1] is x(t + dt)."""
+    out[-1] is x(t + dt). work: scratch of `rk4_work()` (no allocation here: the Monte Carlo calls
+    this 2,000 times a run)."""
     n = x0.shape[0]
     h = dt_s / substeps
     half = 0.5 * h
     sixth = h / 6.0
-    x = x0.copy()
-    k1, k2, k3, k4, y = np.empty(n), np.empty(n), np.empty(n), np.empty(n), np.empty(n)
-    A = np.empty((3, 3))
-    wd = np.empty(3)
+    x, k1, k2, k3, k4, y = work[0], work[1], work[2], work[3], work[4], work[5]
+    A = work[6, :9].reshape((3, 3))
+    wd = work[7, :3]
+    for i in range(n):
+        x[i] = x0[i]
     for j in range(substeps):
         derivative(x, u, p, A, wd, k1)
         for i in range(n):
@@ -229,7 +242,8 @@ def rk4_hold(x0: Array, u: Array, dt_s: float, substeps: int, p: np.void, out: A
         norm = math.sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2] + x[3] * x[3])
         for i in range(4):
             x[i] = x[i] / norm
-        out[j, :] = x
+        for i in range(n):
+            out[j, i] = x[i]
 
 
 @numba.vectorize(["float64(float64, float64)"], cache=True)
@@ -245,7 +259,7 @@ def torque_to_wheel_accel(tau_Nm: float, D_kgm2: float) -> float:
     return tau_Nm / D_kgm2
 
 
-@numba.njit(**JIT)
+@numba.njit(**LEAF)
 def torque_round_trip(u: Array, p: np.void, out: Array) -> None:
     """u -> tau = D u -> u = tau / D: the round trip every command makes over DDS (the nodes convert
     with the same two functions, so a lockstep run over DDS equals the in-process one bit for bit)."""
@@ -254,21 +268,31 @@ def torque_round_trip(u: Array, p: np.void, out: Array) -> None:
         out[a] = torque_to_wheel_accel(wheel_accel_to_torque(u[a], D), D)
 
 
-@numba.njit(**JIT)
-def _derivatives(X: Array, U: Array, p: np.void, F: Array) -> None:
-    A, wd = np.empty((3, 3)), np.empty(3)
+@numba.njit(**LEAF)
+def _derivatives(X: Array, U: Array, pa: NDArray[np.void], F: Array, work: Array) -> None:
+    A = work[0, :9].reshape((3, 3))
+    wd = work[1, :3]
     for k in range(X.shape[0]):
-        derivative(X[k], U[k], p, A, wd, F[k])
+        derivative(X[k], U[k], pa[0], A, wd, F[k])
 
 
-@numba.njit(**JIT)
-def _omega_dots(X: Array, U: Array, p: np.void, W: Array) -> None:
-    A, wd = np.empty((3, 3)), np.empty(3)
+@numba.njit(**LEAF)
+def _omega_dots(X: Array, U: Array, pa: NDArray[np.void], W: Array, work: Array) -> None:
+    p = pa[0]
+    A = work[0, :9].reshape((3, 3))
+    wd = work[1, :3]
     for k in range(X.shape[0]):
         attitude_matrix(X[k, 0], X[k, 1], X[k, 2], X[k, 3], A)
         omega_drift(X[k], A, p, wd)
         for a in range(3):
             W[k, a] = wd[a] + p.control_gain[a] * U[k, a]
+
+
+@numba.njit(**LEAF)
+def _integrate(x: Array, u: Array, dt_s: float, substeps: int, pa: NDArray[np.void], us: Array, out: Array,
+               work: Array) -> None:
+    saturate(u, pa[0], us)
+    rk4_hold(x, us, dt_s, substeps, pa[0], out, work)
 
 
 def omega_dot(x: Array, u: Array, p: NDArray[np.void]) -> Array:
@@ -277,7 +301,7 @@ def omega_dot(x: Array, u: Array, p: NDArray[np.void]) -> Array:
     X = np.ascontiguousarray(x.reshape(-1, STATE_SIZE))
     U = np.ascontiguousarray(np.broadcast_to(np.asarray(u, dtype=float), (*x.shape[:-1], 3)).reshape(-1, 3))
     W = np.empty((X.shape[0], 3))
-    _omega_dots(X, U, p[0], W)
+    _omega_dots(X, U, p, W, rk4_work())
     return W.reshape((*x.shape[:-1], 3))
 
 
@@ -287,7 +311,7 @@ def state_derivative(x: Array, u: Array, p: NDArray[np.void]) -> Array:
     X = np.ascontiguousarray(x.reshape(-1, STATE_SIZE))
     U = np.ascontiguousarray(np.broadcast_to(np.asarray(u, dtype=float), (*x.shape[:-1], 3)).reshape(-1, 3))
     F = np.empty_like(X)
-    _derivatives(X, U, p[0], F)
+    _derivatives(X, U, p, F, rk4_work())
     return F.reshape(x.shape)
 
 
@@ -308,14 +332,15 @@ def integrate(x: Array, u: Array, dt_s: float, p: NDArray[np.void], substeps: in
     if x.shape != (STATE_SIZE,):
         raise ValueError(f"integrate takes one state ({STATE_SIZE},), got {x.shape}")
     us = np.empty(3)
-    saturate(np.ascontiguousarray(u, dtype=float), p[0], us)
     out = np.empty((substeps, STATE_SIZE))
-    rk4_hold(x, us, float(dt_s), substeps, p[0], out)
+    # record arrays, not record scalars, cross into compiled code (numba types a scalar at every call)
+    _integrate(x, np.ascontiguousarray(u, dtype=float), float(dt_s), substeps, p, us, out, rk4_work())
     return out[-1].copy(), out
 
 
 __all__ = [
-    "EARTH_HILL", "JIT", "PLANT_DTYPE", "derivative", "integrate", "net_power", "omega_dot", "omega_drift",
-    "plant_record", "positive_part", "rk4_hold", "saturate", "state_derivative", "sun_hill", "thermal_rate",
+    "EARTH_HILL", "PLANT_DTYPE", "RK4_WORK_ROWS", "derivative", "integrate", "net_power", "omega_dot",
+    "omega_drift", "plant_record", "positive_part", "rk4_hold", "rk4_work", "saturate", "state_derivative",
+    "sun_hill", "thermal_rate",
     "torque_round_trip", "torque_to_wheel_accel", "wheel_accel_to_torque",
 ]  # fmt: skip

@@ -55,6 +55,8 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
+from rta_attitude.jit import JIT, LEAF
+
 Array = NDArray[np.float64]
 
 BIG = 1e20
@@ -78,11 +80,10 @@ conditioning of nearly parallel rows)."""
 CODE_SOLVED, CODE_INFEASIBLE, CODE_MAX_ITER = 0, 1, 2
 """Return codes of `solve`: optimal / a violated row cannot be reached / max_iter iterations spent."""
 
-_JIT = {"cache": True, "error_model": "numpy"}
 
 
 # ----------------------------------------------------------------------------- small kernels
-@numba.njit(**_JIT)
+@numba.njit(**LEAF)
 def _dot(a: Array, b: Array) -> float:
     """sum_k a[k] b[k] in index order (as the numpy version's `_dot_seq`)."""
     out = a[0] * b[0]
@@ -91,7 +92,7 @@ def _dot(a: Array, b: Array) -> float:
     return out
 
 
-@numba.njit(**_JIT)
+@numba.njit(**LEAF)
 def _row_dot(A: Array, i: int, b: Array) -> float:
     """_dot(A[i], b) without the row view (a view costs reference counting)."""
     out = A[i, 0] * b[0]
@@ -100,14 +101,14 @@ def _row_dot(A: Array, i: int, b: Array) -> float:
     return out
 
 
-@numba.njit(**_JIT)
+@numba.njit(**LEAF)
 def _bound(lower: Array, upper: Array, j: int) -> float:
     """b_j of the one-sided row j (j < m: lower_j, else -upper_{j-m})."""
     m = lower.shape[0]
     return lower[j] if j < m else -upper[j - m]
 
 
-@numba.njit(**_JIT)
+@numba.njit(**LEAF)
 def _normal(C: Array, j: int, out: Array, row: int) -> None:
     """out[row] = n_j, the normal of the one-sided row j (j < m: C_j, else -C_{j-m})."""
     m, n = C.shape
@@ -119,7 +120,7 @@ def _normal(C: Array, j: int, out: Array, row: int) -> None:
             out[row, k] = -C[j - m, k]
 
 
-@numba.njit(**_JIT)
+@numba.njit(**LEAF)
 def _is_active(act: Array, j: int) -> bool:
     for a in act:
         if a == j:
@@ -127,7 +128,7 @@ def _is_active(act: Array, j: int) -> bool:
     return False
 
 
-@numba.njit(**_JIT)
+@numba.njit(**LEAF)
 def _most_violated(C: Array, lower: Array, upper: Array, z: Array, act: NDArray[np.int64]) -> int:
     """The inactive one-sided row with the smallest slack among the violated ones (the first index on
     a tie: lower bounds 0..m-1 before upper bounds m..2m-1), or -1 when none is violated."""
@@ -151,7 +152,7 @@ def _most_violated(C: Array, lower: Array, upper: Array, z: Array, act: NDArray[
     return j_up
 
 
-@numba.njit(**_JIT)
+@numba.njit(**LEAF)
 def _argmin(a: Array) -> int:
     """np.argmin: the first minimum, or the first NaN."""
     k = 0
@@ -163,7 +164,7 @@ def _argmin(a: Array) -> int:
     return k
 
 
-@numba.njit(**_JIT)
+@numba.njit(**LEAF)
 def _active_qr(C: Array, act: NDArray[np.int64], s: int, NA: Array, Q: Array, R: Array, v: Array) -> None:
     """Active normals NA[:s] of the slots 0..s-1, NA = R Q with Q's rows orthonormal (modified
     Gram-Schmidt, twice) and R (n, n) lower triangular (the numpy version's `_active_qr` for one problem)."""
@@ -191,7 +192,7 @@ def _active_qr(C: Array, act: NDArray[np.int64], s: int, NA: Array, Q: Array, R:
                 Q[j, k] = v[k] / nv
 
 
-@numba.njit(**_JIT)
+@numba.njit(**LEAF)
 def _solve_lower(R: Array, rhs: Array, s: int, w: Array) -> None:
     """Forward substitution R w = rhs on the first s slots (w zero beyond)."""
     w[:] = 0.0
@@ -202,7 +203,7 @@ def _solve_lower(R: Array, rhs: Array, s: int, w: Array) -> None:
         w[j] = v / R[j, j]
 
 
-@numba.njit(**_JIT)
+@numba.njit(**LEAF)
 def _solve_upper_t(R: Array, rhs: Array, s: int, y: Array) -> None:
     """Back substitution R^T y = rhs on the first s slots (y zero beyond)."""
     y[:] = 0.0
@@ -213,7 +214,7 @@ def _solve_upper_t(R: Array, rhs: Array, s: int, y: Array) -> None:
         y[i] = v / R[i, i]
 
 
-@numba.njit(**_JIT)
+@numba.njit(**LEAF)
 def _count(act: NDArray[np.int64]) -> int:
     s = 0
     for a in act:
@@ -223,7 +224,7 @@ def _count(act: NDArray[np.int64]) -> int:
 
 
 # ----------------------------------------------------------------------------- the solver
-@numba.njit(**_JIT)
+@numba.njit(**JIT)
 def solve(C: Array, lower: Array, upper: Array, z0: Array, max_iter: int) -> tuple[Array, Array, int, int]:
     """Exact solution of  min 1/2 |z - z0|^2  s.t.  lower <= C z <= upper  (one problem).
 
@@ -345,7 +346,7 @@ def solve(C: Array, lower: Array, upper: Array, z0: Array, max_iter: int) -> tup
     return z, mult, code, iters
 
 
-@numba.njit(**_JIT)
+@numba.njit(**LEAF)
 def rows_hold(C: Array, lower: Array, upper: Array, z: Array, tol: float) -> bool:
     """z (n,) finite and lower - tol <= C z <= upper + tol on every row of C (m, n) (C z summed in index
     order; a NaN anywhere fails)."""

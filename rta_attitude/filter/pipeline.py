@@ -30,7 +30,6 @@ from rta_attitude.config.schema import Config
 from rta_attitude.constraints.base import CONSTRAINT_DTYPE, N_CONSTRAINTS, TABLE_DTYPE, constraint_record
 from rta_attitude.constraints.geometry import CONTEXT_DTYPE
 from rta_attitude.constraints.rows import rows
-from rta_attitude.dynamics.quaternion import JIT
 from rta_attitude.dynamics.spacecraft import PLANT_DTYPE, plant_record
 from rta_attitude.dynamics.state import STATE_SIZE
 from rta_attitude.filter import active_set, outcome, proxsuite_qp
@@ -50,6 +49,7 @@ from rta_attitude.filter.outcome import (
     SOLVE_OK,
     SOLVED,
 )
+from rta_attitude.jit import JIT, LEAF
 
 Array = NDArray[np.float64]
 M = N_CONSTRAINTS
@@ -138,7 +138,7 @@ def new_workspace() -> NDArray[np.void]:
 # ----------------------------------------------------------------------------- steps
 
 
-@numba.njit(**JIT)
+@numba.njit(**LEAF)
 def prepare(x_in: Array, u_des: Array, f: np.void, ws: np.void, r: np.void) -> tuple[bool, bool, bool]:
     """Validity, rows, box and the fast-path test of one state. Returns (valid, u_des finite, QP needed).
     For an invalid state the rows are zero and the box is U."""
@@ -285,7 +285,7 @@ def solve(C: Array, lower: Array, upper: Array, z0: Array, f: np.void, r: np.voi
     return z, mult, code, backup
 
 
-@numba.njit(**JIT)
+@numba.njit(**LEAF)
 def extract(z: Array, mult: Array, row_of: NDArray[np.int64], slack_var: NDArray[np.int64], scale: Array,
             ws: np.void, r: np.void) -> None:
     """u (clipped to the box), the slacks and the active rows from a QP solution."""
@@ -299,7 +299,7 @@ def extract(z: Array, mult: Array, row_of: NDArray[np.int64], slack_var: NDArray
             r.slack[i] = scale[slack_var[i]] * z[slack_var[i]]
 
 
-@numba.njit(**JIT)
+@numba.njit(**LEAF)
 def finish(ws: np.void, r: np.void) -> None:
     """BC_i at the final u (slack not included), the box flags, and the table copied into the result."""
     t = ws.table

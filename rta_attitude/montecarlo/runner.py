@@ -30,11 +30,12 @@ from rta_attitude.config.schema import Config
 from rta_attitude.constraints.base import N_CONSTRAINTS
 from rta_attitude.constraints.geometry import CONTEXT_DTYPE
 from rta_attitude.constraints.rows import safety_values
-from rta_attitude.dynamics.quaternion import JIT
+from rta_attitude.dynamics.spacecraft import RK4_WORK_ROWS
 from rta_attitude.dynamics.state import STATE_SIZE
 from rta_attitude.errors import RtaError
 from rta_attitude.filter.outcome import FALLBACK, PASS
 from rta_attitude.filter.pipeline import RESULT_DTYPE, WORKSPACE_DTYPE
+from rta_attitude.jit import JIT, LEAF
 from rta_attitude.montecarlo import DEFAULT_CHUNK_RUNS
 from rta_attitude.simulation.closed_loop import advance, loop_record
 
@@ -72,7 +73,7 @@ class BatchOutcome:
     trajectory: Array | None = None
 
 
-@numba.njit(**JIT)
+@numba.njit(**LEAF)
 def _mark(h: Array, t: float, sample: bool, k: int, viol_s: NDArray[np.bool_], viol_sub: NDArray[np.bool_],
           first: Array) -> None:
     for i in range(M):
@@ -100,6 +101,7 @@ def run_batch(X0: Array, steps: int, loop: NDArray[np.void], viol_s: NDArray[np.
     r = np.zeros(1, RESULT_DTYPE)
     u_des, u = np.zeros(3), np.empty(3)
     subs = np.empty((S, STATE_SIZE))
+    work = np.zeros((RK4_WORK_ROWS, STATE_SIZE))
     hs = np.empty((S, M))
     h = np.empty(M)
     slacked = np.zeros(M, dtype=np.bool_)
@@ -122,7 +124,7 @@ def run_batch(X0: Array, steps: int, loop: NDArray[np.void], viol_s: NDArray[np.
                 if h[i] < min_h[k, i]:
                     min_h[k, i] = h[i]
             _mark(h, t, True, k, viol_s, viol_sub, first)
-            advance(x, u_des, lp, ws[0], r[0], u, subs, hs, ctx[0])
+            advance(x, u_des, lp, ws[0], r[0], u, subs, hs, ctx[0], work)
             status = r[0].status
             if status != PASS:
                 qp_steps[k] += 1

@@ -27,9 +27,9 @@ from rta_attitude.constraints.base import N_CONSTRAINTS
 from rta_attitude.constraints.geometry import CONTEXT_DTYPE
 from rta_attitude.constraints.rows import safety_values
 from rta_attitude.dynamics.controller import CONTROLLER_DTYPE, controller_record, pd_command
-from rta_attitude.dynamics.quaternion import JIT
 from rta_attitude.dynamics.spacecraft import (
     PLANT_DTYPE,
+    RK4_WORK_ROWS,
     attitude_matrix,
     omega_drift,
     plant_record,
@@ -40,6 +40,7 @@ from rta_attitude.dynamics.spacecraft import (
 from rta_attitude.dynamics.state import STATE_SIZE
 from rta_attitude.filter.asif import AsifFilter, FilterResult
 from rta_attitude.filter.pipeline import FILTER_DTYPE, RESULT_DTYPE, WORKSPACE_DTYPE, filter_record, filter_state
+from rta_attitude.jit import JIT, LEAF
 from rta_attitude.simulation.trajectory import Trajectory, substep_minima
 
 Array = NDArray[np.float64]
@@ -68,11 +69,11 @@ def loop_record(cfg: Config, rta: bool = True, pd: bool = True) -> NDArray[np.vo
 
 @numba.njit(**JIT)
 def advance(x: Array, u_des: Array, lp: np.void, ws: np.void, r: np.void, u: Array, subs: Array, hs: Array,
-            ctx: np.void) -> None:
+            ctx: np.void, work: Array) -> None:
     """One sample of the loop from state x (19,) with the desired command u_des (3,), already across
     the torque interface: filter (result r) if RTA, torque interface, actuator saturation (u), RK4
     hold (subs (substeps, 19): the states after each substep, the last is x(t + dt)) and the safety
-    values of every substep (hs (substeps, m))."""
+    values of every substep (hs (substeps, m)). work: `rk4_work()` scratch."""
     p = lp.plant
     if lp.rta:
         filter_state(x, u_des, lp.filter, ws, r)
@@ -81,12 +82,12 @@ def advance(x: Array, u_des: Array, lp: np.void, ws: np.void, r: np.void, u: Arr
         for a in range(3):
             u[a] = u_des[a]
     saturate(u, p, u)
-    rk4_hold(x, u, lp.dt_s, lp.substeps, p, subs)
+    rk4_hold(x, u, lp.dt_s, lp.substeps, p, subs, work)
     for j in range(lp.substeps):
         safety_values(subs[j], p, lp.filter.constraints, ctx, hs[j])
 
 
-@numba.njit(**JIT)
+@numba.njit(**LEAF)
 def _command_at(times: Array, t_s: float) -> int:
     """Row of the command schedule in force at t_s (numpy.searchsorted(side='right') - 1, at least 0)."""
     k = 0
@@ -109,6 +110,7 @@ def run_scenario(x0: Array, steps: int, sched_t: Array, sched_q: Array, loop: ND
     u_des = np.empty(3)
     A, wd = np.empty((3, 3)), np.empty(3)
     subs = np.empty((lp.substeps, STATE_SIZE))
+    work = np.zeros((RK4_WORK_ROWS, STATE_SIZE))
     X[0] = x0
     safety_values(X[0], p, lp.filter.constraints, ctx[0], H[0])
     for k in range(steps):
@@ -116,7 +118,7 @@ def run_scenario(x0: Array, steps: int, sched_t: Array, sched_q: Array, loop: ND
         Q_C[k] = sched_q[_command_at(sched_t, t)]
         pd_command(X[k], Q_C[k], lp.controller, u_des)
         torque_round_trip(u_des, p, U_DES[k])
-        advance(X[k], U_DES[k], lp, ws[0], R[k], U[k], subs, Hsub[k], ctx[0])
+        advance(X[k], U_DES[k], lp, ws[0], R[k], U[k], subs, Hsub[k], ctx[0], work)
         attitude_matrix(X[k, 0], X[k, 1], X[k, 2], X[k, 3], A)
         omega_drift(X[k], A, p, wd)
         for a in range(3):
