@@ -36,6 +36,7 @@ from helpers import integrate, to_torque, to_wheel_accel
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from rclpy.parameter import Parameter
+from rclpy.serialization import deserialize_message, serialize_message
 
 from rta_attitude import config
 from rta_attitude.cli import launch, launcher
@@ -60,14 +61,15 @@ S = convert.NS_PER_S
 
 
 class Collector:
-    """Stands in for a PublishGate: keeps what the node publishes."""
+    """Stands in for a PublishGate: keeps what the node publishes, serialised at publish as rclpy does
+    (a node may reuse its message object once published)."""
 
     def __init__(self) -> None:
         self.msgs: list[Any] = []
         self.sent = 0
 
     def publish(self, msg: Any) -> None:
-        self.msgs.append(msg)
+        self.msgs.append(deserialize_message(serialize_message(msg), type(msg)))
         self.sent += 1
 
 

@@ -216,8 +216,10 @@ class AsifFilter:
             SolverError: the QP failed and the fallback policy is 'raise'.
         """
         t0 = time.perf_counter()
-        if np.shape(x) != (STATE_SIZE,) or np.shape(u_des) != (3,):
-            raise ValueError(f"filter takes x ({STATE_SIZE},) and u_des (3,), got {np.shape(x)} and {np.shape(u_des)}")
+        sx = x.shape if isinstance(x, np.ndarray) else np.shape(x)
+        su = u_des.shape if isinstance(u_des, np.ndarray) else np.shape(u_des)
+        if sx != (STATE_SIZE,) or su != (3,):
+            raise ValueError(f"filter takes x ({STATE_SIZE},) and u_des (3,), got {sx} and {su}")
         self._x1[0] = x
         self._u1[0] = u_des
         # arrays, not record scalars, cross into compiled code: numba types a record scalar at every

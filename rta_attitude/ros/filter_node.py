@@ -69,6 +69,7 @@ class FilterNode(RtaNode):
         self.filter = AsifFilter(self.cfg)  # compiles (or loads) numba's kernels before we subscribe
         self.get_logger().info(f"filter ready in {time.perf_counter() - t0:.2f} s")
         self.slacked = tuple(n for n, s in zip(self.filter.names, self.filter.slacked) if s)
+        self.status_builder = convert.FilterStatusBuilder(self.filter.names)
         self.states: dict[int, tuple[np.ndarray, float]] = {}  # stamp -> (state, wall time of arrival)
         self.desired: dict[int, np.ndarray] = {}
         self.state_order, self.desired_order = StampOrder(), StampOrder()
@@ -201,7 +202,7 @@ class FilterNode(RtaNode):
         res = self._guard(res)
         self.answered_ns = max(self.answered_ns, t_ns)
         self.out[topics.TORQUE_CMD].publish(convert.torque_msg(wheel_accel_to_torque(res.u, D), t_ns))
-        self.out[topics.FILTER_STATUS].publish(convert.filter_status_msg(
+        self.out[topics.FILTER_STATUS].publish(self.status_builder.build(
             res, t_ns, self.filter.counters, self.cfg.filter.preset, self.slacked, self.counts, source))
         if res.fallback and res.fallback not in ("non_finite_u_des", "invalid_state"):
             self.faults.fault("qp_fallback", f"t = {t_ns / convert.NS_PER_S:g} s: QP {res.solver_status}, "

@@ -1,0 +1,190 @@
+"""The DDS loop's floor: four rclpy nodes with the run's topics, types, QoS and messages per step that
+only forward (no physics, no filter, no bag). bench_dds.py runs it beside the real loop.
+
+    python bench/forward_chain.py ROLE --steps N [--result FILE]      (ROLE: plant controller filter recorder)
+
+- plant: waits until every topic it writes has the run's readers, then publishes state(t_0); on each
+  torque_cmd(t_k) publishes state(t_k+1), /clock, torque_applied and the four inspection topics (the
+  real plant's set with inspection_every = 1); after the last step run_status `done`. It writes the wall
+  time from its first state to the last command to --result (the real plant's `wall_time_s`).
+- controller: on each state, publishes torque_des with the state's stamp.
+- filter: on state and torque_des of the same stamp, publishes torque_cmd and filter_status.
+- recorder: subscribes raw to every recorded topic and counts; exits on run_status `done`.
+
+Controller, filter and recorder run with use_sim_time (so they subscribe to /clock), as the launcher starts
+the real ones. The messages are the real nodes' messages (built once by `ros.convert` from a real state and filter
+result, then re-stamped), on the real QoS profiles, spun by the same executor (rclpy's EventsExecutor).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import rclpy
+from rclpy.experimental import EventsExecutor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.signals import SignalHandlerOptions
+
+from rta_attitude import config
+from rta_attitude.dynamics.spacecraft import plant_record
+from rta_attitude.filter.asif import AsifFilter
+from rta_attitude.ros import convert, topics
+
+LEASE_S = 2.0
+
+
+def _stamp(msg: Any, t_ns: int) -> Any:
+    msg.header.stamp = convert.stamp(t_ns)
+    return msg
+
+
+class Forwarder(Node):
+    def __init__(self, role: str, steps: int) -> None:
+        sim_time = [] if role == topics.PLANT else [Parameter("use_sim_time", value=True)]  # as the launcher does
+        super().__init__(topics.NODE_NAMES[role], namespace=topics.DEFAULT_NAMESPACE, parameter_overrides=sim_time)
+        self.role, self.steps, self.done = role, steps, False
+        self.result: dict[str, Any] = {}
+        self.pubs = {s.name: self.create_publisher(topics.msg_class(s.type_name), s.name,
+                                                   topics.qos_profile(s.qos, LEASE_S))
+                     for s in topics.published(role, rta=True)}  # fmt: skip
+        cfg = config.load()
+        scen = cfg.scenario("paper-example")
+        x = np.asarray(scen.x0, dtype=float)
+        self.msgs: dict[str, Any] = {}
+        if role == topics.PLANT:
+            p = plant_record(cfg)
+            self.msgs = {
+                topics.STATE: convert.state_msg(x, 0), topics.TORQUE_APPLIED: convert.torque_msg(np.zeros(3), 0),
+                topics.ODOMETRY: convert.odometry_msg(x, 0), topics.TEMPERATURE: convert.temperature_msg(x, 0),
+                topics.BATTERY: convert.battery_msg(x, 0, p, 8.0), topics.SUN_VECTOR: convert.sun_vector_msg(x, 0),
+            }  # fmt: skip
+            self.sub(topics.TORQUE_CMD, self.on_command)
+            self.k, self.t0 = 0, 0.0
+            self.gate = self.create_timer(0.005, self.start)
+        elif role == topics.CONTROLLER:
+            self.msgs = {topics.TORQUE_DES: convert.torque_msg(np.ones(3) * 1e-5, 0)}
+            self.sub(topics.STATE, self.on_state_controller)
+        elif role == topics.FILTER:
+            f = AsifFilter(cfg)
+            res = f.filter(x, np.zeros(3))
+            self.msgs = {topics.TORQUE_CMD: convert.torque_msg(np.ones(3) * 1e-5, 0),
+                         topics.FILTER_STATUS: convert.filter_status_msg(res, 0, f.counters, "robust",
+                                                                         ["communication"])}
+            self.states: set[int] = set()
+            self.desired: set[int] = set()
+            self.sub(topics.STATE, self.on_state_filter)
+            self.sub(topics.TORQUE_DES, self.on_desired)
+        else:
+            self.count = 0
+            for spec in topics.recorded(rta=True):
+                cb = self.on_run_status if spec.name == topics.RUN_STATUS else self.on_raw
+                self.sub(spec.name, cb, raw=spec.name != topics.RUN_STATUS)
+
+    def sub(self, topic: str, cb: Any, raw: bool = False) -> None:
+        spec = topics.TOPICS[topic]
+        self.create_subscription(topics.msg_class(spec.type_name), spec.name, cb,
+                                 topics.qos_profile(spec.qos, LEASE_S), raw=raw)
+
+    def publish(self, topic: str, t_ns: int) -> None:
+        self.pubs[topic].publish(_stamp(self.msgs[topic], t_ns) if topic in self.msgs else convert.clock_msg(t_ns))
+
+    # plant
+    def start(self) -> None:
+        for name, pub in self.pubs.items():
+            if pub.get_subscription_count() < topics.expected_readers(name, rta=True, record=True):
+                return
+        self.gate.cancel()
+        self.pubs[topics.RUN_STATUS].publish(convert.run_status_msg(0, topics.RUN_RUNNING, {}))
+        self.t0 = time.perf_counter()
+        self.sample(0)
+
+    def sample(self, t_ns: int) -> None:
+        self.publish(topics.STATE, t_ns)
+        self.publish(topics.CLOCK, t_ns)
+        for name in topics.INSPECTION_TOPICS:
+            self.publish(name, t_ns)
+
+    def on_command(self, msg: Any) -> None:
+        t_ns = convert.stamp_ns(msg.header.stamp)
+        if t_ns != convert.seconds_to_ns(self.k):
+            return
+        if self.k == self.steps:
+            self.result = {"loop_s": time.perf_counter() - self.t0, "steps": self.steps}
+            self.pubs[topics.RUN_STATUS].publish(convert.run_status_msg(t_ns, topics.RUN_DONE, {}))
+            self.done = True
+            return
+        self.k += 1
+        t_next = convert.seconds_to_ns(self.k)
+        self.sample(t_next)
+        self.publish(topics.TORQUE_APPLIED, t_ns)
+
+    # controller
+    def on_state_controller(self, msg: Any) -> None:
+        t_ns = convert.stamp_ns(msg.header.stamp)
+        self.publish(topics.TORQUE_DES, t_ns)
+        if t_ns == convert.seconds_to_ns(self.steps):
+            self.done = True
+
+    # filter
+    def on_state_filter(self, msg: Any) -> None:
+        self.states.add(convert.stamp_ns(msg.header.stamp))
+        self.answer()
+
+    def on_desired(self, msg: Any) -> None:
+        self.desired.add(convert.stamp_ns(msg.header.stamp))
+        self.answer()
+
+    def answer(self) -> None:
+        for t_ns in sorted(self.states & self.desired):
+            self.states.discard(t_ns)
+            self.desired.discard(t_ns)
+            self.publish(topics.TORQUE_CMD, t_ns)
+            self.publish(topics.FILTER_STATUS, t_ns)
+            if t_ns == convert.seconds_to_ns(self.steps):
+                self.done = True
+
+    # recorder
+    def on_raw(self, data: bytes) -> None:
+        self.count += 1
+
+    def on_run_status(self, msg: Any) -> None:
+        if convert.run_status_from_msg(msg)[0] == topics.RUN_DONE:
+            self.done = True
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("role", choices=(topics.PLANT, topics.CONTROLLER, topics.FILTER, topics.RECORDER))
+    ap.add_argument("--steps", type=int, required=True)
+    ap.add_argument("--result", type=Path)
+    ap.add_argument("--timeout", type=float, default=600.0)
+    args = ap.parse_args()
+    rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
+    node = Forwarder(args.role, args.steps)
+    ex = EventsExecutor()
+    ex.add_node(node)
+    deadline = time.monotonic() + args.timeout
+    try:
+        while not node.done and time.monotonic() < deadline:
+            ex.spin_once(timeout_sec=0.1)
+        end = time.monotonic() + 0.5  # let the last messages reach their readers
+        while time.monotonic() < end:
+            ex.spin_once(timeout_sec=0.05)
+    finally:
+        ex.shutdown()
+        node.destroy_node()
+        rclpy.try_shutdown()
+    if args.result is not None and node.result:
+        args.result.write_text(json.dumps(node.result))
+    return 0 if node.done else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
