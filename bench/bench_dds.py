@@ -38,11 +38,11 @@ os.environ.setdefault("AMENT_PREFIX_PATH", sys.prefix)
 
 import machine  # noqa: E402
 
-from rta_attitude import config  # noqa: E402
+from rta_attitude import config, topics  # noqa: E402
 from rta_attitude.cli import launch as launch_cli  # noqa: E402
 from rta_attitude.cli import launcher  # noqa: E402
 from rta_attitude.recording.bag import read_bag  # noqa: E402
-from rta_attitude.ros import convert, topics  # noqa: E402
+from rta_attitude.ros import convert  # noqa: E402
 from rta_attitude.simulation.closed_loop import simulate  # noqa: E402
 
 ROLES = (topics.RECORDER, topics.FILTER, topics.CONTROLLER, topics.PLANT)

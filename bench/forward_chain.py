@@ -32,10 +32,10 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.signals import SignalHandlerOptions
 
-from rta_attitude import config
+from rta_attitude import config, topics
 from rta_attitude.dynamics.spacecraft import plant_record
 from rta_attitude.filter.asif import AsifFilter
-from rta_attitude.ros import convert, topics
+from rta_attitude.ros import convert, interface
 
 LEASE_S = 2.0
 
@@ -51,8 +51,8 @@ class Forwarder(Node):
         super().__init__(topics.NODE_NAMES[role], namespace=topics.DEFAULT_NAMESPACE, parameter_overrides=sim_time)
         self.role, self.steps, self.done = role, steps, False
         self.result: dict[str, Any] = {}
-        self.pubs = {s.name: self.create_publisher(topics.msg_class(s.type_name), s.name,
-                                                   topics.qos_profile(s.qos, LEASE_S))
+        self.pubs = {s.name: self.create_publisher(interface.msg_class(s.type_name), s.name,
+                                                   interface.qos_profile(s.qos, LEASE_S))
                      for s in topics.published(role, rta=True)}  # fmt: skip
         cfg = config.load()
         scen = cfg.scenario("paper-example")
@@ -89,8 +89,8 @@ class Forwarder(Node):
 
     def sub(self, topic: str, cb: Any, raw: bool = False) -> None:
         spec = topics.TOPICS[topic]
-        self.create_subscription(topics.msg_class(spec.type_name), spec.name, cb,
-                                 topics.qos_profile(spec.qos, LEASE_S), raw=raw)
+        self.create_subscription(interface.msg_class(spec.type_name), spec.name, cb,
+                                 interface.qos_profile(spec.qos, LEASE_S), raw=raw)
 
     def publish(self, topic: str, t_ns: int) -> None:
         self.pubs[topic].publish(_stamp(self.msgs[topic], t_ns) if topic in self.msgs else convert.clock_msg(t_ns))

@@ -22,12 +22,13 @@ from typing import Any
 import numpy as np
 import pytest
 
-from rta_attitude import config
+from rta_attitude import config, topics
 from rta_attitude.cli.main import main as cli_main
 from rta_attitude.dynamics import spacecraft
 from rta_attitude.dynamics.controller import controller_record, desired_command
 from rta_attitude.errors import BagError
 from rta_attitude.recording import analysis
+from rta_attitude.recording import summary as bag_summary
 from rta_attitude.recording.bag import BagWriter, Qos
 from rta_attitude.simulation.closed_loop import ClosedLoop, Trajectory
 from rta_attitude.simulation.metrics import summarize_trajectory
@@ -71,7 +72,7 @@ def _messages(run: Run) -> list[tuple[str, Any, int]]:
     torque_des; filter torque_cmd + filter_status (RTA) or the pass-through torque_cmd. The chain
     also answers the final state, as in the DDS run. run_status at the start and the end.
     """
-    from rta_attitude.ros import convert, topics
+    from rta_attitude.ros import convert
 
     loop, traj = run.loop, run.traj
     cfg, n = loop.cfg, traj.steps
@@ -119,7 +120,6 @@ def _messages(run: Run) -> list[tuple[str, Any, int]]:
 
 def _write(run: Run, path: Path, chunk_size: int = 256 * 1024, metadata: bool = True) -> Path:
     """A bag as bag_recorder_node writes it (BagWriter; the `rta_attitude` metadata record)."""
-    from rta_attitude.ros import topics
     from rta_attitude.ros.recorder_node import add_metadata
 
     msgs = _messages(run)
@@ -166,7 +166,7 @@ def _without_bag(summary: dict[str, Any]) -> dict[str, Any]:
 def test_bag_summary_equals_in_process_summary(rta: bool, runs: dict[bool, Run], bags: dict[str, Path],
                                                cfg: Any) -> None:
     run = analysis.load_run(bags["rta" if rta else "no_rta"], cfg)
-    summary = analysis.summarize_run(run, cfg)
+    summary = bag_summary.summarize_run(run, cfg)
     assert _without_bag(summary) == runs[rta].summary  # every key, every value, exactly
     traj = runs[rta].traj
     np.testing.assert_array_equal(run.x, traj.x)
@@ -230,7 +230,7 @@ def test_rosbags_writer_bag_gives_the_same_summary(runs: dict[bool, Run], tmp_pa
     assert (path / "metadata.yaml").is_file()
     run = analysis.load_run(path, cfg)  # a bag directory is accepted
     assert run.path.suffix == ".mcap"
-    assert _without_bag(analysis.summarize_run(run, cfg)) == runs[True].summary
+    assert _without_bag(bag_summary.summarize_run(run, cfg)) == runs[True].summary
 
 
 def test_filter_status_layout_matches_the_filter_node(runs: dict[bool, Run], cfg: Any) -> None:
@@ -264,9 +264,9 @@ def test_truncated_bag_is_analysed_up_to_where_it_stops(runs: dict[bool, Run], b
     assert run.data_end_s == float(traj.t_s[n])
     np.testing.assert_array_equal(run.x, traj.x[: n + 1])
     np.testing.assert_array_equal(run.h_substep_min, traj.h_substep_min[:n])
-    summary = analysis.summarize_run(run, cfg)
+    summary = bag_summary.summarize_run(run, cfg)
     assert summary["bag"]["truncated"] and summary["steps"] == n
-    assert f"bag truncated: data ends at t = {run.data_end_s:.1f} s" in analysis.format_bag_lines(summary)
+    assert f"bag truncated: data ends at t = {run.data_end_s:.1f} s" in bag_summary.format_bag_lines(summary)
 
 
 def _cli(*args: str) -> subprocess.Popen[str]:
@@ -356,5 +356,5 @@ def test_fast_cdr_reader_matches_the_generic_decoder(bags: dict[str, Path]) -> N
         assert a.keys() == b.keys() and len(a) > 100
         assert all(np.array_equal(a[k], b[k]) for k in a)
     assert raw.status == decoded.status and raw.run_status == decoded.run_status and len(raw.status) > 100
-    with pytest.raises(analysis._CdrError):
+    with pytest.raises(analysis.CdrError):
         analysis._raw("state", b"\x00\x02\x00\x00" + bytes(40))  # encapsulation the fast reader does not take

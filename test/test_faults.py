@@ -38,12 +38,12 @@ from hypothesis import strategies as st
 from rclpy.parameter import Parameter
 from rclpy.serialization import deserialize_message, serialize_message
 
-from rta_attitude import config
+from rta_attitude import config, topics
 from rta_attitude.cli import launch, launcher
 from rta_attitude.dynamics.state import STATE_NAMES
 from rta_attitude.errors import BagError, MessageError
 from rta_attitude.recording.bag import read_bag
-from rta_attitude.ros import convert, topics
+from rta_attitude.ros import convert, interface
 from rta_attitude.ros.faults import FaultLog, StampOrder
 from rta_attitude.ros.filter_node import FilterNode
 from rta_attitude.ros.plant_node import PlantNode
@@ -314,7 +314,7 @@ def test_stale_states_are_dropped_against_the_sim_clock(filter_node: Any) -> Non
     executor.add_node(helper)
     try:
         spec = topics.TOPICS[topics.CLOCK]
-        pub = helper.create_publisher(Clock, spec.name, topics.qos_profile(spec.qos))
+        pub = helper.create_publisher(Clock, spec.name, interface.qos_profile(spec.qos))
         deadline = time.monotonic() + 10
         while node.get_clock().now().nanoseconds != 100 * S:
             assert time.monotonic() < deadline, "no /clock"
@@ -380,9 +380,10 @@ def test_plant_checks_commands_and_times_out_in_lockstep(tmp_path: Path) -> None
     stub = rclpy.create_node("filter_stub", namespace=NS, context=context)
     states: list[Any] = []
     spec = topics.TOPICS[topics.STATE]
-    stub.create_subscription(topics.msg_class(spec.type_name), spec.name, states.append, topics.qos_profile(spec.qos))
+    stub.create_subscription(interface.msg_class(spec.type_name), spec.name, states.append,
+                             interface.qos_profile(spec.qos))
     spec = topics.TOPICS[topics.TORQUE_CMD]
-    pub = stub.create_publisher(topics.msg_class(spec.type_name), spec.name, topics.qos_profile(spec.qos))
+    pub = stub.create_publisher(interface.msg_class(spec.type_name), spec.name, interface.qos_profile(spec.qos))
     executor.add_node(plant)
     executor.add_node(stub)
 
@@ -563,7 +564,8 @@ def test_controller_killed_the_filter_keeps_the_spacecraft_safe_with_u_des_zero(
                                                                                 sig: signal.Signals) -> None:
     """SIGTERM: the controller leaves (its publisher unmatches) and the filter answers at once; SIGKILL: it
     stays matched until Fast DDS's participant lease expires, and each state waits desired_timeout_s."""
-    from rta_attitude.recording.analysis import load_run, summarize_run
+    from rta_attitude.recording.analysis import load_run
+    from rta_attitude.recording.summary import summarize_run
 
     lp = loop_factory("desired_timeout_s=0.2", "command_timeout_s=3.0", "stop_timeout_s=1.0", duration=STEPS_LONG)
     lp.wait_states(25)
@@ -764,14 +766,15 @@ def test_clock_jumping_back_resets_the_stamp_screens_once(tmp_path: Path) -> Non
     executor = make_executor("single", context=context)
     executor.add_node(node)
     lease = next(k.default for k in topics.KNOBS if k.name == "liveliness_lease_s")  # the nodes request it
-    clock = node.create_publisher(topics.msg_class("rosgraph_msgs/msg/Clock"), "/clock",
-                                  topics.qos_profile(topics.STREAM_QOS))
-    state = node.create_publisher(topics.msg_class(topics.TOPICS[topics.STATE].type_name), topics.STATE,
-                                  topics.qos_profile(topics.STATE_QOS, lease))
+    clock = node.create_publisher(interface.msg_class("rosgraph_msgs/msg/Clock"), "/clock",
+                                  interface.qos_profile(topics.STREAM_QOS))
+    state = node.create_publisher(interface.msg_class(topics.TOPICS[topics.STATE].type_name), topics.STATE,
+                                  interface.qos_profile(topics.STATE_QOS, lease))
     answered: list[int] = []
     spec = topics.TOPICS[topics.TORQUE_CMD]
-    node.create_subscription(topics.msg_class(spec.type_name), spec.name,
-                             lambda m: answered.append(convert.stamp_ns(m.header.stamp)), topics.qos_profile(spec.qos))
+    node.create_subscription(interface.msg_class(spec.type_name), spec.name,
+                             lambda m: answered.append(convert.stamp_ns(m.header.stamp)),
+                             interface.qos_profile(spec.qos))
 
     def spin_until(cond: Any, what: str, timeout_s: float = 60.0) -> None:
         deadline = time.monotonic() + timeout_s

@@ -15,9 +15,8 @@ from typing import Any
 
 import pytest
 
-from rta_attitude import config
+from rta_attitude import config, topics
 from rta_attitude.recording.bag import read_bag
-from rta_attitude.ros import topics
 from rta_attitude.simulation.closed_loop import ClosedLoop
 from rta_attitude.simulation.metrics import format_summary, summarize_trajectory
 

@@ -24,12 +24,12 @@ import rclpy
 from helpers import integrate, saturate, to_wheel_accel
 from rclpy.parameter import Parameter
 
-from rta_attitude import config
+from rta_attitude import config, topics
 from rta_attitude.dynamics.spacecraft import plant_record
 from rta_attitude.dynamics.state import STATE_NAMES
 from rta_attitude.errors import ConfigError, MessageError
 from rta_attitude.filter.asif import AsifFilter
-from rta_attitude.ros import convert, topics
+from rta_attitude.ros import convert, interface
 from rta_attitude.ros.controller_node import ControllerNode
 from rta_attitude.ros.filter_node import FilterNode
 from rta_attitude.ros.plant_node import PlantNode
@@ -75,8 +75,8 @@ def run_nodes(tmp_path: Path, *, rta: bool = True, roles: tuple[str, ...] = tupl
         if probe_state:  # a silent stand-in for the controller: it reads state and never answers
             probe = rclpy.create_node("probe", namespace=NS, context=context)
             spec = topics.TOPICS[topics.STATE]
-            probe.create_subscription(topics.msg_class(spec.type_name), spec.name, lambda m: None,
-                                      topics.qos_profile(spec.qos))
+            probe.create_subscription(interface.msg_class(spec.type_name), spec.name, lambda m: None,
+                                      interface.qos_profile(spec.qos))
             executor.add_node(probe)
         waits = [n.finished for r, n in nodes.items() if r in (topics.PLANT, topics.RECORDER)]
         deadline = time.monotonic() + timeout_s
@@ -337,7 +337,7 @@ def test_node_with_bad_parameter_exits_1_with_one_line(tmp_path: Path) -> None:
 
 
 def test_nodes_package_keeps_rclpy_out_of_the_core_and_launcher() -> None:
-    code = ("import sys, rta_attitude.cli.launcher, rta_attitude.ros, rta_attitude.ros.topics, "
+    code = ("import sys, rta_attitude.cli.launcher, rta_attitude.ros, rta_attitude.topics, "
             "rta_attitude.ros.convert; print('rclpy' in sys.modules)")
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60, check=True)
     assert proc.stdout.strip() == "False"

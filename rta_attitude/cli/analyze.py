@@ -27,13 +27,12 @@ def run(args: argparse.Namespace) -> int:
     """`rta-attitude analyze`: summary (printed, summary.json), time series and figure of a bag."""
     from rta_attitude import config as config_module
     from rta_attitude.files import output_dir, write_text
-    from rta_attitude.recording.analysis import (
+    from rta_attitude.recording.analysis import load_run, resolve_bag_path
+    from rta_attitude.recording.summary import (
         compare_summaries,
         format_bag_lines,
         format_comparison,
         label,
-        load_run,
-        resolve_bag_path,
         summarize_run,
         write_timeseries,
     )

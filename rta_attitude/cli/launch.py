@@ -10,11 +10,11 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
+from rta_attitude import topics
 from rta_attitude.cli.launcher import DEFAULT_DOMAIN_ID, DISCOVERY_RANGES, launch, plan
 from rta_attitude.config.schema import PRESETS
 from rta_attitude.errors import RtaError
 from rta_attitude.files import output_dir, write_text
-from rta_attitude.ros import topics
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -47,8 +47,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """`rta-attitude launch`: see the module docstring."""
-    from rta_attitude.recording.analysis import load_run, summarize_run
+    from rta_attitude.recording.analysis import load_run
     from rta_attitude.recording.bag import read_bag
+    from rta_attitude.recording.summary import summarize_run
     from rta_attitude.ros.convert import run_status_from_msg
     from rta_attitude.simulation.metrics import format_summary
 

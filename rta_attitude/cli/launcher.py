@@ -48,10 +48,10 @@ from typing import IO, Any
 import yaml
 
 from rta_attitude import config as config_module
+from rta_attitude import topics
 from rta_attitude.config.schema import Config
 from rta_attitude.errors import ConfigError
 from rta_attitude.files import output_file
-from rta_attitude.ros import topics
 from rta_attitude.ros.parameters import check_knob, flatten, nest
 
 SHM_DIR = Path("/dev/shm")

@@ -3,7 +3,7 @@
     rta-attitude analyze BAG [--out DIR] [--compare BAG2] [--config FILE] [--namespace NS]
 
 ROS-free (the bag is read with `rta_attitude.recording.bag`; the topic vocabulary comes from the pure-Python
-`nodes/topics.py`; nothing imports rclpy or a message package). From the topics of one run under a
+`rta_attitude.topics`; nothing imports rclpy or a message package). From the topics of one run under a
 namespace (default: the one whose `state` topic the bag has, normally `/rta`):
 
 | topic            | type                                | used for                                        |
@@ -39,7 +39,7 @@ import logging
 import os
 import struct
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -47,14 +47,14 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from rta_attitude.config.schema import CONSTRAINT_NAMES, Config
+from rta_attitude import topics
+from rta_attitude.config.schema import Config
 from rta_attitude.constraints import ConstraintSet
 from rta_attitude.dynamics import spacecraft
 from rta_attitude.dynamics.state import AXES, STATE_NAMES, STATE_SIZE
 from rta_attitude.errors import BagError, ConfigError
-from rta_attitude.files import atomic
 from rta_attitude.recording import bag as bagio
-from rta_attitude.ros import topics
+from rta_attitude.recording.cdr import Cdr, CdrError, read_diagnostics, read_state, read_vector
 from rta_attitude.simulation.trajectory import substep_minima
 
 Array = NDArray[np.float64]
@@ -66,21 +66,11 @@ FILTER_STATUS_TOPIC, TORQUE_APPLIED_TOPIC, RUN_STATUS_TOPIC = topics.FILTER_STAT
     topics.RUN_STATUS
 TOPIC_TYPES: dict[str, str] = {name: topics.TOPICS[name].type_name for name in (
     STATE_TOPIC, TORQUE_DES_TOPIC, TORQUE_CMD_TOPIC, FILTER_STATUS_TOPIC, TORQUE_APPLIED_TOPIC, RUN_STATUS_TOPIC)}
-"""Relative topic names read from a bag and their types (the nodes' vocabulary, nodes/topics.py)."""
+"""Relative topic names read from a bag and their types (the vocabulary of rta_attitude.topics)."""
 REQUIRED_TOPICS = (STATE_TOPIC, TORQUE_CMD_TOPIC)
 METADATA_RECORD = "rta_attitude"
 """Name of the MCAP metadata record in which the recorder stores the run's facts."""
 
-# filter_status layout (nodes/topics.py; written by nodes/convert.filter_status_msg): an entry named
-# topics.QP_STATUS_NAME with the call's values, then one entry per constraint.
-KEY_STATUS = "status"
-KEY_FALLBACK = "fallback"
-KEY_SOLVE_TIME = "solve_time_s"
-KEY_PRESET = "preset"
-KEY_BOX_ACTIVE = "box_active"
-KEY_SLACK = "slack"
-KEY_INTERVENING = "intervening"
-KEY_SLACKED = "slacked"
 
 RUN_FACTS: tuple[str, ...] = ("run_state", "stepping", *topics.PLANT_COUNTERS)
 """Facts of the plant's run_status / the recorder's metadata copied into the summary's `bag` section."""
@@ -228,102 +218,6 @@ def _flag(text: str | None) -> bool:
     return text is not None and text.strip().lower() == "true"
 
 
-class _CdrError(Exception):
-    """Raw bytes that the fast reader does not handle (the generic decoder then reads the bag)."""
-
-
-class _Cdr:
-    """Just enough of an XCDR1 reader for the four message types of a run (plain CDR, either byte order).
-
-    Reading the raw bytes of the bag directly is ~6x faster than mcap_ros2's generic decoder on
-    filter_status (hundreds of strings per message); any surprise raises _CdrError.
-    """
-
-    def __init__(self, data: bytes) -> None:
-        if len(data) < 4 or data[0] != 0 or data[1] not in (0, 1):
-            raise _CdrError("not plain CDR")
-        self.buf, self.pos = data, 4
-        self.order = "<" if data[1] == 1 else ">"
-
-    def _align(self, n: int) -> None:
-        self.pos += -(self.pos - 4) % n
-
-    def u32(self) -> int:
-        self._align(4)
-        (v,) = struct.unpack_from(self.order + "I", self.buf, self.pos)
-        self.pos += 4
-        return int(v)
-
-    def u8(self) -> int:
-        v = self.buf[self.pos]
-        self.pos += 1
-        return v
-
-    def string(self) -> str:
-        n = self.u32()
-        end = self.pos + n
-        if end > len(self.buf) or (n and self.buf[end - 1] != 0):
-            raise _CdrError("bad string")
-        text = self.buf[self.pos:end - 1].decode("utf-8") if n else ""
-        self.pos = end
-        return text
-
-    def doubles(self, count: int) -> Array:
-        self._align(8)
-        arr = np.frombuffer(self.buf, dtype=self.order + "f8", count=count, offset=self.pos)
-        self.pos += 8 * count
-        return arr.astype(float)
-
-    def header(self) -> int:
-        """std_msgs/Header: the stamp in ns (frame_id skipped)."""
-        sec, nanosec = struct.unpack_from(self.order + "iI", self.buf, self.pos)
-        self.pos += 8
-        self.string()
-        return int(sec) * NS_PER_S + int(nanosec)
-
-
-def _raw_state(c: _Cdr) -> tuple[int, tuple[str, ...], Array]:
-    stamp = c.header()
-    names = tuple(c.string() for _ in range(c.u32()))
-    return stamp, names, c.doubles(c.u32())
-
-
-def _raw_vector(c: _Cdr) -> tuple[int, Array]:
-    stamp = c.header()
-    return stamp, c.doubles(3)
-
-
-def _raw_diagnostics(c: _Cdr) -> tuple[int, dict[str, dict[str, str]]]:
-    """DiagnosticArray; the KeyValue loop (most of a filter_status) is inlined for speed."""
-    stamp = c.header()
-    buf, order = c.buf, c.order
-    u32 = struct.Struct(order + "I").unpack_from
-    size = len(buf)
-    out: dict[str, dict[str, str]] = {}
-    for _ in range(c.u32()):
-        c.u8()  # level
-        name = c.string()
-        c.string()  # message
-        c.string()  # hardware_id
-        count = c.u32()
-        pos = c.pos
-        values: dict[str, str] = {}
-        for _ in range(count):  # key, value: uint32 length (incl. NUL), bytes, NUL; lengths 4-aligned
-            pos += -(pos - 4) % 4
-            (n,) = u32(buf, pos)
-            key_end = pos + 4 + n
-            pos = key_end + (-(key_end - 4) % 4)
-            (m,) = u32(buf, pos)
-            value_end = pos + 4 + m
-            if not n or not m or value_end > size or buf[key_end - 1] or buf[value_end - 1]:
-                raise _CdrError("bad string")
-            values[buf[key_end - n:key_end - 1].decode()] = buf[pos + 4:value_end - 1].decode()
-            pos = value_end
-        c.pos = pos
-        out[name] = values
-    return stamp, out
-
-
 def _decoded(name: str | None, msg: Any) -> tuple[int, Any]:
     """(stamp [ns], payload) of a message decoded by mcap_ros2, as the raw readers give it."""
     stamp = _stamp_ns(msg)
@@ -335,17 +229,17 @@ def _decoded(name: str | None, msg: Any) -> tuple[int, Any]:
 
 
 def _raw(name: str | None, data: bytes) -> tuple[int, Any]:
-    """(stamp [ns], payload) read straight from CDR bytes; _CdrError if they are not as expected."""
+    """(stamp [ns], payload) read straight from CDR bytes; CdrError if they are not as expected."""
     try:
-        c = _Cdr(data)
+        c = Cdr(data)
         if name == STATE_TOPIC:
-            stamp, names, pos = _raw_state(c)
+            stamp, names, pos = read_state(c)
             return stamp, (names, pos)
         if name in (FILTER_STATUS_TOPIC, RUN_STATUS_TOPIC):
-            return _raw_diagnostics(c)
-        return _raw_vector(c)
+            return read_diagnostics(c)
+        return read_vector(c)
     except (struct.error, ValueError, IndexError, UnicodeDecodeError) as exc:
-        raise _CdrError(str(exc)) from None
+        raise CdrError(str(exc)) from None
 
 
 @dataclass
@@ -419,7 +313,7 @@ def _read_records(file: Path, wanted: list[str], namespace: str) -> tuple[bagio.
     contents = bagio.read_bag(file, topics=wanted, decode=False)
     try:
         return contents, _collect(contents, namespace, file)
-    except _CdrError as exc:
+    except CdrError as exc:
         log.debug("%s: fast CDR reader gave up (%s); decoding generically", file, exc)
     contents = bagio.read_bag(file, topics=wanted, decode=True)
     return contents, _collect(contents, namespace, file)
@@ -578,25 +472,25 @@ def load_run(
             continue
         top = st.get(topics.QP_STATUS_NAME, {})
         try:
-            status[k] = top.get(KEY_STATUS, "missing")
-            fb = top.get(KEY_FALLBACK, "")
+            status[k] = top.get(topics.KEY_STATUS, "missing")
+            fb = top.get(topics.KEY_FALLBACK, "")
             fallback[k] = "" if fb in ("", topics.NO_FALLBACK) else fb
-            solve[k] = float(top.get(KEY_SOLVE_TIME, "0"))
-            if preset is None and top.get(KEY_PRESET):
-                preset = top[KEY_PRESET]
+            solve[k] = float(top.get(topics.KEY_SOLVE_TIME, "0"))
+            if preset is None and top.get(topics.KEY_PRESET):
+                preset = top[topics.KEY_PRESET]
             for a, axis in enumerate(AXES):
-                box[k, a] = _flag(top.get(f"{KEY_BOX_ACTIVE}_{axis}"))
+                box[k, a] = _flag(top.get(f"{topics.KEY_BOX_ACTIVE}_{axis}"))
             for i, name in enumerate(constraints.names):
                 entry = st.get(topics.CONSTRAINT_STATUS_PREFIX + name)
                 if entry is None:
                     continue
-                slack[k, i] = float(entry.get(KEY_SLACK, "0"))
-                inter[k, i] = _flag(entry.get(KEY_INTERVENING))
-                if _flag(entry.get(KEY_SLACKED)):
+                slack[k, i] = float(entry.get(topics.KEY_SLACK, "0"))
+                inter[k, i] = _flag(entry.get(topics.KEY_INTERVENING))
+                if _flag(entry.get(topics.KEY_SLACKED)):
                     slacked_recorded.add(name)
         except ValueError:
             raise BagError(f"{file}: the filter_status at t = {c / NS_PER_S:.3f} s has a non-numeric "
-                           f"{KEY_SOLVE_TIME} or {KEY_SLACK}") from None
+                           f"{topics.KEY_SOLVE_TIME} or {topics.KEY_SLACK}") from None
     if status_missing:
         notes.append(f"steps without filter_status: {status_missing} (counted as status 'missing')")
     if rta and preset is None:
@@ -618,117 +512,6 @@ def load_run(
     return run
 
 
-# ----------------------------------------------------------------------------- summaries
-
-
-def summarize_run(run: BagRun, cfg: Config) -> dict[str, Any]:
-    """`metrics.summarize` of a bag run: the keys and values of `simulate`'s summary, plus `bag`.
-
-    `bag` holds the file, topics and counts, truncation (`truncated`, `data_ends_s`), the
-    re-integration residual and how the minima between samples were obtained.
-    """
-    from rta_attitude.simulation.metrics import summarize
-
-    meta = {"scenario": run.scenario, "rta": run.rta, "preset": run.preset if run.rta else None,
-            "config": cfg.source, "dt_s": run.dt_s, "substeps": cfg.substeps}
-    out = summarize(
-        run.names, run.t_s, run.h, run.h_substep_min, run.h_substep_argmin_s, run.omega_dot,
-        cfg.limits.omega_dot_max_rad_s2, run.slack if run.rta else None, run.intervening if run.rta else None,
-        run.box_active if run.rta else None, run.status if run.rta else None, run.fallback if run.rta else None,
-        run.solve_time_s if run.rta else None, run.slacked, meta,
-    )  # fmt: skip
-    exact = run.reintegration_residual <= RESIDUAL_TOLERANCE
-    out["bag"] = {
-        "path": str(run.path),
-        "namespace": run.namespace,
-        "topics": run.topic_types,
-        "messages": {t: run.counts.get(t, 0) for t in run.topic_types},
-        "truncated": run.truncated,
-        "data_ends_s": run.data_end_s,
-        "reintegration_residual": run.reintegration_residual,
-        "substep_minima": ("recomputed exactly: each recorded step re-integrated from its recorded state and "
-                           "command reproduces the next recorded state" if exact else
-                           "estimated: re-integration does not reproduce the recorded states"),
-        "run": dict(run.run_facts),
-        "notes": list(run.notes),
-    }
-    return out
-
-
-def format_bag_lines(summary: Mapping[str, Any]) -> str:
-    """The bag-specific lines printed under the `simulate`-style table."""
-    b = summary["bag"]
-    lines = [f"bag {b['path']} ({b['namespace']}): {summary['steps']} steps, "
-             f"re-integration residual {b['reintegration_residual']:.2g}"]
-    if b["truncated"]:
-        lines.append(f"bag truncated: data ends at t = {b['data_ends_s']:.1f} s (the file has no MCAP footer; "
-                     "the writer was killed)")
-    lines += [f"note: {n}" for n in b["notes"]]
-    return "\n".join(lines)
-
-
-def _fmt(v: Any, spec: str = ".5g") -> str:
-    if v is None:
-        return "-"
-    if isinstance(v, bool):
-        return "yes" if v else "no"
-    if isinstance(v, float):
-        return format(v, spec)
-    return str(v)
-
-
-def compare_summaries(a: Mapping[str, Any], b: Mapping[str, Any]) -> list[dict[str, Any]]:
-    """Rows (quantity, a, b, difference) comparing two run summaries, for the table and JSON."""
-    rows: list[dict[str, Any]] = []
-
-    def row(name: str, va: Any, vb: Any) -> None:
-        diff = vb - va if isinstance(va, (int, float)) and isinstance(vb, (int, float)) \
-            and not isinstance(va, bool) and not isinstance(vb, bool) else None
-        rows.append({"quantity": name, "a": va, "b": vb, "b_minus_a": diff})
-
-    for name in CONSTRAINT_NAMES:
-        ca, cb = a["constraints"].get(name), b["constraints"].get(name)
-        if ca is None or cb is None:
-            continue
-        row(f"{name} min h [{ca['unit']}]", ca["min_h"], cb["min_h"])
-        row(f"{name} first violation [s]", ca["first_violation_s"], cb["first_violation_s"])
-    for name, acc in a.get("angular_acceleration", {}).items():
-        other = b.get("angular_acceleration", {}).get(name)
-        if other is not None:
-            row(f"{name} max |.| [deg/s^2]", acc["max_abs_deg_s2"], other["max_abs_deg_s2"])
-    for key in ("intervening_steps", "fallbacks"):
-        row(key, a.get(key), b.get(key))
-    row("violated", ", ".join(a["violated"]) or "none", ", ".join(b["violated"]) or "none")
-    row("safe", a["safe"], b["safe"])
-    return rows
-
-
-def format_comparison(rows: Sequence[Mapping[str, Any]], label_a: str, label_b: str) -> str:
-    """Fixed-width table of `compare_summaries` rows (columns as wide as their longest entry)."""
-    cells = [("quantity", "A: " + label_a, "B: " + label_b, "B - A")]
-    cells += [(str(r["quantity"]), _fmt(r["a"]), _fmt(r["b"]), _fmt(r["b_minus_a"], ".4g")) for r in rows]
-    w = [max(len(c[i]) for c in cells) for i in range(4)]
-    return "\n".join(f"{q:<{w[0]}}  {a:>{w[1]}}  {b:>{w[2]}}  {d:>{w[3]}}" for q, a, b, d in cells)
-
-
-def label(summary: Mapping[str, Any]) -> str:
-    return f"RTA on ({summary.get('preset')})" if summary.get("rta") else "RTA off"
-
-
-def write_timeseries(run: BagRun, path: Path) -> Path:
-    """Save the rebuilt series as a compressed NPZ with named columns (as `simulate`'s timeseries.npz)."""
-    with atomic(path) as tmp:
-        np.savez_compressed(
-            tmp, t_s=run.t_s, x=run.x, state_names=np.array(STATE_NAMES), u_des=run.u_des, u=run.u,
-            omega_dot=run.omega_dot, constraint_names=np.array(run.names), h=run.h, h_substep_min=run.h_substep_min,
-            slack=run.slack, intervening=run.intervening, box_active=run.box_active, status=run.status,
-            fallback=run.fallback, solve_time_s=run.solve_time_s,
-        )  # fmt: skip
-    return path
-
-
 __all__ = [
-    "DEFAULT_NAMESPACE", "TOPIC_TYPES", "BagRun", "compare_summaries", "find_namespace", "format_bag_lines",
-    "format_comparison", "label", "load_run", "parse_diagnostics", "resolve_bag_path", "summarize_run",
-    "write_timeseries",
+    "DEFAULT_NAMESPACE", "TOPIC_TYPES", "BagRun", "find_namespace", "load_run", "parse_diagnostics", "resolve_bag_path",
 ]  # fmt: skip

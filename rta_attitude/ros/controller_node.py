@@ -26,10 +26,11 @@ from typing import Any
 
 import numpy as np
 
+from rta_attitude import topics
 from rta_attitude.dynamics.controller import controller_record, desired_command
 from rta_attitude.dynamics.spacecraft import wheel_accel_to_torque
 from rta_attitude.errors import MessageError
-from rta_attitude.ros import convert, topics
+from rta_attitude.ros import convert, interface
 from rta_attitude.ros.faults import StampOrder
 from rta_attitude.ros.spin import RtaNode, run
 
@@ -43,7 +44,7 @@ class ControllerNode(RtaNode):
         self.overrides: list[tuple[int, np.ndarray]] = []  # (stamp ns, q_c), sorted by stamp
         self.order = StampOrder()
         spec = topics.TOPICS[topics.TORQUE_DES]
-        pub = self.create_publisher(topics.msg_class(spec.type_name), spec.name, self.qos(topics.TORQUE_DES))
+        pub = self.create_publisher(interface.msg_class(spec.type_name), spec.name, self.qos(topics.TORQUE_DES))
         self.out = self.gate(topics.TORQUE_DES, pub)
         self.subscribe(topics.STATE, self._on_state, peer=topics.PLANT)
         self.subscribe(topics.ATTITUDE_COMMAND, self._on_command)

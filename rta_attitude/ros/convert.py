@@ -24,13 +24,13 @@ from numpy.typing import NDArray
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import BatteryState, JointState, Temperature
 
+from rta_attitude import topics
 from rta_attitude.config.loader import CELSIUS_OFFSET_K
 from rta_attitude.dynamics import quaternion as quat
 from rta_attitude.dynamics import spacecraft
 from rta_attitude.dynamics.state import AXES, CW, ENERGY, OMEGA, STATE_NAMES, STATE_SIZE, TEMP, THETA_S, Q
 from rta_attitude.errors import MessageError
 from rta_attitude.filter.asif import FilterCounters, FilterResult
-from rta_attitude.ros import topics
 
 Array = NDArray[np.float64]
 NS_PER_S = 1_000_000_000
@@ -244,16 +244,6 @@ def _level_text(status: str) -> bytes:
         else DiagnosticStatus.ERROR
 
 
-_CONSTRAINT_KEYS = ("h", "psi0", "psi1", "bc", "slack", "intervening", "uncontrollable", "slacked")
-
-
-def _qp_keys() -> list[str]:
-    return ["status", "solver_status", "iterations", "fallback", "solve_time_s", "preset",
-            *(f"u_des_{a}" for a in AXES), *(f"u_{a}" for a in AXES), *(f"box_active_{a}" for a in AXES),
-            "calls", "fast_path", "solved", "fallbacks", "solver_failures", "backup_solves", "invalid_states",
-            topics.INPUT_SOURCE_KEY, *topics.INPUT_COUNTERS]  # fmt: skip
-
-
 def _bool(v: Any) -> str:
     return "true" if v else "false"
 
@@ -272,11 +262,11 @@ class FilterStatusBuilder:
         hid = topics.STATUS_HARDWARE_ID
         self.msg = DiagnosticArray()
         self.qp = DiagnosticStatus(name=topics.QP_STATUS_NAME, hardware_id=hid)
-        self.qp.values = [KeyValue(key=k) for k in _qp_keys()]
+        self.qp.values = [KeyValue(key=k) for k in list(topics.QP_KEYS)]
         self.per = []
         for name in self.names:
             st = DiagnosticStatus(name=topics.CONSTRAINT_STATUS_PREFIX + name, hardware_id=hid)
-            st.values = [KeyValue(key=k) for k in _CONSTRAINT_KEYS]
+            st.values = [KeyValue(key=k) for k in topics.CONSTRAINT_KEYS]
             self.per.append(st)
         self.msg.status = [self.qp, *self.per]
 

@@ -38,12 +38,13 @@ from typing import Any
 
 import numpy as np
 
+from rta_attitude import topics
 from rta_attitude.dynamics.spacecraft import torque_to_wheel_accel, wheel_accel_to_torque
 from rta_attitude.dynamics.state import STATE_SIZE
 from rta_attitude.errors import MessageError
 from rta_attitude.filter import outcome
 from rta_attitude.filter.asif import AsifFilter, FilterResult
-from rta_attitude.ros import convert, topics
+from rta_attitude.ros import convert, interface
 from rta_attitude.ros.faults import StampOrder
 from rta_attitude.ros.spin import RtaNode, run
 
@@ -79,7 +80,7 @@ class FilterNode(RtaNode):
         """A torque_des arrived: from now on a missing one is a fault (desired_timeout_s)."""
         self.out: dict[str, Any] = {}
         for spec in topics.published(topics.FILTER, self.rta):
-            pub = self.create_publisher(topics.msg_class(spec.type_name), spec.name, self.qos(spec.name))
+            pub = self.create_publisher(interface.msg_class(spec.type_name), spec.name, self.qos(spec.name))
             self.out[spec.name] = self.gate(spec.name, pub)
         callbacks = {topics.STATE: (self._on_state, topics.PLANT), topics.TORQUE_DES: (self._on_desired, "")}
         self.subs: dict[str, Any] = {}

@@ -25,7 +25,7 @@ from typing import TYPE_CHECKING, Any
 from rta_attitude import config
 from rta_attitude.config.schema import Config
 from rta_attitude.errors import ConfigError
-from rta_attitude.ros.topics import SYSTEM_PARAMETERS, Knob
+from rta_attitude.topics import SYSTEM_PARAMETERS, Knob
 
 if TYPE_CHECKING:
     from rclpy.node import Node

@@ -38,10 +38,11 @@ from typing import Any
 
 import numpy as np
 
+from rta_attitude import topics
 from rta_attitude.dynamics import spacecraft
 from rta_attitude.errors import MessageError
 from rta_attitude.kernel_cache import drop_stale_caches
-from rta_attitude.ros import convert, topics
+from rta_attitude.ros import convert, interface
 from rta_attitude.ros.spin import RtaNode, run
 
 STARTUP_POLL_S = 0.005
@@ -80,7 +81,7 @@ class PlantNode(RtaNode):
         self.pending: tuple[int, np.ndarray] | None = None
         self.latency_s: list[float] = []
         self.published: dict[str, int] = {}
-        self.pubs = {name: self.create_publisher(topics.msg_class(spec.type_name), spec.name, self.qos(name))
+        self.pubs = {name: self.create_publisher(interface.msg_class(spec.type_name), spec.name, self.qos(name))
                      for name, spec in topics.TOPICS.items() if spec.publisher == topics.PLANT}  # fmt: skip
         self.command_topic = topics.TORQUE_CMD
         self.subscribe(self.command_topic, self._on_command)

@@ -37,9 +37,10 @@ from typing import Any
 from rclpy.serialization import deserialize_message
 from rclpy.timer import Timer
 
+from rta_attitude import topics
 from rta_attitude.errors import BagError, ConfigError, MessageError
 from rta_attitude.recording.bag import BagWriter, Qos
-from rta_attitude.ros import convert, topics
+from rta_attitude.ros import convert, interface
 from rta_attitude.ros.spin import RtaNode, run
 
 DRAIN_POLL_S = 0.02
@@ -85,7 +86,7 @@ class RecorderNode(RtaNode):
         self._drain: Timer | None = None
         self._terminal = False
         self.status_topic = self.resolve_topic_name(topics.RUN_STATUS)
-        self._status_type = topics.msg_class(topics.TOPICS[topics.RUN_STATUS].type_name)
+        self._status_type = interface.msg_class(topics.TOPICS[topics.RUN_STATUS].type_name)
         specs = {self.resolve_topic_name(spec.name): spec for spec in topics.recorded(self.rta)}
         for name, spec in specs.items():
             self.received[name] = 0

@@ -47,8 +47,9 @@ from rclpy.signals import SignalHandlerOptions
 from rclpy.task import Future
 from rclpy.timer import Timer
 
+from rta_attitude import topics
 from rta_attitude.errors import ConfigError, MessageError, RtaError
-from rta_attitude.ros import convert, parameters, topics
+from rta_attitude.ros import convert, interface, parameters
 from rta_attitude.ros.faults import FaultLog, StampOrder
 
 GATE_POLL_S = 0.005
@@ -103,7 +104,7 @@ class RtaNode(Node):
 
     def qos(self, topic: str) -> Any:
         """The QoS profile of one of the run's topics, with this run's liveliness lease."""
-        return topics.qos_profile(topics.TOPICS[topic].qos, self.knobs["liveliness_lease_s"])
+        return interface.qos_profile(topics.TOPICS[topic].qos, self.knobs["liveliness_lease_s"])
 
     def subscribe(self, topic: str, callback: Callable[[Any], None], peer: str = "", raw: bool = False) -> Any:
         """Subscribe to one of the run's topics; with `peer` (the writer's role), report that peer lost once
@@ -112,7 +113,7 @@ class RtaNode(Node):
         events = SubscriptionEventCallbacks(
             liveliness=partial(self._on_liveliness, peer) if peer else None,
             incompatible_qos=partial(self._on_incompatible, spec.name))
-        return self.create_subscription(topics.msg_class(spec.type_name), spec.name, callback, self.qos(topic),
+        return self.create_subscription(interface.msg_class(spec.type_name), spec.name, callback, self.qos(topic),
                                         raw=raw, event_callbacks=events)
 
     def _on_incompatible(self, topic: str, info: QoSRequestedIncompatibleQoSInfo) -> None:

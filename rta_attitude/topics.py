@@ -1,8 +1,9 @@
 """The ROS vocabulary in one place: node names, topics, their types and QoS, who publishes and who
 subscribes, diagnostic keys and the node-only parameters ("knobs").
 
-Pure Python: nothing here imports rclpy at module level, so the launcher and bag analysis can use
-the names without starting ROS. `qos_profile` builds the rclpy profile lazily.
+Pure Python, below every layer that uses it: the bag reader and analysis, the launcher and the ROS
+nodes share these names without starting ROS. The rclpy objects built from them (QoS profiles,
+message classes) are `rta_attitude.ros.interface`'s.
 
 QoS policy (see docs/ros_interface.md):
 
@@ -76,25 +77,6 @@ COMMAND_QOS = QosSpec(history="keep_last", depth=10)
 """attitude_command reader: reliable, volatile (accepts volatile and latched writers)."""
 
 
-def qos_profile(spec: QosSpec, lease_s: float = 0.0) -> Any:
-    """The rclpy QoSProfile of a QosSpec (imports rclpy); `lease_s` > 0 sets automatic liveliness with
-    that lease on specs that have `liveliness` (a reader's requested lease must be >= the writer's, so
-    every node of a run uses the same knob)."""
-    from rclpy.duration import Duration
-    from rclpy.qos import DurabilityPolicy, HistoryPolicy, LivelinessPolicy, QoSProfile, ReliabilityPolicy
-
-    keep_all = spec.history == "keep_all"
-    profile = QoSProfile(
-        history=HistoryPolicy.KEEP_ALL if keep_all else HistoryPolicy.KEEP_LAST,
-        depth=max(spec.depth, 1),
-        reliability=ReliabilityPolicy.RELIABLE if spec.reliability == "reliable" else ReliabilityPolicy.BEST_EFFORT,
-        durability=(DurabilityPolicy.TRANSIENT_LOCAL if spec.durability == "transient_local"
-                    else DurabilityPolicy.VOLATILE),
-    )
-    if spec.liveliness and lease_s > 0:
-        profile.liveliness = LivelinessPolicy.AUTOMATIC
-        profile.liveliness_lease_duration = Duration(nanoseconds=round(lease_s * 1e9))
-    return profile
 
 
 # ----------------------------------------------------------------------------- topics
@@ -173,12 +155,6 @@ TOPICS: dict[str, TopicSpec] = {
 INSPECTION_TOPICS: tuple[str, ...] = (ODOMETRY, TEMPERATURE, BATTERY, SUN_VECTOR)
 
 
-def msg_class(type_name: str) -> Any:
-    """The rclpy message class of `pkg/msg/Type` (imports the message package)."""
-    import importlib
-
-    pkg, _, name = type_name.split("/")
-    return getattr(importlib.import_module(f"{pkg}.msg"), name)
 
 
 def subscribed(role: str, rta: bool) -> list[TopicSpec]:
@@ -250,9 +226,12 @@ INPUT_COUNTERS: tuple[str, ...] = (
 INPUT_SOURCE_KEY = "u_des_source"
 """filter_status key: where this call's u_des came from: `torque_des`, or `missing` (u_des = 0 after a
 timeout or with the controller gone)."""
+KEY_STATUS, KEY_FALLBACK, KEY_SOLVE_TIME, KEY_PRESET = "status", "fallback", "solve_time_s", "preset"
+KEY_BOX_ACTIVE = "box_active"
+"""filter_status keys that readers (bag analysis, echo) look up by name; box_active has one key per axis."""
 QP_KEYS: tuple[str, ...] = (
-    "status", "solver_status", "iterations", "fallback", "solve_time_s", "preset",
-    "u_des_x", "u_des_y", "u_des_z", "u_x", "u_y", "u_z", "box_active_x", "box_active_y", "box_active_z",
+    KEY_STATUS, "solver_status", "iterations", KEY_FALLBACK, KEY_SOLVE_TIME, KEY_PRESET,
+    "u_des_x", "u_des_y", "u_des_z", "u_x", "u_y", "u_z", *(f"{KEY_BOX_ACTIVE}_{a}" for a in "xyz"),
     "calls", "fast_path", "solved", "fallbacks", "solver_failures", "backup_solves", "invalid_states",
     INPUT_SOURCE_KEY, *INPUT_COUNTERS,
 )  # fmt: skip
@@ -261,7 +240,10 @@ fallback policy applied ('none' if none), solve time [s], preset, u_des and u [r
 the filter's running counters (core: calls .. invalid_states), the source of u_des and the node's
 input counters (INPUT_COUNTERS)."""
 NO_FALLBACK = "none"
-CONSTRAINT_KEYS: tuple[str, ...] = ("h", "psi0", "psi1", "bc", "slack", "intervening", "uncontrollable", "slacked")
+KEY_SLACK, KEY_INTERVENING, KEY_SLACKED = "slack", "intervening", "slacked"
+CONSTRAINT_KEYS: tuple[str, ...] = (
+    "h", "psi0", "psi1", "bc", KEY_SLACK, KEY_INTERVENING, "uncontrollable", KEY_SLACKED,
+)  # fmt: skip
 """Keys of each constraint entry (floats as repr, exact; flags 'true'/'false')."""
 
 RUN_STATUS_NAME = "plant/run"
@@ -379,5 +361,5 @@ __all__ = [
     "RUN_STATUS_NAME", "STATE", "STATE_QOS", "STATUS_HARDWARE_ID", "STATUS_QOS", "STREAM_QOS", "SUN_VECTOR",
     "SYSTEM_PARAMETERS",
     "TEMPERATURE", "TOPICS", "TORQUE_APPLIED", "TORQUE_CMD", "TORQUE_DES", "Knob", "QosSpec", "TopicSpec",
-    "expected_readers", "knobs_for", "msg_class", "published", "qos_profile", "recorded", "subscribed",
+    "expected_readers", "knobs_for", "published", "recorded", "subscribed",
 ]  # fmt: skip
