@@ -29,6 +29,10 @@ machine; `--discovery subnet` lifts it) on `--domain-id` (default: $ROS_DOMAIN_I
 DEFAULT_DOMAIN_ID), and without ROS_STATIC_PEERS, so a run never talks to another robot on the network.
 Node-only parameters given with `-p` are checked like the core's (type, choices, range) before any
 process starts.
+
+One module because its parts are one process lifecycle: `plan` checks every input and builds the
+command lines that `launch` runs, and the /dev/shm bookkeeping needs the children's pids while they run
+and is settled in the same `finally` that stops them.
 """
 
 from __future__ import annotations

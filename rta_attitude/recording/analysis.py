@@ -31,6 +31,11 @@ is analysed up to its last complete step and the summary says where the data sto
 
 The summary has the keys and values of `simulate`'s (`metrics.summarize`) plus a `bag` section
 (file, topics, truncation, residual); only `wall_time_s` is absent (no simulation ran here).
+
+One module because everything in it serves `load_run`: the private helpers are the steps of one
+rebuild (which topics, pairing by stamp, which torque was applied, what goes into `notes`), whose rules
+are read together; the parts with a life of their own have left (the raw CDR reader for
+`recording/cdr.py`, summaries and comparison for `recording/summary.py`).
 """
 
 from __future__ import annotations

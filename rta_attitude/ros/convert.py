@@ -6,6 +6,10 @@ they read rclpy messages and the objects that mcap_ros2 decodes from a bag alike
 `MessageError` (one line naming what is wrong) on malformed input.
 
 Floats in DiagnosticStatus values are written with `repr`, which round-trips float64 exactly.
+
+One module because each message the run reads back has its builder and its parser side by side
+(state, torques, filter_status, run_status), so a layout and the code that reads it change together;
+it is also the one module that imports the message packages directly.
 """
 
 from __future__ import annotations

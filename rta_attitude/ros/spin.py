@@ -18,6 +18,11 @@ durability). `PublishGate` holds messages until the publisher has matched the ru
 readers (topics.expected_readers), polling on a steady timer so the executor keeps running (all
 nodes can share one executor); past `startup_timeout_s` the node fails with a line naming the
 topic and the counts.
+
+One module because its parts are one lifecycle: `run` spins until the node's `finished` future is
+set, and a signal (`RtaNode.request_stop`, which waits on the gates' publishers), a failure
+(`RtaNode.fail`) or a gate's startup timeout all end the node through that future; apart, the stop
+protocol would be spread over several files.
 """
 
 from __future__ import annotations
