@@ -9,7 +9,7 @@ the one recorded next to the caches, deletes those modules' cache files so every
 together.
 
 Nothing runs at import: the entry points that compile or load kernels call it first (`AsifFilter`,
-the plant node, the launcher, the CLI, the Monte Carlo, the test session). A fresh installation has
+the plant node, every `rta-attitude` command (cli.main), the test session). A fresh installation has
 no cache, so only a developer who edits kernel sources and then calls a kernel without one of those
 entry points can meet a stale cache.
 """

@@ -193,7 +193,7 @@ def expected_readers(topic: str, rta: bool, record: bool) -> int:
 STATUS_HARDWARE_ID = "rta_attitude"
 QP_STATUS_NAME = "filter"
 """filter_status: the entry of the filter call (QP status, fallback, box, timing, counters); one entry
-per constraint follows, named like the constraint (params.CONSTRAINT_NAMES). rta_attitude.recording.analysis
+per constraint follows, named like the constraint (config.schema.CONSTRAINT_NAMES). rta_attitude.recording.analysis
 reads this layout."""
 CONSTRAINT_STATUS_PREFIX = ""
 INPUT_COUNTERS: tuple[str, ...] = (
@@ -235,7 +235,7 @@ QP_KEYS: tuple[str, ...] = (
     "calls", "fast_path", "solved", "fallbacks", "solver_failures", "backup_solves", "invalid_states",
     INPUT_SOURCE_KEY, *INPUT_COUNTERS,
 )  # fmt: skip
-"""Keys of the `filter` entry: status ('pass', 'solved', 'fallback'), proxsuite status, iterations,
+"""Keys of the `filter` entry: status ('pass', 'solved', 'fallback'), solver status (outcome.solve_text), iterations,
 fallback policy applied ('none' if none), solve time [s], preset, u_des and u [rad/s^2], box flags,
 the filter's running counters (core: calls .. invalid_states), the source of u_des and the node's
 input counters (INPUT_COUNTERS)."""
@@ -335,7 +335,7 @@ KNOBS: tuple[Knob, ...] = (
     Knob("battery_voltage_V", 8.0, (PLANT,), "nominal bus voltage for BatteryState (display only) [V]",
          positive=True),
     Knob("exit_when_done", True, (PLANT, RECORDER), "exit after the run ends (plant) / the bag is closed"),
-    Knob("bag_path", "", (RECORDER,), "MCAP file to write (required)"),
+    Knob("bag_path", "", (RECORDER,), "MCAP file to write (default: rta_attitude_YYYY_MM_DD-HH_MM_SS.mcap)"),
     Knob("bag_overwrite", False, (RECORDER,), "replace an existing bag file"),
     Knob("bag_chunk_kb", 256, (RECORDER,), "uncompressed KiB per MCAP chunk: a killed recorder loses at most one",
          minimum=1),

@@ -120,7 +120,6 @@ def _messages(run: Run) -> list[tuple[str, Any, int]]:
 
 def _write(run: Run, path: Path, chunk_size: int = 256 * 1024, metadata: bool = True) -> Path:
     """A bag as bag_recorder_node writes it (BagWriter; the `rta_attitude` metadata record)."""
-    from rta_attitude.ros.recorder_node import add_metadata
 
     msgs = _messages(run)
     with BagWriter(path, chunk_size=chunk_size) as bag:
@@ -131,7 +130,7 @@ def _write(run: Run, path: Path, chunk_size: int = 256 * 1024, metadata: bool = 
         for topic, msg, t in msgs:
             bag.write_message(topic, msg, t)
         if metadata:
-            add_metadata(bag, "rta_attitude", {
+            bag.add_metadata("rta_attitude", {
                 "scenario": run.loop.scenario.name, "rta": str(run.loop.rta).lower(),
                 "preset": run.loop.cfg.filter.preset, "config": run.loop.cfg.source,
                 "duration_s": repr(run.loop.scenario.duration_s), "dt_s": "1.0", "namespace": NS})

@@ -61,6 +61,9 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.DEBUG if args.verbose else logging.WARNING,
                         format="%(levelname)s %(name)s: %(message)s")
+    from rta_attitude.kernel_cache import drop_stale_caches
+
+    drop_stale_caches()  # every command may run kernels (simulate, montecarlo, analyze, launch, ...)
     try:
         return int(handlers[args.command](args) or 0)
     except RtaError as exc:

@@ -1,6 +1,6 @@
 """The filter's vocabulary, in one place: what a call did, why it fell back, which solver answered.
 
-Codes are what the compiled pipeline writes into a result record (RESULT_DTYPE, `filter.asif`);
+Codes are what the compiled pipeline writes into a result record (RESULT_DTYPE, `filter.pipeline`);
 names are what people read (filter_status, reports, the CLI). Both come from the tuples below, so a
 code and its name cannot drift apart. The configurable choices (fallback policy, solver, backup
 solver) are configuration vocabulary, named once in `config.schema`; their codes are their positions.

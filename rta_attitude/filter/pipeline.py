@@ -64,7 +64,7 @@ ACTIVE_MULTIPLIER = 1e-9
 FILTER_DTYPE = np.dtype([
     ("plant", PLANT_DTYPE),                  # the filter's model of the spacecraft
     ("constraints", CONSTRAINT_DTYPE),
-    ("policy", np.int8),                     # outcome.POLICIES code
+    ("policy", np.int8),                     # outcome.FALLBACKS code
     ("solver", np.int8),                     # outcome.SOLVERS code
     ("backup_solver", np.int8),              # outcome.BACKUP_SOLVERS code (proxsuite only)
     ("check_tolerance", np.float64),         # a solution must meet every row to this

@@ -23,8 +23,8 @@ where a truncated bag stops); the number of steps recorded by the plant caps it.
 Messages are matched by header stamp (the stamp of the state a command answers). What the bag
 does not hold is recomputed exactly from what it does: h at the samples from the states, and the
 minima of h *between* samples (which `simulate` takes from its RK4 substeps) by re-integrating every
-recorded step from its recorded state with its recorded command (`simulation.integrate`, the same
-ZOH/RK4 the plant uses, all steps as one batch). The re-integrated end of each step is compared with
+recorded step from its recorded state with its recorded command (`dynamics.spacecraft`'s ZOH/RK4,
+the plant's own code, step by step). The re-integrated end of each step is compared with
 the next recorded state: the largest difference (`bag.reintegration_residual`) is ~0 for a lockstep
 run, which proves the recomputed substep minima are the plant's own. A bag cut short (writer killed)
 is analysed up to its last complete step and the summary says where the data stops.

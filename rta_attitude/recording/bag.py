@@ -20,6 +20,7 @@ directory for tools that want one. Nothing here imports rclpy.
 
 from __future__ import annotations
 
+import datetime as dt
 import json
 import os
 import re
@@ -273,6 +274,12 @@ def _compression(name: str) -> CompressionType:
     return kinds[name]
 
 
+def default_bag_name(now: dt.datetime | None = None) -> str:
+    """A unique, time-stamped bag name as rosbag2 makes them (`rosbag2_2026_11_23-21_05_07`), with our
+    prefix and the MCAP suffix: `rta_attitude_2026_11_23-21_05_07.mcap` (local time)."""
+    return f"rta_attitude_{(now or dt.datetime.now()).strftime('%Y_%m_%d-%H_%M_%S')}.mcap"
+
+
 class BagWriter:
     """Write a rosbag2-convention MCAP file; a context manager, `close()` is idempotent.
 
@@ -282,6 +289,7 @@ class BagWriter:
         chunk_size: uncompressed bytes per chunk [B]; a killed writer loses at most one chunk.
         compression: "auto" (zstd, else lz4, else none), "zstd", "lz4" or "none".
         ros_distro: recorded in the rosbag2 metadata record.
+        overwrite_hint: how the caller's user asks for `overwrite` (named in the error when the file exists).
     """
 
     def __init__(
@@ -292,13 +300,14 @@ class BagWriter:
         chunk_size: int = DEFAULT_CHUNK_SIZE,
         compression: str = "auto",
         ros_distro: str = "jazzy",
+        overwrite_hint: str = "overwrite=True",
     ) -> None:
         self.path = Path(path)
         kind = _compression(compression)
         try:
             self._file = open(self.path, "wb" if overwrite else "xb", buffering=0)
         except FileExistsError:
-            raise BagError(f"{self.path}: file exists (pass overwrite=True to replace it)") from None
+            raise BagError(f"{self.path}: file exists (pass {overwrite_hint} to replace it)") from None
         except OSError as exc:
             raise BagError(f"{self.path}: cannot create ({exc.strerror})") from None
         sink: Any = _Sink(self._file)  # not an IO subclass, so mcap does not wrap it in a buffer
@@ -670,6 +679,7 @@ def write_metadata_yaml(path: str | os.PathLike[str]) -> Path:
 
 __all__ = [
     "DURATION_INFINITE",
+    "default_bag_name",
     "BagContents",
     "BagMessage",
     "BagWriter",

@@ -20,7 +20,6 @@ is not a unit quaternion within `quaternion_tolerance` is rejected.
 from __future__ import annotations
 
 import bisect
-import sys
 from collections.abc import Sequence
 from typing import Any
 
@@ -30,9 +29,9 @@ from rta_attitude import topics
 from rta_attitude.dynamics.controller import controller_record, desired_command
 from rta_attitude.dynamics.spacecraft import wheel_accel_to_torque
 from rta_attitude.errors import MessageError
-from rta_attitude.ros import convert, interface
+from rta_attitude.ros import convert, interface, spin
 from rta_attitude.ros.faults import StampOrder
-from rta_attitude.ros.spin import RtaNode, run
+from rta_attitude.ros.spin import RtaNode
 
 
 class ControllerNode(RtaNode):
@@ -89,7 +88,7 @@ class ControllerNode(RtaNode):
 
 def main(args: Sequence[str] | None = None) -> None:
     """Console script `pd_controller_node` (`ros2 run rta_attitude pd_controller_node --ros-args ...`)."""
-    sys.exit(run(ControllerNode, args, topics.NODE_NAMES[topics.CONTROLLER]))
+    spin.main(ControllerNode, args, topics.NODE_NAMES[topics.CONTROLLER])
 
 
 if __name__ == "__main__":

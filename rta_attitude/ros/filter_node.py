@@ -31,7 +31,6 @@ per episode, faults.FaultLog):
 
 from __future__ import annotations
 
-import sys
 import time
 from collections.abc import Sequence
 from typing import Any
@@ -44,9 +43,9 @@ from rta_attitude.dynamics.state import STATE_SIZE
 from rta_attitude.errors import MessageError
 from rta_attitude.filter import outcome
 from rta_attitude.filter.asif import AsifFilter, FilterResult
-from rta_attitude.ros import convert, interface
+from rta_attitude.ros import convert, interface, spin
 from rta_attitude.ros.faults import StampOrder
-from rta_attitude.ros.spin import RtaNode, run
+from rta_attitude.ros.spin import RtaNode
 
 MAX_PENDING = 64
 """Unpaired messages kept per topic; older ones are dropped (and counted)."""
@@ -232,7 +231,7 @@ class FilterNode(RtaNode):
 
 def main(args: Sequence[str] | None = None) -> None:
     """Console script `asif_filter_node` (`ros2 run rta_attitude asif_filter_node --ros-args ...`)."""
-    sys.exit(run(FilterNode, args, topics.NODE_NAMES[topics.FILTER]))
+    spin.main(FilterNode, args, topics.NODE_NAMES[topics.FILTER])
 
 
 if __name__ == "__main__":

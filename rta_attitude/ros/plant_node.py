@@ -32,7 +32,6 @@ readers (topics.expected_readers). End: run_status `done` (or `failed: reason`, 
 
 from __future__ import annotations
 
-import sys
 from collections.abc import Sequence
 from typing import Any
 
@@ -42,8 +41,8 @@ from rta_attitude import topics
 from rta_attitude.dynamics import spacecraft
 from rta_attitude.errors import MessageError
 from rta_attitude.kernel_cache import drop_stale_caches
-from rta_attitude.ros import convert, interface
-from rta_attitude.ros.spin import RtaNode, run
+from rta_attitude.ros import convert, interface, spin
+from rta_attitude.ros.spin import RtaNode
 
 STARTUP_POLL_S = 0.005
 WATCHDOG_PERIOD_S = 0.1
@@ -127,12 +126,13 @@ class PlantNode(RtaNode):
         self.published[topic] = self.published.get(topic, 0) + 1
 
     def _publish_sample(self) -> None:
-        """state(t_k) first (the loop waits on it), then /clock and the inspection views."""
+        """/clock(t_k) first (a reader's sim time reaches t_k before the state stamped t_k arrives, so
+        `ros2 topic delay --use-sim-time` reads >= 0), then state(t_k) and the inspection views."""
         t_ns, x = self._t_ns(self.k), self.x
+        self._publish(topics.CLOCK, convert.clock_msg(t_ns))
         self._sent_s = self.wall_now_s()
         self._progress_s = self._sent_s
         self._publish(topics.STATE, convert.state_msg(x, t_ns))
-        self._publish(topics.CLOCK, convert.clock_msg(t_ns))
         if self.k % max(self.knobs["inspection_every"], 1) == 0 or self.k == self.steps:
             self._publish(topics.ODOMETRY, convert.odometry_msg(x, t_ns))
             self._publish(topics.TEMPERATURE, convert.temperature_msg(x, t_ns))
@@ -301,7 +301,7 @@ class PlantNode(RtaNode):
 
 def main(args: Sequence[str] | None = None) -> None:
     """Console script `plant_node` (`ros2 run rta_attitude plant_node --ros-args ...`)."""
-    sys.exit(run(PlantNode, args, topics.NODE_NAMES[topics.PLANT]))
+    spin.main(PlantNode, args, topics.NODE_NAMES[topics.PLANT])
 
 
 if __name__ == "__main__":

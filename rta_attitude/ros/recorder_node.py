@@ -29,7 +29,6 @@ ends.
 
 from __future__ import annotations
 
-import sys
 from collections.abc import Sequence
 from functools import partial
 from typing import Any
@@ -38,22 +37,13 @@ from rclpy.serialization import deserialize_message
 from rclpy.timer import Timer
 
 from rta_attitude import topics
-from rta_attitude.errors import BagError, ConfigError, MessageError
-from rta_attitude.recording.bag import BagWriter, Qos
-from rta_attitude.ros import convert, interface
-from rta_attitude.ros.spin import RtaNode, run
+from rta_attitude.errors import BagError, MessageError
+from rta_attitude.recording.bag import BagWriter, Qos, default_bag_name
+from rta_attitude.ros import convert, interface, spin
+from rta_attitude.ros.spin import RtaNode
 
 DRAIN_POLL_S = 0.02
 METADATA_NAME = "rta_attitude"
-
-
-def add_metadata(bag: BagWriter, name: str, data: dict[str, str]) -> None:
-    """Add an MCAP metadata record (BagWriter.add_metadata when it exists; until then its writer)."""
-    add = getattr(bag, "add_metadata", None)
-    if add is not None:
-        add(name, data)
-    else:  # rta_attitude.recording.bag has no public metadata API yet (see docs/ros_interface.md)
-        bag._writer.add_metadata(name, data)
 
 
 def bag_qos(spec: topics.QosSpec, lease_s: float = 0.0) -> Qos:
@@ -72,10 +62,7 @@ class RecorderNode(RtaNode):
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__(topics.RECORDER, **kwargs)
-        path = self.knobs["bag_path"]
-        if not path:
-            self.destroy_node()
-            raise ConfigError("parameter bag_path is required (the .mcap file to write)")
+        path = self.knobs["bag_path"] or default_bag_name()  # unique and time-stamped, as rosbag2 names bags
         self.bag: BagWriter | None = None
         self.received: dict[str, int] = {}
         """Messages written per topic (absolute name)."""
@@ -93,7 +80,8 @@ class RecorderNode(RtaNode):
             self.subscribe(spec.name, partial(self._on_message, name), raw=True,
                            peer=topics.PLANT if spec.name == topics.STATE else "")
         # the file is created last, so a node that fails to start leaves no half-written bag
-        bag = BagWriter(path, overwrite=self.knobs["bag_overwrite"], chunk_size=self.knobs["bag_chunk_kb"] * 1024)
+        bag = BagWriter(path, overwrite=self.knobs["bag_overwrite"], chunk_size=self.knobs["bag_chunk_kb"] * 1024,
+                        overwrite_hint="bag_overwrite:=true")
         for name, spec in specs.items():
             bag.add_topic(name, spec.type_name, bag_qos(spec.qos, self.knobs["liveliness_lease_s"]))
         self.bag = bag
@@ -190,7 +178,7 @@ class RecorderNode(RtaNode):
         bag, self.bag = self.bag, None
         try:
             try:
-                add_metadata(bag, METADATA_NAME, self.metadata())
+                bag.add_metadata(METADATA_NAME, self.metadata())
             finally:
                 bag.close()
         except BagError as exc:
@@ -207,7 +195,7 @@ class RecorderNode(RtaNode):
 
 def main(args: Sequence[str] | None = None) -> None:
     """Console script `bag_recorder_node` (`ros2 run rta_attitude bag_recorder_node --ros-args ...`)."""
-    sys.exit(run(RecorderNode, args, topics.NODE_NAMES[topics.RECORDER]))
+    spin.main(RecorderNode, args, topics.NODE_NAMES[topics.RECORDER])
 
 
 if __name__ == "__main__":

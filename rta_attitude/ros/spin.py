@@ -363,7 +363,8 @@ def _error(name: str, text: str) -> None:
     print(f"[ERROR] [{name}]: {text}", file=sys.stderr, flush=True)
 
 
-def run(factory: Callable[[], RtaNode], args: Sequence[str] | None = None, name: str = "rta_attitude") -> int:
+def run(factory: Callable[[], RtaNode], args: Sequence[str] | None = None, name: str = "rta_attitude",
+        restore_signals: bool = True) -> int:
     """Check the command line, init rclpy, build the node, spin until it finishes or is stopped by
     SIGINT/SIGTERM (see the module docstring), shut down cleanly.
 
@@ -371,6 +372,8 @@ def run(factory: Callable[[], RtaNode], args: Sequence[str] | None = None, name:
         factory: builds the node (after rclpy.init).
         args: command line (default sys.argv), with `--ros-args ...`.
         name: logger name for errors raised before the node exists.
+        restore_signals: put the previous SIGINT/SIGTERM handlers back before returning (in-process
+            callers); `main` passes False and ignores both signals until the process has exited.
 
     Returns:
         Exit code: 0, or 1 after a configuration or runtime error (logged as one line).
@@ -430,8 +433,20 @@ def run(factory: Callable[[], RtaNode], args: Sequence[str] | None = None, name:
                 code = 1
             node.destroy_node()
         rclpy.try_shutdown()
-        _restore(previous)
+        if restore_signals:
+            _restore(previous)
     return code
+
+
+def main(factory: Callable[[], RtaNode], args: Sequence[str] | None, name: str) -> None:
+    """A node's console script: run it, then exit with its code. Once the node has finished, SIGINT and
+    SIGTERM are ignored until the process is gone: `ros2 launch` sends SIGINT to every process when a
+    run ends, and one that reached a finished node during interpreter teardown would turn a clean end
+    into "process has died [exit code -2]"."""
+    code = run(factory, args, name, restore_signals=False)
+    for s in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(s, signal.SIG_IGN)
+    sys.exit(code)
 
 
 def _restore(previous: dict[signal.Signals, Any]) -> None:
@@ -439,5 +454,5 @@ def _restore(previous: dict[signal.Signals, Any]) -> None:
         signal.signal(s, handler)
 
 
-__all__ = ["GATE_POLL_S", "SPIN_TIMEOUT_S", "STOP_MARGIN_S", "PublishGate", "RtaNode", "check_params_files",
+__all__ = ["GATE_POLL_S", "SPIN_TIMEOUT_S", "STOP_MARGIN_S", "PublishGate", "RtaNode", "check_params_files", "main",
            "make_executor", "run"]

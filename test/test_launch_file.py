@@ -1,0 +1,130 @@
+"""The launch file's logic (rta_attitude.ros.launch_file), driven without ros2launch: every argument is
+checked before a node starts (one line naming it), and the run ends whatever ends it."""
+
+from __future__ import annotations
+
+import ast
+import datetime as dt
+import os
+from pathlib import Path
+
+import pytest
+
+from rta_attitude import topics
+from rta_attitude.errors import ConfigError
+from rta_attitude.recording.bag import default_bag_name
+from rta_attitude.ros.launch_file import ARGUMENTS, RunEnd, validate
+
+LAUNCH_FILE = Path(__file__).resolve().parents[1] / "launch" / "rta_attitude.launch.py"
+EXE = topics.EXECUTABLES
+PLANT, RECORDER, FILTER, CONTROLLER = (EXE[r] for r in (topics.PLANT, topics.RECORDER, topics.FILTER,
+                                                         topics.CONTROLLER))
+NOW = dt.datetime(2026, 11, 23, 21, 5, 7)
+
+
+def test_defaults_are_valid_and_typed(tmp_path: Path) -> None:
+    a = validate({}, cwd=tmp_path, now=NOW)
+    assert a["rta"] is True and a["record"] is True and a["bag_overwrite"] is False
+    assert a["real_time_factor"] == 1.0 and a["stepping"] == "lockstep" and a["scenario"] == "paper_example"
+    assert a["bag"] == str(tmp_path / "rta_attitude_2026_11_23-21_05_07.mcap")  # rosbag2-style unique name
+    assert Path(a["params_file"]).is_file()
+    assert validate({"rta": "False", "stepping": "REALTIME", "discovery_range": "subnet", "domain_id": "42"},
+                    cwd=tmp_path)["rta"] is False
+
+
+@pytest.mark.parametrize(("name", "value", "words"), [
+    ("stepping", "bogus", "stepping:='bogus': must be one of lockstep, realtime"),
+    ("real_time_factor", "fast", "real_time_factor:='fast': must be a number"),
+    ("real_time_factor", "-1", "must be a finite number > 0"),
+    ("real_time_factor", "inf", "must be a finite number > 0"),
+    ("rta", "yes", "rta:='yes': must be one of true, false"),
+    ("domain_id", "300", "domain_id:='300': must be an integer 0-232"),
+    ("domain_id", "x", "must be an integer"),
+    ("discovery_range", "lan", "must be one of LOCALHOST, SUBNET, OFF"),
+    ("namespace", "rta", "must be an absolute ROS name"),
+    ("namespace", "/1sat", "must be an absolute ROS name"),
+    ("params_file", "/nonexistent.yaml", "params_file:='/nonexistent.yaml': no such file"),
+    ("scenario", "nope", "nope"),
+    ("colour", "red", "unknown launch argument colour"),
+])  # fmt: skip
+def test_a_bad_argument_is_one_line_naming_it(tmp_path: Path, name: str, value: str, words: str) -> None:
+    with pytest.raises(ConfigError) as err:
+        validate({name: value}, cwd=tmp_path)
+    assert words in str(err.value) and "\n" not in str(err.value)
+
+
+def test_a_bad_params_file_is_rejected_before_any_node(tmp_path: Path) -> None:
+    bad = tmp_path / "bad.yaml"
+    text = Path(validate({}, cwd=tmp_path)["params_file"]).read_text()
+    assert "omega_max_deg_s: 1.0" in text
+    bad.write_text(text.replace("omega_max_deg_s: 1.0", "omega_max_deg_s: -1.0"))
+    with pytest.raises(ConfigError) as err:
+        validate({"params_file": str(bad)}, cwd=tmp_path)
+    assert f"params_file:={str(bad)!r}" in str(err.value) and "omega_max" in str(err.value)
+    assert "\n" not in str(err.value)
+    bad.write_text("/**:\n  ros__parameters: {}\n")
+    with pytest.raises(ConfigError, match=r"params_file.*missing"):
+        validate({"params_file": str(bad)}, cwd=tmp_path)
+
+
+def test_the_bag_is_never_silently_reused(tmp_path: Path) -> None:
+    bag = tmp_path / "run.mcap"
+    bag.write_bytes(b"x")
+    with pytest.raises(ConfigError, match=r"exists \(pass bag_overwrite:=true to replace it\)"):
+        validate({"bag": str(bag)}, cwd=tmp_path)
+    assert validate({"bag": str(bag), "bag_overwrite": "true"}, cwd=tmp_path)["bag"] == str(bag)
+    assert validate({"bag": "rel.mcap"}, cwd=tmp_path)["bag"] == str(tmp_path / "rel.mcap")
+    with pytest.raises(ConfigError, match="is a directory"):
+        validate({"bag": str(tmp_path)}, cwd=tmp_path)
+    with pytest.raises(ConfigError, match="does not exist"):
+        validate({"bag": str(tmp_path / "no" / "run.mcap")}, cwd=tmp_path)
+    if os.geteuid() != 0:  # root writes anywhere
+        ro = tmp_path / "ro"
+        ro.mkdir(mode=0o555)
+        with pytest.raises(ConfigError, match="not writable"):
+            validate({"bag": str(ro / "run.mcap")}, cwd=tmp_path)
+    assert "bag" in validate({"record": "false", "bag": str(bag)}, cwd=tmp_path)  # not checked when not recording
+
+
+def test_default_bag_names_are_time_stamped() -> None:
+    assert default_bag_name(NOW) == "rta_attitude_2026_11_23-21_05_07.mcap"
+    assert default_bag_name(NOW) != default_bag_name(NOW + dt.timedelta(seconds=1))
+
+
+def test_a_normal_end_waits_for_the_recorder_and_ignores_the_shutdowns_exits() -> None:
+    end = RunEnd(record=True)
+    assert end.exited(PLANT, 0) == ("running", "")  # the recorder still closes the bag
+    verdict, _ = end.exited(RECORDER, 0)
+    assert verdict == "done"
+    assert end.exited(FILTER, 0)[0] == "ignored" and end.exited(CONTROLLER, -2)[0] == "ignored"
+    end = RunEnd(record=True)
+    assert end.exited(RECORDER, 0)[0] == "done"  # the recorder saw the final run_status first
+    assert end.exited(PLANT, 0)[0] == "ignored"
+    end = RunEnd(record=False)
+    assert end.exited(PLANT, 0)[0] == "done"
+
+
+@pytest.mark.parametrize("record", [True, False])
+def test_any_failure_ends_the_run_as_failed(record: bool) -> None:
+    end = RunEnd(record=record)
+    assert end.exited(PLANT, 2) == ("failed", f"{PLANT} exited with code 2")
+    assert end.exited(RECORDER, 0)[0] == "ignored"
+    end = RunEnd(record=record)
+    assert end.exited(FILTER, 0) == ("failed", f"{FILTER} ended before the run did")
+    end = RunEnd(record=record)
+    assert end.exited(CONTROLLER, None)[0] == "failed"  # unknown exit code
+    end = RunEnd(record=True)
+    assert end.exited(PLANT, 0)[0] == "running"
+    assert end.exited(CONTROLLER, 0)[0] == "running"  # after the plant is done: fine
+    assert end.exited(RECORDER, 1) == ("failed", f"{RECORDER} exited with code 1")
+
+
+def test_the_launch_file_declares_every_argument_and_uses_this_logic() -> None:
+    """The launch file itself (parsed, not run: ros2launch is not a PyPI package) validates in an
+    OpaqueFunction before creating nodes and wires every node's exit to RunEnd."""
+    tree = ast.parse(LAUNCH_FILE.read_text())
+    names = {n.id for n in ast.walk(tree) if isinstance(n, ast.Name)}
+    assert {"validate", "RunEnd", "ARGUMENTS", "OpaqueFunction", "OnProcessExit"} <= names
+    called = [n.func.id for n in ast.walk(tree) if isinstance(n, ast.Call) and isinstance(n.func, ast.Name)]
+    assert called.index("validate") < called.index("Node")  # nothing is built before the arguments are checked
+    assert len(ARGUMENTS) == len({a.name for a in ARGUMENTS}) == 11
