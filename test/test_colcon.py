@@ -77,5 +77,6 @@ def test_installed_package_is_found_through_the_ament_index_and_its_nodes_run(in
 def test_launch_file_compiles_and_declares_the_nodes() -> None:
     text = (ROOT / "launch" / "rta_attitude.launch.py").read_text()
     compile(text, "rta_attitude.launch.py", "exec")
-    for exe in EXECUTABLES:
-        assert f'"{exe}"' in text
+    assert "exe = topics.EXECUTABLES" in text  # the node executables by role, as setup.py names them
+    for role in ("PLANT", "CONTROLLER", "FILTER", "RECORDER"):
+        assert f"exe[topics.{role}]" in text
