@@ -63,12 +63,12 @@ def test_installed_package_is_found_through_the_ament_index_and_its_nodes_run(in
     code = ("from ament_index_python.packages import get_package_prefix, get_package_share_directory as s; "
             "print(get_package_prefix('rta_attitude')); print(s('rta_attitude'))")
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True,
-                         timeout=60).stdout.split()
+                         timeout=300).stdout.split()
     assert out == [str(install), str(install / "share" / "rta_attitude")]
     # what `ros2 run rta_attitude plant_node --ros-args ...` executes; the installed YAML is found via
     # AMENT_PREFIX_PATH and a bad scenario is one error line, exit code 1
     proc = subprocess.run([str(install / "lib" / "rta_attitude" / "plant_node"), "--ros-args", "-p",
-                           "scenario:=nope"], env=env, capture_output=True, text=True, timeout=60)
+                           "scenario:=nope"], env=env, capture_output=True, text=True, timeout=300)
     assert proc.returncode == 1
     assert "unknown scenario 'nope'" in proc.stderr + proc.stdout
     assert "Traceback" not in proc.stderr + proc.stdout

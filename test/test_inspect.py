@@ -257,7 +257,7 @@ def test_replay_topics_and_echo_over_dds(bag: Path, recorded: dict[str, dict[int
                 want = recorded["/rta/torque_cmd"][t].vector
                 assert d["vector"] == {"x": want.x, "y": want.y, "z": want.z}
                 assert d["header"]["frame_id"] == "body"
-        results = {name: p.wait(timeout=60) for name, p in children.items() if name != "echo_forever"}
+        results = {name: p.wait(timeout=300) for name, p in children.items() if name != "echo_forever"}
         assert results["topics"] == 0, children["topics"].communicate()
         listing = children["topics"].communicate()[0]
         assert "/rta/state" in listing and "sensor_msgs/msg/JointState" in listing and "Hz" in listing

@@ -104,7 +104,7 @@ def test_launch_without_rta_short_run(tmp_path: Path) -> None:
     (["-p", "novalue"], "expected KEY=VALUE"),
 ])
 def test_launch_checks_inputs_before_starting_anything(args: list[str], message: str, tmp_path: Path) -> None:
-    proc = _launch(*args, "--bag", str(tmp_path / "x.mcap"), timeout=60)
+    proc = _launch(*args, "--bag", str(tmp_path / "x.mcap"), timeout=300)
     assert proc.returncode == 1
     assert message in proc.stderr and "Traceback" not in proc.stderr
     assert not (tmp_path / "x.mcap").exists()
@@ -113,7 +113,7 @@ def test_launch_checks_inputs_before_starting_anything(args: list[str], message:
 def test_launch_refuses_to_overwrite_a_bag(tmp_path: Path) -> None:
     bag = tmp_path / "old.mcap"
     bag.write_bytes(b"keep me")
-    proc = _launch("--bag", str(bag), timeout=60)
+    proc = _launch("--bag", str(bag), timeout=300)
     assert proc.returncode == 1 and "exists" in proc.stderr
     assert bag.read_bytes() == b"keep me"
 
@@ -127,7 +127,7 @@ def test_ctrl_c_stops_every_node_and_finalizes_the_bag(tmp_path: Path) -> None:
         assert launcher.poll() is None and time.monotonic() < deadline, launcher.communicate()[1][-2000:]
         time.sleep(0.1)
     launcher.send_signal(signal.SIGINT)
-    _, err = launcher.communicate(timeout=60)
+    _, err = launcher.communicate(timeout=300)
     assert launcher.returncode == 1 and "interrupted" in err
     assert "left in /dev/shm" not in err and "SIGKILL" not in err
     assert _survivors(str(bag)) == []

@@ -330,7 +330,7 @@ def test_bad_parameters_are_one_config_error(overrides: dict[str, Any], message:
 
 def test_node_with_bad_parameter_exits_1_with_one_line(tmp_path: Path) -> None:
     proc = subprocess.run([sys.executable, "-m", topics.MODULES[topics.CONTROLLER], "--ros-args", "-p",
-                           "filter.preset:=fast"], capture_output=True, text=True, timeout=60)
+                           "filter.preset:=fast"], capture_output=True, text=True, timeout=300)
     assert proc.returncode == 1
     assert "Traceback" not in proc.stderr + proc.stdout
     assert "filter.preset must be one of robust, paper, got 'fast'" in proc.stderr + proc.stdout
@@ -339,5 +339,5 @@ def test_node_with_bad_parameter_exits_1_with_one_line(tmp_path: Path) -> None:
 def test_nodes_package_keeps_rclpy_out_of_the_core_and_launcher() -> None:
     code = ("import sys, rta_attitude.cli.launcher, rta_attitude.ros, rta_attitude.topics, "
             "rta_attitude.ros.convert; print('rclpy' in sys.modules)")
-    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60, check=True)
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, check=True)
     assert proc.stdout.strip() == "False"

@@ -20,6 +20,7 @@ is not a unit quaternion within `quaternion_tolerance` is rejected.
 from __future__ import annotations
 
 import bisect
+import time
 from collections.abc import Sequence
 from typing import Any
 
@@ -42,6 +43,9 @@ class ControllerNode(RtaNode):
         self.law = controller_record(self.cfg, pd=self.scenario.controller == "pd")
         self.overrides: list[tuple[int, np.ndarray]] = []  # (stamp ns, q_c), sorted by stamp
         self.order = StampOrder()
+        t0 = time.perf_counter()
+        desired_command(self.scenario.x0, self.scenario.command_at(0.0), self.law)  # kernel loaded before we subscribe
+        self.get_logger().info(f"controller ready in {time.perf_counter() - t0:.2f} s")
         spec = topics.TOPICS[topics.TORQUE_DES]
         pub = self.create_publisher(interface.msg_class(spec.type_name), spec.name, self.qos(topics.TORQUE_DES))
         self.out = self.gate(topics.TORQUE_DES, pub)

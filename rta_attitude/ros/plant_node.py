@@ -153,6 +153,8 @@ class PlantNode(RtaNode):
     def _on_command(self, msg: Any) -> None:
         if self._ended or not self._running:
             return
+        if self.counts["commands"] == 0:  # the chain's first sign of life: its command timeout starts now
+            self._progress_s = self.wall_now_s()
         self.counts["commands"] += 1
         try:
             t_ns, tau = convert.torque_from_msg(msg)
