@@ -246,7 +246,7 @@ def test_paper_model_differs_by_the_dropped_term() -> None:
     diff = bsk[:, OMEGA] - paper[:, OMEGA]
     rel = np.linalg.norm(diff - predicted, axis=1) / np.linalg.norm(predicted, axis=1)
     assert np.linalg.norm(predicted[-1]) > 0.05 * np.linalg.norm(x0[OMEGA])  # not a small correction
-    assert rel.max() < 0.05, rel
+    assert rel.max() < 0.01, rel  # measured 1.4e-3 after 1 s
     # and the gyrostat plant differs from Basilisk by round-off only
     with CompiledPlant(cfg, x0) as plant:
         gyro = plant.step(np.zeros(3))[1]
