@@ -91,6 +91,16 @@ def _initial_state(x0: Array) -> Array:
     return x
 
 
+def simulated_model(cfg: Config) -> NDArray[np.void]:
+    """The PLANT_DTYPE record (1,) of the equations `plant.simulator` integrates: `spacecraft.model` on
+    the compiled plant, the gyrostat on Basilisk (for the angular accelerations a run reports)."""
+    if cfg.plant.simulator == "basilisk":
+        from rta_attitude.dynamics.basilisk import truth_record
+
+        return truth_record(cfg)
+    return plant_record(cfg)
+
+
 def make_plant(cfg: Config, x0: Array, dt_s: float | None = None) -> Plant:
     """The plant `plant.simulator` names, started at x0 (19,); dt_s defaults to filter.sample_time_s.
 
@@ -104,4 +114,4 @@ def make_plant(cfg: Config, x0: Array, dt_s: float | None = None) -> Plant:
     return CompiledPlant(cfg, x0, dt_s)
 
 
-__all__ = ["CompiledPlant", "Plant", "make_plant"]
+__all__ = ["CompiledPlant", "Plant", "make_plant", "simulated_model"]

@@ -28,7 +28,7 @@ from rta_attitude.constraints.base import N_CONSTRAINTS
 from rta_attitude.constraints.geometry import CONTEXT_DTYPE
 from rta_attitude.constraints.rows import safety_values
 from rta_attitude.dynamics.controller import CONTROLLER_DTYPE, controller_record, desired_command, pd_command
-from rta_attitude.dynamics.plant import Plant
+from rta_attitude.dynamics.plant import Plant, make_plant, simulated_model
 from rta_attitude.dynamics.spacecraft import (
     PLANT_DTYPE,
     RK4_WORK_ROWS,
@@ -166,8 +166,6 @@ class ClosedLoop:
             if self.rta:
                 self.filter.counters.add(run.results)
         else:
-            from rta_attitude.dynamics.plant import make_plant
-
             with make_plant(cfg, self.scenario.x0, dt) as plant:
                 run = run_stepped(cfg, self.scenario, n, plant, self.filter if self.rta else None)
         return self._trajectory(run, dt)
@@ -241,7 +239,7 @@ def run_stepped(cfg: Config, scenario: Scenario, steps: int, plant: Plant, filt:
     S = cfg.substeps
     run = StepArrays.empty(steps, S)
     ctrl = controller_record(cfg, scenario.controller == "pd")
-    truth = _truth_record(cfg)
+    truth = simulated_model(cfg)
     constraints = ConstraintSet(cfg)
     D = cfg.spacecraft.wheel_inertia_kgm2
     lim = cfg.limits.wheel_accel_max_rad_s2
@@ -266,15 +264,6 @@ def run_stepped(cfg: Config, scenario: Scenario, steps: int, plant: Plant, filt:
         run.x[k + 1] = x_next
         run.h[k + 1] = run.h_sub[k, -1]
     return run
-
-
-def _truth_record(cfg: Config) -> NDArray[np.void]:
-    """The plant record of what the simulator integrates (Basilisk: always the gyrostat)."""
-    if cfg.plant.simulator == "basilisk":
-        from rta_attitude.dynamics.basilisk import truth_record
-
-        return truth_record(cfg)
-    return plant_record(cfg)
 
 
 def simulate(cfg: Config, scenario: str | Scenario, rta: bool = True, preset: str | None = None,
