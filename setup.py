@@ -18,6 +18,8 @@ setup(
     ],
     package_data={package_name: ["py.typed"]},
     install_requires=["setuptools", "numpy", "numba", "pyyaml"],
+    # plant.simulator: basilisk (docs/basilisk.md); the version whose behaviour the tests pin
+    extras_require={"basilisk": ["bsk==2.12.1"]},
     zip_safe=True,
     maintainer="rta_attitude developers",
     maintainer_email="rta-attitude@example.com",

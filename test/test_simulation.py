@@ -99,3 +99,22 @@ def test_active_set_and_proxsuite_solvers_agree_on_the_paper_example():
     c = simulate(CFG.with_solver("proxsuite"), short)
     assert np.array_equal(a.status, c.status)
     assert np.abs(a.u - c.u).max() < 1e-4
+
+
+@pytest.mark.parametrize(("scenario", "rta"), [("paper-example", True), ("passed-example", True),
+                                               ("paper-example", False)])
+def test_stepped_loop_over_the_compiled_plant_equals_the_compiled_loop(scenario, rta, paper_reference):
+    """`run_stepped` (the Python loop that other simulators run, `plant.simulator`) over `CompiledPlant`
+    is the compiled closed loop, bit for bit: PD law, torque interface, filter call, actuator, plant,
+    substep checks in the same order."""
+    from rta_attitude.dynamics.plant import CompiledPlant
+    from rta_attitude.simulation.closed_loop import ClosedLoop, run_stepped
+
+    loop = ClosedLoop(CFG, CFG.scenario(scenario), rta)
+    ref = paper_reference[rta] if scenario == "paper-example" else loop.run()
+    with CompiledPlant(loop.cfg, loop.scenario.x0) as plant:
+        run = run_stepped(loop.cfg, loop.scenario, ref.steps, plant, loop.filter if rta else None)
+    traj = loop._trajectory(run, CFG.filter.sample_time_s)
+    for name in ("x", "h", "h_substep_min", "h_substep_argmin_s", "q_c", "u_des", "u", "omega_dot", "bc", "slack",
+                 "intervening", "box_active", "status", "fallback", "iterations"):
+        np.testing.assert_array_equal(getattr(traj, name), getattr(ref, name), err_msg=name)

@@ -7,7 +7,7 @@ import os
 import sys
 from pathlib import Path
 
-from rta_attitude.config.schema import PRESETS, SOLVERS
+from rta_attitude.config.schema import PRESETS, SIMULATORS, SOLVERS
 from rta_attitude.errors import ConfigError
 from rta_attitude.montecarlo import BACKENDS, DEFAULT_CHUNK_RUNS
 
@@ -27,6 +27,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--solver", choices=SOLVERS, default=None,
                         help="QP solver (default: the config's): the exact active-set method or proxsuite (several "
                              "times slower); a run equals `simulate` with the same solver bit for bit")
+    parser.add_argument("--simulator", choices=SIMULATORS, default=None,
+                        help="what integrates the spacecraft (default: the config's plant.simulator); basilisk runs "
+                             "a Python loop per run (about 1-3 ms a step): use --max-runs")
+    parser.add_argument("--max-runs", type=int, default=None,
+                        help="run only the first N of the --runs sampled states (the same states as the whole "
+                             "campaign of that seed)")
     parser.add_argument("--out", type=Path, default=Path("out/montecarlo"), help="output directory")
     parser.add_argument("--no-plot", action="store_true", help="skip the PNG figure")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -39,6 +45,8 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError(f"--runs must be >= 1, got {args.runs}")
     if args.chunk_runs is not None and args.chunk_runs < 1:
         raise ConfigError(f"--chunk-runs must be >= 1, got {args.chunk_runs}")
+    if args.max_runs is not None and args.max_runs < 1:
+        raise ConfigError(f"--max-runs must be >= 1, got {args.max_runs}")
     from rta_attitude import config as config_module
     from rta_attitude.files import output_dir
     from rta_attitude.montecarlo.campaign import format_table, montecarlo, summary, write_outputs
@@ -46,9 +54,12 @@ def run(args: argparse.Namespace) -> int:
     cfg = config_module.load(args.config, preset=args.preset)
     if args.solver is not None:
         cfg = cfg.with_solver(args.solver)
+    if args.simulator is not None:
+        cfg = cfg.with_simulator(args.simulator)
     output_dir(args.out)  # before hours of work, not after
     result = montecarlo(cfg, args.runs, args.duration, args.seed, args.workers, args.backend, args.scheduler,
-                        args.chunk_runs, progress=not args.no_progress and sys.stderr.isatty())
+                        args.chunk_runs, progress=not args.no_progress and sys.stderr.isatty(),
+                        max_runs=args.max_runs)
     paths = write_outputs(result, args.out, plot=not args.no_plot)
     print(format_table(summary(result)))
     print("wrote " + ", ".join(str(p) for p in paths.values()))

@@ -8,7 +8,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from rta_attitude.config.schema import PRESETS, SOLVERS
+from rta_attitude.config.schema import PRESETS, SIMULATORS, SOLVERS
 from rta_attitude.errors import RtaError
 
 
@@ -20,6 +20,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--duration", type=float, default=None, help="override the scenario duration, s")
     parser.add_argument("--solver", choices=SOLVERS, default=None,
                         help="QP solver (default: the config's; active_set = the Monte Carlo's)")
+    parser.add_argument("--simulator", choices=SIMULATORS, default=None,
+                        help="what integrates the spacecraft (default: the config's plant.simulator); basilisk "
+                             "needs pip install rta_attitude[basilisk]")
     parser.add_argument("--out", type=Path, default=Path("out/simulate"), help="output directory")
     parser.add_argument("--no-plot", action="store_true", help="skip the PNG figure")
     parser.add_argument("--config", type=Path, default=None,
@@ -54,6 +57,8 @@ def run(args: argparse.Namespace) -> int:
     cfg = config_module.load(args.config, preset=args.preset)
     if args.solver is not None:
         cfg = cfg.with_solver(args.solver)
+    if args.simulator is not None:
+        cfg = cfg.with_simulator(args.simulator)
     scenario = cfg.scenario(args.scenario)
     if args.duration is not None:
         if not args.duration > 0:
@@ -68,6 +73,8 @@ def run(args: argparse.Namespace) -> int:
     wall = time.perf_counter() - t0
     summary = summarize_trajectory(traj, cfg.limits.omega_dot_max_rad_s2, loop.cfg.slacked_constraints)
     summary["wall_time_s"] = wall
+    summary["simulator"] = cfg.plant.simulator
+    summary["filter_model"] = cfg.spacecraft.model
     write_trajectory(traj, out)
     write_text(out / "summary.json", json.dumps(summary, indent=2) + "\n")
     print(format_summary(summary))

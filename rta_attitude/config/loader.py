@@ -24,6 +24,7 @@ from rta_attitude.config.schema import (
     Environment,
     FilterOptions,
     Limits,
+    PlantOptions,
     Power,
     Scenario,
     Spacecraft,
@@ -275,6 +276,12 @@ def from_parameters(params: Mapping[str, Any], source: str = "<memory>") -> Conf
     it = root.section("integrator")
     substeps = it.integer("substeps")
     it.done()
+    plant = PlantOptions()
+    root.used.add("plant")
+    if "plant" in root.data:  # optional section: the compiled simulator without it
+        pl = root.section("plant")
+        plant = PlantOptions(pl.text("simulator", "compiled"))
+        pl.done()
     sn = root.section("scenarios")
     scenarios = {}
     for name in list(sn.data):
@@ -282,7 +289,7 @@ def from_parameters(params: Mapping[str, Any], source: str = "<memory>") -> Conf
     sn.done()
     root.done()
     return Config(spacecraft, environment, thermal, power, limits, barriers, Augmentation(d0, d1, d2),
-                  filter_options, controller, substeps, scenarios, source=source)
+                  filter_options, controller, substeps, scenarios, source=source, plant=plant)
 
 
 def load(path: str | os.PathLike[str] | None = None, *, preset: str | None = None) -> Config:

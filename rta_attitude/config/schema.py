@@ -5,6 +5,7 @@ Built by `rta_attitude.config.load` from the YAML file; nothing else converts un
 
 from __future__ import annotations
 
+import importlib.util
 import math
 from dataclasses import dataclass, field, replace
 
@@ -31,6 +32,11 @@ SOLVERS: tuple[str, ...] = ("active_set", "proxsuite")
 CONTROLLERS: tuple[str, ...] = ("pd", "none")
 PLANT_MODELS: tuple[str, ...] = ("gyrostat", "paper")
 """gyrostat: the wheels' momentum in Euler's equations (-omega x (J omega - D psi)); paper: without it."""
+SIMULATORS: tuple[str, ...] = ("compiled", "basilisk")
+"""What integrates the simulated spacecraft: `compiled`, the package's own RK4 of `spacecraft.model`
+(`dynamics.spacecraft`); `basilisk`, Basilisk (the optional `bsk` package) as an independent truth plant
+(`dynamics.basilisk`: rigid hub and three wheels, always with the wheels' gyroscopic torque)."""
+BASILISK_MISSING = "plant.simulator basilisk needs the optional extra: pip install rta_attitude[basilisk]"
 
 
 def _positive(where: str, value: float) -> None:
@@ -78,6 +84,20 @@ class Spacecraft:
     def control_gain(self) -> NDArray[np.float64]:
         """d omega_dot / d u = sign D / J_i (3,), 1/s^2 per rad/s^2."""
         return self.torque_sign * self.wheel_inertia_kgm2 / self.J
+
+
+@dataclass(frozen=True)
+class PlantOptions:
+    """Which simulator integrates the spacecraft (simulate, the Monte Carlo, the plant node); the
+    filter's own model is `spacecraft.model` whatever this says."""
+
+    simulator: str = "compiled"
+    """SIMULATORS: `compiled` or `basilisk` (needs `pip install rta_attitude[basilisk]`)."""
+
+    def __post_init__(self) -> None:
+        _choice("plant.simulator", self.simulator, SIMULATORS)
+        if self.simulator == "basilisk" and importlib.util.find_spec("Basilisk") is None:
+            raise ConfigError(BASILISK_MISSING)
 
 
 @dataclass(frozen=True)
@@ -325,8 +345,13 @@ class Config:
     substeps: int
     scenarios: dict[str, Scenario]
     source: str = "<memory>"
+    plant: PlantOptions = field(default_factory=PlantOptions)
+    """The simulator of the spacecraft (`plant:` section; optional, default compiled)."""
 
     def __post_init__(self) -> None:
+        if self.plant.simulator == "basilisk" and self.spacecraft.torque_sign != 1.0:
+            raise ConfigError(f"plant.simulator basilisk needs spacecraft.torque_sign 1.0 (a wheel's reaction "
+                              f"with psi = -Omega), got {self.spacecraft.torque_sign!r}")
         if not (isinstance(self.substeps, int) and self.substeps >= 1):
             raise ConfigError(f"integrator.substeps must be an integer >= 1, got {self.substeps!r}")
         for group in BARRIER_GROUPS:
@@ -372,6 +397,14 @@ class Config:
     def with_solver(self, solver: str) -> Config:
         """A copy using another QP solver ('proxsuite' or 'active_set')."""
         return replace(self, filter=replace(self.filter, solver=solver))
+
+    def with_simulator(self, simulator: str) -> Config:
+        """A copy whose spacecraft is integrated by another simulator ('compiled' or 'basilisk').
+
+        Raises:
+            ConfigError: unknown simulator, or basilisk without the optional extra.
+        """
+        return replace(self, plant=PlantOptions(simulator))
 
     def with_fallback(self, fallback: str) -> Config:
         """A copy using another fallback policy."""

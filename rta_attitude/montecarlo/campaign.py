@@ -26,8 +26,11 @@ def _cpu_s() -> float:
 
 def montecarlo(cfg: Config, runs: int, duration_s: float, seed: int, workers: int = 1, backend: str = "local",
                scheduler: str | Any | None = None, chunk_runs: int | None = None,
-               progress: bool = False) -> MonteCarloResult:
+               progress: bool = False, max_runs: int | None = None) -> MonteCarloResult:
     """Sample, run and classify (the library entry point of the CLI).
+
+    max_runs: run only the first max_runs of the `runs` sampled states (the same states, in the same
+    order, as the whole campaign of that seed): a subset for a slower simulator (`plant.simulator`).
 
     Raises:
         ConfigError: bad arguments.
@@ -40,7 +43,11 @@ def montecarlo(cfg: Config, runs: int, duration_s: float, seed: int, workers: in
         raise ConfigError(f"workers must be >= 1, got {workers}")
     if backend == "dask" and not scheduler:
         raise ConfigError("the dask backend needs --scheduler ADDRESS (e.g. tcp://127.0.0.1:8786)")
+    if max_runs is not None and max_runs < 1:
+        raise ConfigError(f"max_runs must be >= 1, got {max_runs}")
     x0, redraws = sample_initial_states(runs, seed, cfg)
+    if max_runs is not None:
+        x0, redraws = x0[:max_runs], redraws[:max_runs]
     t0 = time.perf_counter()
     cpu0 = _cpu_s()
     if backend == "local":

@@ -9,6 +9,11 @@ counts, the largest slack, the final state (and, on request, the states at every
 
 Runs are independent, so their results do not depend on the chunk or the worker they ran in: the
 local backend (`fork`ed processes) and the Dask backend give identical results.
+
+Another simulator than the compiled one (`plant.simulator: basilisk`) runs each state through
+`simulation.closed_loop.run_stepped`, a Python loop over the plant's steps with the same filter call
+(`run_runs_stepped`); its outcome has the same fields, computed from the run's samples and substeps as
+the compiled loop marks them (over the compiled plant the two are equal bit for bit, tested).
 """
 
 from __future__ import annotations
@@ -30,6 +35,7 @@ from rta_attitude.config.schema import Config
 from rta_attitude.constraints.base import N_CONSTRAINTS
 from rta_attitude.constraints.geometry import CONTEXT_DTYPE
 from rta_attitude.constraints.rows import safety_values
+from rta_attitude.dynamics.plant import Plant
 from rta_attitude.dynamics.spacecraft import RK4_WORK_ROWS
 from rta_attitude.dynamics.state import STATE_SIZE
 from rta_attitude.errors import RtaError
@@ -147,19 +153,30 @@ def run_batch(X0: Array, steps: int, loop: NDArray[np.void], viol_s: NDArray[np.
         x_final[k] = x
 
 
-def run_runs(cfg: Config, x0: Array, duration_s: float, record: bool = False,
-             progress: Callable[[int], None] | None = None) -> BatchOutcome:
-    """Run initial states x0 (N, 19) for duration_s in this process; progress(runs done) after each
-    group of PROGRESS_RUNS runs."""
+def _new_outcome(N: int, steps: int, record: bool) -> BatchOutcome:
+    return BatchOutcome(np.zeros((N, M), dtype=bool), np.zeros((N, M), dtype=bool), np.full((N, M), np.nan),
+                        np.full((N, M), np.inf), np.zeros(N, dtype=np.int64), np.zeros(N, dtype=np.int64),
+                        np.zeros(N, dtype=np.int64), np.zeros(N), np.empty((N, STATE_SIZE)),
+                        np.empty((N, steps + 1, STATE_SIZE)) if record else None)
+
+
+def _check_states(x0: Array) -> Array:
     x0 = np.ascontiguousarray(x0, dtype=float)
     if x0.ndim != 2 or x0.shape[1] != STATE_SIZE:
         raise ValueError(f"x0 must be (N, {STATE_SIZE}), got {x0.shape}")
+    return x0
+
+
+def run_runs(cfg: Config, x0: Array, duration_s: float, record: bool = False,
+             progress: Callable[[int], None] | None = None) -> BatchOutcome:
+    """Run initial states x0 (N, 19) for duration_s in this process; progress(runs done) after each
+    group of PROGRESS_RUNS runs (each run with another simulator than the compiled one)."""
+    if cfg.plant.simulator != "compiled":
+        return run_runs_stepped(cfg, x0, duration_s, record=record, progress=progress)
+    x0 = _check_states(x0)
     steps = round(duration_s / cfg.filter.sample_time_s)
     N = x0.shape[0]
-    out = BatchOutcome(np.zeros((N, M), dtype=bool), np.zeros((N, M), dtype=bool), np.full((N, M), np.nan),
-                       np.full((N, M), np.inf), np.zeros(N, dtype=np.int64), np.zeros(N, dtype=np.int64),
-                       np.zeros(N, dtype=np.int64), np.zeros(N), np.empty((N, STATE_SIZE)),
-                       np.empty((N, steps + 1, STATE_SIZE)) if record else None)
+    out = _new_outcome(N, steps, record)
     loop = loop_record(cfg, rta=True, pd=False)
     traj = out.trajectory if out.trajectory is not None else np.empty((1, 1, STATE_SIZE))
     for a in range(0, N, PROGRESS_RUNS):
@@ -170,6 +187,64 @@ def run_runs(cfg: Config, x0: Array, duration_s: float, record: bool = False,
                   traj[a:b] if record else traj, record)
         if progress is not None:
             progress(b)
+    return out
+
+
+def run_runs_stepped(cfg: Config, x0: Array, duration_s: float, plant: Callable[[Config, Array], Plant] | None = None,
+                     record: bool = False, progress: Callable[[int], None] | None = None) -> BatchOutcome:
+    """Run initial states x0 (N, 19) for duration_s with u_des = 0, one `run_stepped` each, on the plant
+    `plant(cfg, x0)` builds (default `dynamics.plant.make_plant`: the configured simulator); the outcome
+    of `run_runs`, marked as `run_batch` marks it (samples and substeps in time order). progress(runs
+    done) after each run."""
+    from rta_attitude.config.schema import Scenario
+    from rta_attitude.dynamics.plant import make_plant
+    from rta_attitude.filter.asif import AsifFilter
+    from rta_attitude.simulation.closed_loop import run_stepped
+
+    x0 = _check_states(x0)
+    dt = cfg.filter.sample_time_s
+    steps = round(duration_s / dt)
+    S = cfg.substeps
+    N = x0.shape[0]
+    out = _new_outcome(N, steps, record)
+    build = make_plant if plant is None else plant
+    filt = AsifFilter(cfg)
+    slacked = filt.slacked
+    # the samples and the substeps before the next sample, in time order, with run_batch's times
+    t = np.empty(steps * S + 1)
+    for step in range(steps):
+        t[step * S] = step * dt
+        for j in range(S - 1):
+            t[step * S + 1 + j] = step * dt + dt * (j + 1) / S
+    t[-1] = steps * dt
+    is_sample = np.zeros(steps * S + 1, dtype=bool)
+    is_sample[::S] = True
+    for k in range(N):
+        scenario = Scenario(name="montecarlo", description="", duration_s=steps * dt, x0=x0[k], controller="none")
+        with build(cfg, x0[k]) as p:
+            run = run_stepped(cfg, scenario, steps, p, filt)
+        h = np.empty((steps * S + 1, M))
+        h[::S] = run.h
+        for j in range(S - 1):
+            h[1 + j::S] = run.h_sub[:, j]
+        neg = h < 0
+        out.violated_samples[k] = neg[is_sample].any(axis=0)
+        out.violated_substeps[k] = neg.any(axis=0)
+        for i in np.flatnonzero(out.violated_substeps[k]):
+            out.first_violation_s[k, i] = t[np.argmax(neg[:, i])]
+        out.min_h_samples[k] = np.fmin.reduce(run.h, axis=0, initial=np.inf)  # NaN skipped, as run_batch
+        status = run.results["status"]
+        out.qp_steps[k] = np.count_nonzero(status != PASS)
+        out.fallback_steps[k] = np.count_nonzero(status == FALLBACK)
+        out.qp_failures[k] = int(run.results["qp_failed"].sum())
+        if slacked.any():
+            out.max_comm_slack[k] = float(np.fmax.reduce(np.abs(run.results["slack"][:, slacked]), axis=None,
+                                                         initial=0.0))
+        out.x_final[k] = run.x[-1]
+        if out.trajectory is not None:
+            out.trajectory[k] = run.x
+        if progress is not None:
+            progress(k + 1)
     return out
 
 
@@ -307,4 +382,4 @@ def run_dask(cfg: Config, x0: Array, duration_s: float, scheduler: str | Any, ch
 
 
 __all__ = ["BatchOutcome", "ChunkTask", "merge", "progress_bar", "run_batch", "run_chunk",
-           "run_dask", "run_local", "run_runs", "split"]
+           "run_dask", "run_local", "run_runs", "run_runs_stepped", "split"]

@@ -1,5 +1,6 @@
 """plant_node: the spacecraft simulator. Publishes /clock, `state` and the inspection topics,
-takes body torques and integrates the core model (`dynamics.spacecraft.integrate`) one sample at a time.
+takes body torques and integrates the core model (`dynamics.spacecraft.integrate`) one sample at a time,
+or Basilisk with `plant.simulator:=basilisk` (`dynamics.plant.make_plant`; the same step interface).
 
 Stepping (`stepping` parameter):
 
@@ -39,6 +40,7 @@ import numpy as np
 
 from rta_attitude import topics
 from rta_attitude.dynamics import spacecraft
+from rta_attitude.dynamics.plant import make_plant
 from rta_attitude.errors import MessageError
 from rta_attitude.kernel_cache import drop_stale_caches
 from rta_attitude.ros import convert, interface, spin
@@ -73,7 +75,9 @@ class PlantNode(RtaNode):
         t0 = self.wall_now_s()
         drop_stale_caches()
         spacecraft.integrate(self.x, np.zeros(3), self.dt_s, self.plant, 1)  # compile (or load) the integrator now
-        self.get_logger().info(f"plant integrator ready in {self.wall_now_s() - t0:.2f} s")
+        self.simulator = make_plant(self.cfg, self.x, self.dt_s)
+        self.get_logger().info(f"plant integrator ({self.cfg.plant.simulator}) ready in "
+                               f"{self.wall_now_s() - t0:.2f} s")
         self.held_tau = np.zeros(3)
         self.misses_in_a_row = 0
         self.last_command_ns = -1
@@ -142,7 +146,7 @@ class PlantNode(RtaNode):
     def _step(self, tau_Nm: np.ndarray) -> None:
         """Hold tau over [t_k, t_k+1) (the core saturates and integrates), publish the new sample."""
         u = spacecraft.torque_to_wheel_accel(tau_Nm, self.D)
-        x_next, _ = spacecraft.integrate(self.x, u, self.dt_s, self.plant, self.cfg.substeps)
+        x_next, _ = self.simulator.step(u)
         t_ns = self._t_ns(self.k)
         self.held_tau = tau_Nm
         self.k += 1
@@ -265,6 +269,11 @@ class PlantNode(RtaNode):
             values.update(latency_median_s=float(np.median(lat)), latency_p99_s=float(np.percentile(lat, 99)),
                           latency_max_s=float(lat.max()))
         return values
+
+    def close(self) -> None:
+        """Release the simulator, then log as every node does."""
+        self.simulator.close()
+        super().close()
 
     def _end(self, state: str) -> None:
         """Publish the final run_status with the message counts, wait for acks, finish."""

@@ -16,26 +16,31 @@ controller, RTA on/off, dt and substeps).
 from __future__ import annotations
 
 import logging
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numba
 import numpy as np
 from numpy.typing import NDArray
 
 from rta_attitude.config.schema import CONSTRAINT_NAMES, Config, Scenario
+from rta_attitude.constraints import ConstraintSet
 from rta_attitude.constraints.base import N_CONSTRAINTS
 from rta_attitude.constraints.geometry import CONTEXT_DTYPE
 from rta_attitude.constraints.rows import safety_values
-from rta_attitude.dynamics.controller import CONTROLLER_DTYPE, controller_record, pd_command
+from rta_attitude.dynamics.controller import CONTROLLER_DTYPE, controller_record, desired_command, pd_command
+from rta_attitude.dynamics.plant import Plant, make_plant, simulated_model
 from rta_attitude.dynamics.spacecraft import (
     PLANT_DTYPE,
     RK4_WORK_ROWS,
     attitude_matrix,
+    omega_dot,
     omega_drift,
     plant_record,
     rk4_hold,
     saturate,
     torque_round_trip,
+    torque_to_wheel_accel,
+    wheel_accel_to_torque,
 )
 from rta_attitude.dynamics.state import STATE_SIZE
 from rta_attitude.filter.asif import AsifFilter, FilterResult
@@ -144,27 +149,35 @@ class ClosedLoop:
         self.loop = loop_record(self.cfg, rta, pd=scenario.controller == "pd")
 
     def run(self, dt_s: float | None = None) -> Trajectory:
-        """Simulate the whole scenario; dt defaults to filter.sample_time_s."""
+        """Simulate the whole scenario; dt defaults to filter.sample_time_s. The compiled simulator runs
+        `run_scenario`; another (`plant.simulator`) runs `run_stepped` over `dynamics.plant.make_plant`."""
         cfg = self.cfg
         lp = self.loop.copy()
         if dt_s is not None:
             lp[0]["dt_s"] = dt_s
         dt = float(lp[0]["dt_s"])
         n = round(self.scenario.duration_s / dt)
-        S = cfg.substeps
-        X, H = np.empty((n + 1, STATE_SIZE)), np.empty((n + 1, M))
-        Hsub = np.empty((n, S, M))
-        q_c, u_des, u, w_dot = np.empty((n, 4)), np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 3))
-        R = np.zeros(n, RESULT_DTYPE)
-        sched_t = np.asarray(self.scenario.schedule_s, dtype=float)
-        sched_q = np.ascontiguousarray(self.scenario.schedule_q, dtype=float)
-        run_scenario(np.ascontiguousarray(self.scenario.x0, dtype=float), n, sched_t, sched_q, lp, X, H, Hsub, q_c,
-                     u_des, u, w_dot, R)
+        if cfg.plant.simulator == "compiled":
+            run = StepArrays.empty(n, cfg.substeps)
+            sched_t = np.asarray(self.scenario.schedule_s, dtype=float)
+            sched_q = np.ascontiguousarray(self.scenario.schedule_q, dtype=float)
+            run_scenario(np.ascontiguousarray(self.scenario.x0, dtype=float), n, sched_t, sched_q, lp, run.x,
+                         run.h, run.h_sub, run.q_c, run.u_des, run.u, run.omega_dot, run.results)
+            if self.rta:
+                self.filter.counters.add(run.results)
+        else:
+            with make_plant(cfg, self.scenario.x0, dt) as plant:
+                run = run_stepped(cfg, self.scenario, n, plant, self.filter if self.rta else None)
+        return self._trajectory(run, dt)
+
+    def _trajectory(self, run: StepArrays, dt: float) -> Trajectory:
+        cfg = self.cfg
+        n = run.u.shape[0]
+        R = run.results
         t = dt * np.arange(n + 1)
-        h_min, h_arg = substep_minima(H[:-1], np.moveaxis(Hsub, 1, 0), t[:-1], dt)
+        h_min, h_arg = substep_minima(run.h[:-1], np.moveaxis(run.h_sub, 1, 0), t[:-1], dt)
         res = FilterResult(R, cfg.filter.fallback)
         if self.rta:
-            self.filter.counters.add(R)
             status, fallback = res.status, res.fallback
             bc, slack, inter, box = res.bc, res.slack, res.intervening, res.box_active
         else:
@@ -172,13 +185,85 @@ class ClosedLoop:
             bc, slack, inter, box = (np.zeros((n, M)), np.zeros((n, M)), np.zeros((n, M), dtype=bool),
                                      np.zeros((n, 3), dtype=bool))
         return Trajectory(
-            names=CONSTRAINT_NAMES, t_s=t, x=X, q_c=q_c, u_des=u_des, u=u, omega_dot=w_dot, h=H,
-            h_substep_min=h_min, h_substep_argmin_s=h_arg, bc=bc, slack=slack, intervening=inter,
+            names=CONSTRAINT_NAMES, t_s=t, x=run.x, q_c=run.q_c, u_des=run.u_des, u=run.u, omega_dot=run.omega_dot,
+            h=run.h, h_substep_min=h_min, h_substep_argmin_s=h_arg, bc=bc, slack=slack, intervening=inter,
             box_active=box, status=np.asarray(status, dtype=str), fallback=np.asarray(fallback, dtype=str),
             iterations=R["iterations"].copy() if self.rta else np.zeros(n, dtype=np.int64),
             solve_time_s=np.zeros(n), rta=self.rta, preset=cfg.filter.preset, scenario=self.scenario.name,
-            meta={"config": cfg.source, "dt_s": dt, "substeps": S},
+            meta={"config": cfg.source, "dt_s": dt, "substeps": cfg.substeps},
         )  # fmt: skip
+
+
+@dataclass
+class StepArrays:
+    """What a closed-loop run records, step by step (N steps, S substeps, m constraints).
+
+    Attributes:
+        x: states at the samples (N + 1, 19); h: safety values there (N + 1, m).
+        h_sub: safety values after each substep (N, S, m) (the last is the next sample).
+        q_c (N, 4), u_des, u, omega_dot (N, 3): command, desired and applied wheel accelerations
+            (u after saturation), body angular acceleration at each step's start (the plant's model).
+        results: the filter's RESULT_DTYPE records (N,) (zeros without RTA).
+    """
+
+    x: Array
+    h: Array
+    h_sub: Array
+    q_c: Array
+    u_des: Array
+    u: Array
+    omega_dot: Array
+    results: NDArray[np.void]
+
+    @classmethod
+    def empty(cls, steps: int, substeps: int) -> StepArrays:
+        """Arrays for `steps` steps of `substeps` substeps (results zeroed)."""
+        return cls(np.empty((steps + 1, STATE_SIZE)), np.empty((steps + 1, M)), np.empty((steps, substeps, M)),
+                   np.empty((steps, 4)), np.empty((steps, 3)), np.empty((steps, 3)), np.empty((steps, 3)),
+                   np.zeros(steps, RESULT_DTYPE))
+
+
+def run_stepped(cfg: Config, scenario: Scenario, steps: int, plant: Plant, filt: AsifFilter | None) -> StepArrays:
+    """The closed loop of `run_scenario`, one Python step at a time over any plant (`dynamics.plant`):
+    at each sample the PD law (`pd_command`, if the scenario has it), the torque interface, the filter
+    (`AsifFilter.filter`, if given), the interface again, the actuator, `plant.step`, and the safety
+    values of every substep. Over `CompiledPlant` it equals `run_scenario` bit for bit (tested).
+
+    Args:
+        cfg: configuration (the scenario's slack weights applied: `Config.for_scenario`).
+        scenario: command schedule and controller; the plant already starts at its x0.
+        steps: samples to run.
+        plant: the plant, at the scenario's initial state.
+        filt: the filter; None: u_des goes to the plant unfiltered.
+    """
+    S = cfg.substeps
+    run = StepArrays.empty(steps, S)
+    ctrl = controller_record(cfg, scenario.controller == "pd")
+    truth = simulated_model(cfg)
+    constraints = ConstraintSet(cfg)
+    D = cfg.spacecraft.wheel_inertia_kgm2
+    lim = cfg.limits.wheel_accel_max_rad_s2
+    sched_t = np.asarray(scenario.schedule_s, dtype=float)
+    sched_q = np.ascontiguousarray(scenario.schedule_q, dtype=float)
+    run.x[0] = plant.x
+    run.h[0] = constraints.safety_values(plant.x)
+    for k in range(steps):
+        x = run.x[k]
+        run.q_c[k] = sched_q[_command_at(sched_t, k * plant.dt_s)]
+        run.u_des[k] = torque_to_wheel_accel(wheel_accel_to_torque(desired_command(x, run.q_c[k], ctrl), D), D)
+        if filt is not None:
+            result = filt.filter(x, run.u_des[k])
+            run.results[k] = result.record
+            u = torque_to_wheel_accel(wheel_accel_to_torque(result.u, D), D)
+        else:
+            u = run.u_des[k]
+        run.u[k] = np.clip(u, -lim, lim)
+        run.omega_dot[k] = omega_dot(x, run.u[k], truth)
+        x_next, subs = plant.step(run.u[k])
+        run.h_sub[k] = constraints.safety_values(subs)
+        run.x[k + 1] = x_next
+        run.h[k + 1] = run.h_sub[k, -1]
+    return run
 
 
 def simulate(cfg: Config, scenario: str | Scenario, rta: bool = True, preset: str | None = None,
@@ -214,5 +299,5 @@ def compile_kernels(cfg: Config) -> float:
     return time.perf_counter() - t0
 
 
-__all__ = ["LOOP_DTYPE", "ClosedLoop", "Trajectory", "advance", "compile_kernels", "loop_record", "run_scenario",
-           "simulate"]
+__all__ = ["LOOP_DTYPE", "ClosedLoop", "StepArrays", "Trajectory", "advance", "compile_kernels", "loop_record",
+           "run_scenario", "run_stepped", "simulate"]

@@ -126,6 +126,8 @@ def format_summary(summary: dict[str, Any]) -> str:
     """A fixed-width table of a summary, for terminals and logs."""
     rta = f"on ({summary.get('preset')})" if summary.get("rta") else "off"
     title = f"scenario {summary.get('scenario', '?')}  rta={rta}  duration {summary['duration_s']:.0f} s"
+    if "simulator" in summary:
+        title += f"  plant: {summary['simulator']}, filter model: {summary.get('filter_model', '?')}"
     lines = [title, f"{'constraint':<16}{'min h':>14} {'unit':<10}{'first violation':>16}  note"]
     for name in CONSTRAINT_NAMES:
         c = summary["constraints"].get(name)
