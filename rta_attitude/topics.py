@@ -177,15 +177,16 @@ def recorded(rta: bool) -> list[TopicSpec]:
     return [t for t in subscribed(RECORDER, rta) if rta or t.name != FILTER_STATUS]
 
 
+def reader_roles(topic: str, rta: bool, record: bool) -> list[str]:
+    """The roles of the run's own nodes that subscribe to `topic`."""
+    return [who for who, only_rta, only_plain in TOPICS[topic].readers
+            if not ((only_rta and not rta) or (only_plain and rta) or (who == RECORDER and not record))]
+
+
 def expected_readers(topic: str, rta: bool, record: bool) -> int:
     """How many of the run's own nodes subscribe to `topic`; a writer waits for this many matches
     before its first message (tools such as `ros2 topic echo` only add readers)."""
-    n = 0
-    for who, only_rta, only_plain in TOPICS[topic].readers:
-        if (only_rta and not rta) or (only_plain and rta) or (who == RECORDER and not record):
-            continue
-        n += 1
-    return n
+    return len(reader_roles(topic, rta, record))
 
 
 # ----------------------------------------------------------------------------- diagnostics
@@ -361,5 +362,5 @@ __all__ = [
     "RUN_STATUS_NAME", "STATE", "STATE_QOS", "STATUS_HARDWARE_ID", "STATUS_QOS", "STREAM_QOS", "SUN_VECTOR",
     "SYSTEM_PARAMETERS",
     "TEMPERATURE", "TOPICS", "TORQUE_APPLIED", "TORQUE_CMD", "TORQUE_DES", "Knob", "QosSpec", "TopicSpec",
-    "expected_readers", "knobs_for", "published", "recorded", "subscribed",
+    "expected_readers", "reader_roles", "knobs_for", "published", "recorded", "subscribed",
 ]  # fmt: skip

@@ -366,6 +366,38 @@ def test_quaternion_tolerance_renormalises_within_and_rejects_beyond() -> None:
 # ----------------------------------------------------------------------------- the plant's command checks
 
 
+def test_plant_waits_for_a_reader_that_is_alive_but_still_starting() -> None:
+    """A reader node in the graph that has not subscribed yet (a first start compiles the filter's kernels
+    for tens of seconds, longer on a loaded machine) does not make the plant give up at startup_timeout_s;
+    once that node is gone, the timeout ends the run with one line naming the topic."""
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    executor = make_executor("single", context=context)
+    plant = PlantNode(context=context, parameter_overrides=[Parameter(k, value=v) for k, v in {
+        "rta": False, "record": False, "startup_timeout_s": 0.5, "stop_timeout_s": 0.5}.items()])
+    starting = rclpy.create_node(topics.NODE_NAMES[topics.CONTROLLER], namespace=NS, context=context)
+    executor.add_node(plant)
+    executor.add_node(starting)
+
+    def spin_until(cond: Any, timeout_s: float = 60.0) -> None:
+        deadline = time.monotonic() + timeout_s
+        while not cond():
+            assert time.monotonic() < deadline
+            executor.spin_once(timeout_sec=0.02)
+
+    try:
+        spin_until(lambda: plant.startup_extensions >= 2)  # the timeout ran out twice: the plant waited on
+        assert not plant.finished.done() and plant.published.get(topics.STATE, 0) == 0
+        executor.remove_node(starting)
+        starting.destroy_node()
+        spin_until(lambda: plant.finished.done())
+    finally:
+        executor.shutdown()
+        plant.destroy_node()
+        rclpy.try_shutdown(context=context)
+    assert plant.exit_code == 1 and plant.published.get(topics.STATE, 0) == 0
+
+
 def test_plant_checks_commands_and_times_out_in_lockstep(tmp_path: Path) -> None:
     """Over DDS in one process: a plant in lockstep and a stand-in for the filter that sends bad
     commands. NaN or wrong frame: rejected; wrong stamps: future/duplicate/late; beyond the actuator

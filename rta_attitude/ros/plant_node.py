@@ -93,17 +93,44 @@ class PlantNode(RtaNode):
         self._ended = False
         self._running = False
         self._started_s = 0.0
+        self.startup_extensions = 0
+        """How often startup_timeout_s ran out while a reader was alive but still starting (then: wait on)."""
         self._startup = self.wall_timer(STARTUP_POLL_S, self._check_ready)
         self.get_logger().info(f"scenario {self.scenario.name}: {self.steps} steps of {self.dt_s:g} s, "
                                f"{self.knobs['stepping']}, rta={'on' if self.rta else 'off'}; waiting for readers")
 
     # ------------------------------------------------------------------ start
+    def _readers_starting(self) -> list[str]:
+        """The run's reader nodes that exist in the ROS graph under our namespace but have not subscribed
+        to everything they read yet: started, still building (a first start compiles the filter's kernels
+        for tens of seconds). Empty if every reader has subscribed, or if one is not even in the graph
+        (that one counts against startup_timeout_s)."""
+        ns = self.get_namespace()
+        alive = {name for name, node_ns in self.get_node_names_and_namespaces() if node_ns == ns}
+        roles: set[str] = set()
+        for n, pub in self.pubs.items():
+            want = topics.reader_roles(n, self.rta, self.record)
+            if len(want) > pub.get_subscription_count():
+                roles |= set(want)
+        names = sorted(topics.NODE_NAMES[r] for r in roles)
+        subscribed = {info.node_name for n in self.pubs for info in self.get_subscriptions_info_by_topic(
+            self.pubs[n].topic_name) if info.node_namespace == ns}
+        pending = [name for name in names if name not in subscribed]
+        return pending if pending and all(name in alive for name in pending) else []
+
     def _check_ready(self) -> None:
         missing = [(self.pubs[n].topic_name, self.pubs[n].get_subscription_count(), want)
                    for n in self.pubs if (want := topics.expected_readers(n, self.rta, self.record))
                    and self.pubs[n].get_subscription_count() < want]  # fmt: skip
         if missing:
             if self.wall_now_s() - self._progress_s > self.knobs["startup_timeout_s"]:
+                starting = self._readers_starting()
+                if starting:  # alive in the graph, not subscribed yet (compiling kernels): wait as long as it takes
+                    self.get_logger().info(f"waiting for {', '.join(starting)} to finish starting (alive, not "
+                                           f"subscribed after {self.knobs['startup_timeout_s']:g} s)")
+                    self._progress_s = self.wall_now_s()
+                    self.startup_extensions += 1
+                    return
                 self.destroy_timer(self._startup)
                 name, have, want = missing[0]
                 self._end(topics.RUN_FAILED + f": {name} has {have} of {want} readers after "

@@ -382,8 +382,14 @@ def run(factory: Callable[[], RtaNode], args: Sequence[str] | None = None, name:
 
     argv = list(args) if args is not None else list(sys.argv)
     received: list[int] = []
-    previous = {s: signal.signal(s, lambda signum, frame: received.append(signum))
-                for s in (signal.SIGINT, signal.SIGTERM)}
+    building = [True]
+
+    def on_signal(signum: int, frame: Any) -> None:
+        received.append(signum)
+        if building[0]:  # still in the constructor (e.g. compiling kernels): abandon the start at once
+            raise KeyboardInterrupt
+
+    previous = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
     node: RtaNode | None = None
     executor: Executor | None = None
     code = 0
@@ -400,6 +406,7 @@ def run(factory: Callable[[], RtaNode], args: Sequence[str] | None = None, name:
         return 1
     try:
         node = factory()
+        building[0] = False
         executor = make_executor(node.knobs["executor"])
         executor.add_node(node)
         hard_stop = float("inf")
@@ -419,10 +426,12 @@ def run(factory: Callable[[], RtaNode], args: Sequence[str] | None = None, name:
         (node.get_logger() if node is not None else rclpy.logging.get_logger(name)).error(str(exc))
         code = 1
     except Exception:
+        building[0] = False
         if rclpy.ok() and not received:
             raise
         code = node.exit_code if node is not None else 0  # a signal while starting: a clean stop
     finally:
+        building[0] = False
         if executor is not None:
             executor.shutdown()
         if node is not None:
