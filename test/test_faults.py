@@ -366,6 +366,13 @@ def test_quaternion_tolerance_renormalises_within_and_rejects_beyond() -> None:
 # ----------------------------------------------------------------------------- the plant's command checks
 
 
+def _spin_until(executor: Any, cond: Any, timeout_s: float) -> None:
+    """Spin `executor` until `cond()` holds; fail after timeout_s."""
+    deadline = time.monotonic() + timeout_s
+    while not cond():
+        assert time.monotonic() < deadline
+        executor.spin_once(timeout_sec=0.02)
+
 def test_plant_waits_for_a_reader_that_is_alive_but_still_starting() -> None:
     """A reader node in the graph that has not subscribed yet (a first start compiles the filter's kernels
     for tens of seconds, longer on a loaded machine) does not make the plant give up at startup_timeout_s;
@@ -380,10 +387,7 @@ def test_plant_waits_for_a_reader_that_is_alive_but_still_starting() -> None:
     executor.add_node(starting)
 
     def spin_until(cond: Any, timeout_s: float = 60.0) -> None:
-        deadline = time.monotonic() + timeout_s
-        while not cond():
-            assert time.monotonic() < deadline
-            executor.spin_once(timeout_sec=0.02)
+        _spin_until(executor, cond, timeout_s)
 
     try:
         spin_until(lambda: plant.startup_extensions >= 2)  # the timeout ran out twice: the plant waited on
@@ -420,10 +424,7 @@ def test_plant_checks_commands_and_times_out_in_lockstep(tmp_path: Path) -> None
     executor.add_node(stub)
 
     def spin_until(cond: Any, timeout_s: float = 60.0) -> None:
-        deadline = time.monotonic() + timeout_s
-        while not cond():
-            assert time.monotonic() < deadline
-            executor.spin_once(timeout_sec=0.02)
+        _spin_until(executor, cond, timeout_s)
 
     try:
         spin_until(lambda: len(states) == 1 and pub.get_subscription_count() == 1)
