@@ -74,6 +74,10 @@ filter covers a dead controller with `desired_timeout_s`)."""
 STATUS_QOS = QosSpec(durability="transient_local", history="keep_last", depth=10)
 """run_status: late joiners get the latest statuses."""
 COMMAND_QOS = QosSpec(history="keep_last", depth=10)
+DIAGNOSTICS = "/diagnostics"
+"""The standard status topic (rqt_robot_monitor, the diagnostic aggregator); `ros.diagnostics` publishes a
+node's summary there at ~1 Hz, outside the loop (no run node waits for its readers)."""
+DIAGNOSTICS_QOS = QosSpec(history="keep_last", depth=10)
 """attitude_command reader: reliable, volatile (accepts volatile and latched writers)."""
 
 
@@ -355,7 +359,8 @@ def knobs_for(role: str) -> tuple[Knob, ...]:
 
 __all__ = [
     "ATTITUDE_COMMAND", "BATTERY", "BODY_FRAME", "CLOCK", "COMMAND_QOS", "CONSTRAINT_KEYS",
-    "CONSTRAINT_STATUS_PREFIX", "CONTROLLER", "DEFAULT_NAMESPACE", "EXECUTABLES", "EXPECTED_PREFIX", "FILTER",
+    "CONSTRAINT_STATUS_PREFIX", "CONTROLLER", "DEFAULT_NAMESPACE",
+    "DIAGNOSTICS", "DIAGNOSTICS_QOS", "EXECUTABLES", "EXPECTED_PREFIX", "FILTER",
     "FILTER_STATUS", "HILL_FRAME", "INPUT_COUNTERS", "INPUT_SOURCE_KEY", "INSPECTION_TOPICS", "KNOBS", "MODULES",
     "NODE_NAMES", "NO_FALLBACK", "ODOMETRY", "PACKAGE", "PLANT", "PLANT_COUNTERS", "QP_KEYS", "QP_STATUS_NAME",
     "RECORDER", "RUN_DONE", "RUN_FAILED", "RUN_INTERRUPTED", "RUN_RUNNING", "RUN_STATUS",

@@ -341,3 +341,57 @@ def test_nodes_package_keeps_rclpy_out_of_the_core_and_launcher() -> None:
             "rta_attitude.ros.convert; print('rclpy' in sys.modules)")
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, check=True)
     assert proc.stdout.strip() == "False"
+
+
+# ----------------------------------------------------------------------------- /diagnostics
+
+
+def test_status_on_diagnostics_names_the_node_and_means_its_level() -> None:
+    """A lockstep run in one process: the filter and the plant put their summaries on /diagnostics,
+    named `<node>: <what>`; the filter's level follows its call (OK, WARN with slack, ERROR on a fallback)
+    and the run ends OK `done`."""
+    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+
+    from rta_attitude.ros.diagnostics import filter_level, run_level
+
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    executor = make_executor("events", context=context)
+    common = {"scenario": "paper_example", "rta": True, "record": False, "scenarios.paper_example.duration_s": 60.0}
+    nodes = {}
+    got: list[Any] = []
+    try:
+        for role in (topics.FILTER, topics.CONTROLLER, topics.PLANT):
+            knob_names = {k.name for k in topics.knobs_for(role)}
+            nodes[role] = NODE_CLASSES[role](context=context, parameter_overrides=[
+                Parameter(k, value=v) for k, v in common.items() if k in knob_names or "." in k])
+            executor.add_node(nodes[role])
+        probe = rclpy.create_node("diagnostics_probe", context=context)
+        probe.create_subscription(DiagnosticArray, topics.DIAGNOSTICS, got.append,
+                                  interface.qos_profile(topics.DIAGNOSTICS_QOS))
+        executor.add_node(probe)
+        deadline = time.monotonic() + 120
+        while not (nodes[topics.PLANT].finished.done() and any(
+                s.message == topics.RUN_DONE for m in got for s in m.status)):
+            assert time.monotonic() < deadline, "run did not finish with a `done` on /diagnostics"
+            executor.spin_once(timeout_sec=0.1)
+    finally:
+        for node in nodes.values():
+            node.close()
+            node.destroy_node()
+        executor.shutdown()
+        rclpy.try_shutdown(context=context)
+    statuses = [s for m in got for s in m.status]
+    assert {s.name for s in statuses} == {f"{NS}/asif_filter: filter", f"{NS}/plant: run"}
+    run = [s for s in statuses if s.name.endswith(": run")]
+    assert run[-1].level == DiagnosticStatus.OK and run[-1].message == topics.RUN_DONE
+    filt = [s for s in statuses if s.name.endswith(": filter")]
+    calls = [int({kv.key: kv.value for kv in s.values}["calls"]) for s in filt]
+    assert filt and calls == sorted(calls) and calls[0] >= 1
+    assert {s.level for s in filt} <= {DiagnosticStatus.OK, DiagnosticStatus.WARN}  # no fallback in this run
+    # the level rules themselves
+    assert filter_level("fallback", "soften", False) == (DiagnosticStatus.ERROR, "fallback: soften")
+    assert filter_level("solved", "", True)[0] == DiagnosticStatus.WARN
+    assert filter_level("pass", "", False) == (DiagnosticStatus.OK, "passing u_des through")
+    assert run_level("failed: no torque_cmd", 0)[0] == DiagnosticStatus.ERROR
+    assert run_level("running", 2) == (DiagnosticStatus.WARN, "running; 2 fault episode(s) active")

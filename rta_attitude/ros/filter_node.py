@@ -44,6 +44,7 @@ from rta_attitude.errors import MessageError
 from rta_attitude.filter import outcome
 from rta_attitude.filter.asif import AsifFilter, FilterResult
 from rta_attitude.ros import convert, interface, spin
+from rta_attitude.ros.diagnostics import DiagnosticsPublisher, filter_level
 from rta_attitude.ros.faults import StampOrder
 from rta_attitude.ros.spin import RtaNode
 
@@ -70,6 +71,7 @@ class FilterNode(RtaNode):
         self.get_logger().info(f"filter ready in {time.perf_counter() - t0:.2f} s")
         self.slacked = tuple(n for n, s in zip(self.filter.names, self.filter.slacked) if s)
         self.status_builder = convert.FilterStatusBuilder(self.filter.names)
+        self.diagnostics = DiagnosticsPublisher(self, "filter")
         self.states: dict[int, tuple[np.ndarray, float]] = {}  # stamp -> (state, wall time of arrival)
         self.desired: dict[int, np.ndarray] = {}
         self.state_order, self.desired_order = StampOrder(), StampOrder()
@@ -204,6 +206,10 @@ class FilterNode(RtaNode):
         self.out[topics.TORQUE_CMD].publish(convert.torque_msg(wheel_accel_to_torque(res.u, D), t_ns))
         self.out[topics.FILTER_STATUS].publish(self.status_builder.build(
             res, t_ns, self.filter.counters, self.cfg.filter.preset, self.slacked, self.counts, source))
+        level, text = filter_level(str(res.status), str(res.fallback), bool((res.record["slack"] > 0.0).any()))
+        c = self.filter.counters
+        self.diagnostics.update(level, text, {"preset": self.cfg.filter.preset, "calls": c.calls, "solved": c.solved,
+                                              "fallbacks": c.fallbacks, "t_s": t_ns / convert.NS_PER_S}, t_ns)
         if res.fallback and res.fallback not in ("non_finite_u_des", "invalid_state"):
             self.faults.fault("qp_fallback", f"t = {t_ns / convert.NS_PER_S:g} s: QP {res.solver_status}, "
                               f"fallback {res.fallback}")

@@ -44,6 +44,7 @@ from rta_attitude.dynamics.plant import make_plant
 from rta_attitude.errors import MessageError
 from rta_attitude.kernel_cache import drop_stale_caches
 from rta_attitude.ros import convert, interface, spin
+from rta_attitude.ros.diagnostics import DiagnosticsPublisher, run_level
 from rta_attitude.ros.spin import RtaNode
 
 STARTUP_POLL_S = 0.005
@@ -86,6 +87,7 @@ class PlantNode(RtaNode):
         self.published: dict[str, int] = {}
         self.pubs = {name: self.create_publisher(interface.msg_class(spec.type_name), spec.name, self.qos(name))
                      for name, spec in topics.TOPICS.items() if spec.publisher == topics.PLANT}  # fmt: skip
+        self.diagnostics = DiagnosticsPublisher(self, "run")
         self.command_topic = topics.TORQUE_CMD
         self.subscribe(self.command_topic, self._on_command)
         self._sent_s = 0.0
@@ -161,6 +163,7 @@ class PlantNode(RtaNode):
         `ros2 topic delay --use-sim-time` reads >= 0), then state(t_k) and the inspection views."""
         t_ns, x = self._t_ns(self.k), self.x
         self._publish(topics.CLOCK, convert.clock_msg(t_ns))
+        self._diagnose(topics.RUN_RUNNING)
         self._sent_s = self.wall_now_s()
         self._progress_s = self._sent_s
         self._publish(topics.STATE, convert.state_msg(x, t_ns))
@@ -302,6 +305,12 @@ class PlantNode(RtaNode):
         self.simulator.close()
         super().close()
 
+    def _diagnose(self, state: str) -> None:
+        """The run's summary on /diagnostics (at ~1 Hz and on every change of level or message)."""
+        level, text = run_level(state, len(self.faults.active))
+        self.diagnostics.update(level, text, {"step": self.k, "steps": self.steps, **{k: v for k, v in
+                                self.counts.items() if v}}, self._t_ns(self.k))
+
     def _end(self, state: str) -> None:
         """Publish the final run_status with the message counts, wait for acks, finish."""
         if self._ended:
@@ -320,6 +329,7 @@ class PlantNode(RtaNode):
         for topic, n in counts.items():
             values[topics.EXPECTED_PREFIX + self.resolve_topic_name(topic)] = n
         self._publish(topics.RUN_STATUS, convert.run_status_msg(self._t_ns(self.k), state, values))
+        self._diagnose(state)
         interrupted = state.startswith(topics.RUN_INTERRUPTED)
         if self.knobs["exit_when_done"] or interrupted:
             self.flush(self.knobs["stop_timeout_s"])
