@@ -313,7 +313,7 @@ def test_yaml_leaves_are_ros_parameters_and_overrides_reach_the_core() -> None:
     assert cfg.filter.preset == "paper" and cfg.scenario("paper_example").duration_s == 50.0
     assert cfg.barriers["omega"].k1 == 0.3
     assert cfg.spacecraft == CFG.spacecraft and knobs["rta"] is True
-    assert not refused[0].successful and "startup" in refused[0].reason
+    assert not refused[0].successful and "read-only" in refused[0].reason
 
 
 @pytest.mark.parametrize(("overrides", "message"), [
@@ -395,3 +395,28 @@ def test_status_on_diagnostics_names_the_node_and_means_its_level() -> None:
     assert filter_level("pass", "", False) == (DiagnosticStatus.OK, "passing u_des through")
     assert run_level("failed: no torque_cmd", 0)[0] == DiagnosticStatus.ERROR
     assert run_level("running", 2) == (DiagnosticStatus.WARN, "running; 2 fault episode(s) active")
+
+
+def test_parameters_describe_themselves_and_are_read_only() -> None:
+    """`ros2 param describe` shows something: a description for every parameter, read_only (all are read
+    at start-up), and a knob's choices and range; an override out of range is one ConfigError."""
+    from rcl_interfaces.msg import ParameterType
+
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    try:
+        node = PlantNode(context=context, parameter_overrides=[Parameter("real_time_factor", value=50.0)])
+        skip = ("use_sim_time", "start_type_description_service")
+        names = [n for n in node.list_parameters([], 0).names if n not in skip and not n.startswith("qos_overrides.")]
+        described = dict(zip(names, node.describe_parameters(names)))
+        node.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=context)
+    assert len(described) > 50 and all(d.description and d.read_only for d in described.values())
+    rtf, stepping = described["real_time_factor"], described["stepping"]
+    assert rtf.floating_point_range[0].from_value == 0.0 and rtf.type == ParameterType.PARAMETER_DOUBLE
+    assert "lockstep" in stepping.additional_constraints and "realtime" in stepping.additional_constraints
+    assert described["inspection_every"].integer_range[0].from_value == 1
+    assert "config/rta_attitude.yaml" in described["filter.preset"].description
+    with pytest.raises(ConfigError, match=r"^parameter real_time_factor must be"):
+        _node(topics.PLANT, {"real_time_factor": -2.0})

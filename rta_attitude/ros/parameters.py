@@ -11,7 +11,8 @@ named by its dotted path (`filter.preset`, `scenarios.paper_example.duration_s`)
 3. rebuilds the nested mapping and validates it with `config.from_parameters`, the loader the CLI
    uses, so a wrong type or an unknown key fails the same way everywhere (ConfigError, one line).
 
-Parameters are read once: later `ros2 param set` calls on them are refused with a reason.
+Parameters are read once: each is declared read_only with a description (`ros2 param describe`), knobs
+with their choices and range; a later `ros2 param set` is refused.
 `flatten` and `nest` are ROS-free (the launcher uses them); `load` imports rclpy.
 """
 
@@ -19,6 +20,7 @@ from __future__ import annotations
 
 import array
 import math
+import sys
 from collections.abc import Iterator, Mapping, Sequence
 from typing import TYPE_CHECKING, Any
 
@@ -68,13 +70,44 @@ def _plain(value: Any) -> Any:
     return value
 
 
-def _declare(node: Node, name: str, value: Any, description: str = "") -> None:
-    from rcl_interfaces.msg import ParameterDescriptor
+def descriptor(name: str, knob: Knob | None = None) -> Any:
+    """The ParameterDescriptor a node declares `name` with: a description, read_only (every parameter is
+    read at start-up), and for a knob its choices (additional_constraints) and its range
+    (FloatingPointRange / IntegerRange, inclusive as ROS ranges are; `check_knob` then also rejects a
+    value equal to an exclusive bound)."""
+    from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 
-    if node.has_parameter(name):
-        return
+    if knob is None:
+        return ParameterDescriptor(
+            description=f"core parameter {name} (config/rta_attitude.yaml; validated by rta_attitude.config)",
+            read_only=True, dynamic_typing=True)
+    d = ParameterDescriptor(description=knob.description, read_only=True, dynamic_typing=True,
+                            additional_constraints=knob.allowed)
+    kind = type(knob.default)
+    if kind is float:
+        top = knob.maximum if knob.maximum is not None else sys.float_info.max
+        d.floating_point_range = [FloatingPointRange(from_value=float(knob.minimum), to_value=float(top), step=0.0)]
+    elif kind is int:
+        top = int(knob.maximum) if knob.maximum is not None else 2**62
+        d.integer_range = [IntegerRange(from_value=int(knob.minimum), to_value=top, step=0)]
+    return d
+
+
+def _declare(node: Node, name: str, value: Any, knob: Knob | None = None) -> None:
+    from rclpy.exceptions import InvalidParameterValueException
+
+    if node.has_parameter(name):  # declared from an override (no descriptor yet): declare it again, described
+        if node.describe_parameter(name).read_only:
+            return
+        value = node.get_parameter(name).value
+        node.undeclare_parameter(name)
     try:
-        node.declare_parameter(name, value, ParameterDescriptor(description=description, dynamic_typing=True))
+        node.declare_parameter(name, value, descriptor(name, knob))
+    except InvalidParameterValueException:
+        assert knob is not None  # only knobs have ranges
+        given = getattr(node, "_parameter_overrides", {}).get(name)  # rclpy keeps the overrides there
+        got = f", got {_plain(given.value)!r}" if given is not None else ""
+        raise ConfigError(f"parameter {knob.name} must be {knob.allowed}{got}") from None
     except (TypeError, ValueError) as exc:
         raise ConfigError(f"parameter {name}={value!r} cannot be a ROS parameter ({exc})") from None
 
@@ -119,7 +152,7 @@ def load(node: Node, knobs: Sequence[Knob]) -> tuple[Config, dict[str, Any]]:
         ConfigError: missing or invalid parameter file, a wrong value, or an unknown key.
     """
     for knob in knobs:
-        _declare(node, knob.name, knob.default, knob.description)
+        _declare(node, knob.name, knob.default, knob)
     values = {k.name: _knob_value(node, k) for k in knobs}
     file_params, path = config.read_parameters(values.get("config_file") or None)
     for name, value in flatten(file_params):
@@ -143,4 +176,4 @@ def load(node: Node, knobs: Sequence[Knob]) -> tuple[Config, dict[str, Any]]:
     return cfg, values
 
 
-__all__ = ["check_knob", "flatten", "load", "nest"]
+__all__ = ["check_knob", "descriptor", "flatten", "load", "nest"]
