@@ -44,7 +44,8 @@ class ControllerNode(RtaNode):
         self.overrides: list[tuple[int, np.ndarray]] = []  # (stamp ns, q_c), sorted by stamp
         self.order = StampOrder()
         t0 = time.perf_counter()
-        desired_command(self.scenario.x0, self.scenario.command_at(0.0), self.law)  # kernel loaded before we subscribe
+        with spin.interruptible():
+            desired_command(self.scenario.x0, self.scenario.command_at(0.0), self.law)  # loaded before we subscribe
         self.get_logger().info(f"controller ready in {time.perf_counter() - t0:.2f} s")
         spec = topics.TOPICS[topics.TORQUE_DES]
         pub = self.create_publisher(interface.msg_class(spec.type_name), spec.name, self.qos(topics.TORQUE_DES))

@@ -67,7 +67,8 @@ class FilterNode(RtaNode):
         super().__init__(topics.FILTER, **kwargs)
         self.counts.update({k: 0 for k in topics.INPUT_COUNTERS})
         t0 = time.perf_counter()
-        self.filter = AsifFilter(self.cfg)  # compiles (or loads) numba's kernels before we subscribe
+        with spin.interruptible():
+            self.filter = AsifFilter(self.cfg)  # compiles (or loads) numba's kernels before we subscribe
         self.get_logger().info(f"filter ready in {time.perf_counter() - t0:.2f} s")
         self.slacked = tuple(n for n, s in zip(self.filter.names, self.filter.slacked) if s)
         self.status_builder = convert.FilterStatusBuilder(self.filter.names)

@@ -75,7 +75,8 @@ class PlantNode(RtaNode):
         self.D = self.cfg.spacecraft.wheel_inertia_kgm2
         t0 = self.wall_now_s()
         drop_stale_caches()
-        spacecraft.integrate(self.x, np.zeros(3), self.dt_s, self.plant, 1)  # compile (or load) the integrator now
+        with spin.interruptible():
+            spacecraft.integrate(self.x, np.zeros(3), self.dt_s, self.plant, 1)  # compile (or load) it now
         self.simulator = make_plant(self.cfg, self.x, self.dt_s)
         self.get_logger().info(f"plant integrator ({self.cfg.plant.simulator}) ready in "
                                f"{self.wall_now_s() - t0:.2f} s")

@@ -27,10 +27,11 @@ protocol would be spread over several files.
 
 from __future__ import annotations
 
+import contextlib
 import signal
 import sys
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from functools import partial
 from pathlib import Path
 from typing import Any
@@ -382,11 +383,10 @@ def run(factory: Callable[[], RtaNode], args: Sequence[str] | None = None, name:
 
     argv = list(args) if args is not None else list(sys.argv)
     received: list[int] = []
-    building = [True]
 
     def on_signal(signum: int, frame: Any) -> None:
         received.append(signum)
-        if building[0]:  # still in the constructor (e.g. compiling kernels): abandon the start at once
+        if _INTERRUPTIBLE[0]:  # compiling kernels in a constructor (nothing to close yet): abandon the start
             raise KeyboardInterrupt
 
     previous = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
@@ -406,7 +406,6 @@ def run(factory: Callable[[], RtaNode], args: Sequence[str] | None = None, name:
         return 1
     try:
         node = factory()
-        building[0] = False
         executor = make_executor(node.knobs["executor"])
         executor.add_node(node)
         hard_stop = float("inf")
@@ -426,12 +425,11 @@ def run(factory: Callable[[], RtaNode], args: Sequence[str] | None = None, name:
         (node.get_logger() if node is not None else rclpy.logging.get_logger(name)).error(str(exc))
         code = 1
     except Exception:
-        building[0] = False
         if rclpy.ok() and not received:
             raise
         code = node.exit_code if node is not None else 0  # a signal while starting: a clean stop
     finally:
-        building[0] = False
+        _INTERRUPTIBLE[0] = False
         if executor is not None:
             executor.shutdown()
         if node is not None:
@@ -458,10 +456,26 @@ def main(factory: Callable[[], RtaNode], args: Sequence[str] | None, name: str) 
     sys.exit(code)
 
 
+_INTERRUPTIBLE = [False]
+"""True while a constructor runs a step that holds nothing to close (`interruptible`)."""
+
+
+@contextlib.contextmanager
+def interruptible() -> Iterator[None]:
+    """A start-up step that may take long and holds nothing that needs closing (loading or compiling
+    kernels): a SIGINT/SIGTERM during it abandons the start at once (exit 0) instead of waiting for it,
+    so a launch's shutdown never has to escalate to SIGKILL."""
+    _INTERRUPTIBLE[0] = True
+    try:
+        yield
+    finally:
+        _INTERRUPTIBLE[0] = False
+
+
 def _restore(previous: dict[signal.Signals, Any]) -> None:
     for s, handler in previous.items():
         signal.signal(s, handler)
 
 
-__all__ = ["GATE_POLL_S", "SPIN_TIMEOUT_S", "STOP_MARGIN_S", "PublishGate", "RtaNode", "check_params_files", "main",
-           "make_executor", "run"]
+__all__ = ["GATE_POLL_S", "SPIN_TIMEOUT_S", "STOP_MARGIN_S", "PublishGate", "RtaNode", "check_params_files",
+           "interruptible", "main", "make_executor", "run"]
