@@ -247,6 +247,9 @@ def servers() -> Iterator[Callable[..., Server]]:
             s.stop(signal.SIGINT)
 
 
+CLOCK_START_NS = 1_000 * 10**9
+
+
 def state_values() -> list[float]:
     from rta_attitude.dynamics.state import STATE_NAMES
 
@@ -268,7 +271,9 @@ def run_publisher() -> Iterator[dict[str, Any]]:
     node = Node("foxglove_test_publisher", context=context, namespace=topics.DEFAULT_NAMESPACE)
     pubs = {name: node.create_publisher(interface.msg_class(topics.TOPICS[name].type_name), name,
                                         interface.qos_profile(topics.TOPICS[name].qos, 2.0))
-            for name in (topics.STATE, topics.FILTER_STATUS)}
+            for name in (topics.STATE, topics.FILTER_STATUS, topics.RUN_STATUS, topics.CLOCK)}
+    # run_status is latched (transient-local): published once, before any server reads it
+    pubs[topics.RUN_STATUS].publish(convert.run_status_msg(5_000_000_000, topics.RUN_RUNNING, {"commands": 7}))
     import numpy as np
 
     state = convert.state_msg(np.array(state_values()), 12_000_000_345)
@@ -284,9 +289,12 @@ def run_publisher() -> Iterator[dict[str, Any]]:
     stop = threading.Event()
 
     def loop() -> None:
+        clock_ns = CLOCK_START_NS
         while not stop.wait(0.05):
             pubs[topics.STATE].publish(state)
             pubs[topics.FILTER_STATUS].publish(diag)
+            clock_ns += 10_000_000
+            pubs[topics.CLOCK].publish(convert.clock_msg(clock_ns))
 
     thread = threading.Thread(target=loop, daemon=True)
     thread.start()
@@ -309,7 +317,7 @@ def decode(type_name: str, raw: bytes) -> Any:
 @pytest.mark.dds
 def test_live_state_and_filter_status_decode_with_an_independent_reader(
         run_publisher: dict[str, Any], servers: Callable[..., Server]) -> None:
-    server = servers("--port", "0", "--legacy-port", "0", "--topics", "/rta/.*", "--exclude", "/rta/run_status",
+    server = servers("--port", "0", "--legacy-port", "0", "--topics", "/rta/.*", "--exclude", "/rta/torque_.*",
                      "--rescan-period", "0.3")
     port = server.port()
     legacy_port = server.port("foxglove server (foxglove.websocket.v1 relay) listening on ")
@@ -324,7 +332,8 @@ def test_live_state_and_filter_status_decode_with_an_independent_reader(
     try:
         client.pump_until(lambda: client.server_info is not None, "serverInfo")
         wanted = {f"/rta/{topics.STATE}": "sensor_msgs/msg/JointState",
-                  f"/rta/{topics.FILTER_STATUS}": "diagnostic_msgs/msg/DiagnosticArray"}
+                  f"/rta/{topics.FILTER_STATUS}": "diagnostic_msgs/msg/DiagnosticArray",
+                  f"/rta/{topics.RUN_STATUS}": "diagnostic_msgs/msg/DiagnosticArray"}
         client.pump_until(lambda: all(client.channel(t) for t in wanted), "advertise of state and filter_status")
         for topic, type_name in wanted.items():
             chan = client.channel(topic)
@@ -332,11 +341,12 @@ def test_live_state_and_filter_status_decode_with_an_independent_reader(
             assert (chan["encoding"], chan["schemaName"], chan["schemaEncoding"]) == ("cdr", type_name, "ros2msg")
             parsed = get_types_from_msg(chan["schema"], type_name)
             assert parsed[type_name][1] == TYPESTORE.fielddefs[type_name][1], "schema is the Jazzy definition"
-        assert not any(c["topic"] in ("/rta/run_status", "/rosout", "/parameter_events")
-                       for c in client.channels.values()), "include/exclude"
         ids = [client.channel(t)["id"] for t in wanted]  # type: ignore[index]
         client.subscribe(ids)
-        client.pump_until(lambda: all(len(client.messages.get(i, [])) >= 2 for i in ids), "messages on both")
+        client.pump_until(lambda: all(len(client.messages.get(i, [])) >= (1 if i == ids[2] else 2) for i in ids),
+                          "messages on state and filter_status, and the latched run_status")
+        assert not any(c["topic"] in ("/clock", "/rosout", "/parameter_events") for c in client.channels.values()), \
+            "--topics"
     finally:
         ws.close()
 
@@ -353,7 +363,38 @@ def test_live_state_and_filter_status_decode_with_an_independent_reader(
     assert {kv.key: kv.value for kv in by_name["filter"].values} == {"u_des_x": "0.5", "u_x": "0.25"}
     assert [float(by_name[n].values[0].value) for n in CONSTRAINT_NAMES] == [0.5 + i for i in
                                                                            range(len(CONSTRAINT_NAMES))]
+    log_time, raw = client.messages[ids[2]][0]
+    run = decode("diagnostic_msgs/msg/DiagnosticArray", raw)
+    assert [(s.name, s.message, [(kv.key, kv.value) for kv in s.values]) for s in run.status] == \
+        [(topics.RUN_STATUS_NAME, topics.RUN_RUNNING, [("commands", "7")])]
+    assert log_time == 5_000_000_000
     assert server.stop(signal.SIGINT) == 0, "".join(server.stderr)
+
+
+@pytest.mark.dds
+def test_sim_time_sends_clock_as_the_server_time(run_publisher: dict[str, Any],
+                                                  servers: Callable[..., Server]) -> None:
+    server = servers("--port", "0", "--sim-time", "--topics", "/clock")
+    ws = WsClient(server.port(), [SDK_SUBPROTOCOL])
+    client = FoxgloveClient(ws)
+    times: list[int] = []
+    handle = client.handle
+
+    def handle_time(frame: str | bytes) -> None:
+        if isinstance(frame, bytes) and frame[0] == OP_TIME:
+            times.append(struct.unpack_from("<Q", frame, 1)[0])
+        handle(frame)
+
+    client.handle = handle_time  # type: ignore[method-assign]
+    try:
+        client.pump_until(lambda: client.server_info is not None, "serverInfo")
+        assert "time" in client.server_info["capabilities"]  # type: ignore[index]
+        client.pump_until(lambda: len(times) >= 3, "3 time messages")
+    finally:
+        ws.close()
+    assert all(t > CLOCK_START_NS for t in times) and times == sorted(times)
+    assert all((t - CLOCK_START_NS) % 10_000_000 == 0 for t in times), "the /clock values, as published"
+    assert server.stop(signal.SIGTERM) == 0, "".join(server.stderr)
 
 
 @pytest.mark.dds

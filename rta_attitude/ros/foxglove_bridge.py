@@ -12,8 +12,9 @@
   after a line of 80 `=` and `MSG: pkg/Type`; `ros2idl` where a type has no `.msg`), as foxglove_bridge and
   rosbag2 write it;
 - ROS subscriptions exist only while a client is subscribed to the channel; they are `raw=True`, so the CDR
-  bytes go out untouched (nothing is deserialized in Python). Reliability and durability follow the
-  publishers (a transient-local topic such as run_status reaches a late client);
+  bytes go out untouched (nothing is deserialized in Python). Topics are read best-effort, so a slow client
+  never pushes back on the run's reliable keep-all writers; latched (transient-local) topics such as
+  run_status are read reliable and transient-local, so they reach a late client (`subscription_qos`);
 - the log time of a message is its `header.stamp` when the type starts with a `std_msgs/Header` and the stamp
   is non-zero, else the receive time on the node's clock;
 - `--sim-time`: use_sim_time on the node, the Foxglove `time` capability, and every `/clock` broadcast as the
@@ -282,24 +283,26 @@ def cdr_leading_time_ns(data: bytes, *, allow_zero: bool = False) -> int | None:
 
 
 def subscription_qos(node: Node, topic: str) -> QoSProfile:
-    """QoS compatible with all current publishers of ``topic`` (as foxglove_bridge chooses it).
+    """QoS compatible with all current publishers of `topic`, that never holds a publisher back.
 
-    Reliable only if every publisher is reliable; transient-local only if every publisher is
-    transient-local (so latched messages are received); otherwise best-effort/volatile.
+    Transient-local (and reliable) only if every publisher is transient-local and reliable, so latched messages
+    such as the run's `run_status` reach a late client. Every other topic is read best-effort: the run's stream
+    topics are reliable keep-all, and a reliable reader that falls behind (a slow client) would push back on
+    the writers of the closed loop; a best-effort reader never does, so the viewer stays off the control path
+    (foxglove_bridge would follow the publishers and read them reliably).
     """
     infos = node.get_publishers_info_by_topic(topic)
-    reliable = bool(infos) and all(
-        i.qos_profile.reliability == ReliabilityPolicy.RELIABLE for i in infos
-    )
-    transient = bool(infos) and all(
-        i.qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL for i in infos
+    latched = bool(infos) and all(
+        i.qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL
+        and i.qos_profile.reliability == ReliabilityPolicy.RELIABLE
+        for i in infos
     )
     depth = max(10, sum(max(0, i.qos_profile.depth) for i in infos))
     return QoSProfile(
         history=HistoryPolicy.KEEP_LAST,
         depth=min(depth, 1000),
-        reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
-        durability=DurabilityPolicy.TRANSIENT_LOCAL if transient else DurabilityPolicy.VOLATILE,
+        reliability=ReliabilityPolicy.RELIABLE if latched else ReliabilityPolicy.BEST_EFFORT,
+        durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE,
     )
 
 
