@@ -547,3 +547,51 @@ def test_margin_plots_cover_every_constraint_with_a_zero_line_and_torques_pair_p
         assert values == [f"/rta/torque_des.vector.{axis}", f"/rta/torque_cmd.vector.{axis}"]
     state_paths = [p for _, p in _paths() if p.startswith("/rta/filter_status.status[:]{name==\"filter\"}")]
     assert state_paths, "the filter status is shown"
+
+
+def _evaluate(path: str, msg: Any) -> list[Any]:
+    """A message path on a decoded message, as the apps evaluate it: slices and filters fan out to a list."""
+    m = _TOPIC.match(path)
+    assert m, path
+    items, pos = [msg], m.end()
+    while pos < len(path):
+        e = _ELEMENT.match(path, pos)
+        assert e, path
+        items = [getattr(item, e.group(1)) for item in items]
+        if e.group(2):
+            index = e.group(3)
+            items = [x for item in items for x in (list(item) if index == ":" else [list(item)[int(index)]])]
+        for key, value in _FILTER.findall(e.group(4)):
+            want: Any = value.strip('"') if value.startswith('"') else int(value)
+            items = [item for item in items if getattr(item, key) == want]
+        pos = e.end()
+    return items
+
+
+def test_every_filter_status_path_reads_one_value_of_a_real_filter_status() -> None:
+    """The layout's filter_status paths on a message the filter node's builder makes (the filter's answer at
+    paper_example's initial state), serialized by rclpy and decoded by rosbags: every path gives one value, and
+    each margin path exactly the h of its constraint (repr of the float64, which the apps read as that number)."""
+    import numpy as np
+    from rclpy.serialization import serialize_message
+
+    from rta_attitude import config
+    from rta_attitude.filter.asif import AsifFilter
+    from rta_attitude.ros import convert
+
+    cfg = config.load()
+    filt = AsifFilter(cfg)
+    res = filt.filter(cfg.scenario("paper_example").x0, np.zeros(3))
+    msg = decode("diagnostic_msgs/msg/DiagnosticArray",
+                 bytes(serialize_message(convert.filter_status_msg(res, 42, filt.counters, "robust", ()))))
+    checked = 0
+    for panel_id, path in _paths():
+        if not path.startswith("/rta/filter_status."):
+            continue
+        values = _evaluate(path, msg)
+        assert len(values) == 1, f"{panel_id}: {path} gives {values}"
+        name = re.search(r'name=="([a-z_]+)"', path).group(1)  # type: ignore[union-attr]
+        if path.endswith('{key=="h"}.value'):
+            assert float(values[0]) == res.h[list(res.names).index(name)], path
+        checked += 1
+    assert checked >= len(CONSTRAINT_NAMES)
