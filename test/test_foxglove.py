@@ -595,3 +595,33 @@ def test_every_filter_status_path_reads_one_value_of_a_real_filter_status() -> N
             assert float(values[0]) == res.h[list(res.names).index(name)], path
         checked += 1
     assert checked >= len(CONSTRAINT_NAMES)
+
+
+@pytest.mark.parametrize("type_name", sorted(set(RUN_TOPICS.values())))
+def test_schema_of_every_run_topic_is_its_jazzy_definition(type_name: str) -> None:
+    """The ros2msg schema the server sends for each of the run's types, parsed by rosbags, gives rosbags' own
+    Jazzy definitions of the type and of every nested type; header detection drives the log time."""
+    from rta_attitude.ros.foxglove_bridge import MessageDefinitionCache
+
+    cache = MessageDefinitionCache([Path(sys.prefix)])
+    encoding, text = cache.complete_definition(type_name)
+    assert encoding == "ros2msg"
+    parsed = get_types_from_msg(text, type_name)
+    for name, fields in parsed.items():
+        assert fields[1] == TYPESTORE.fielddefs[name][1], name
+    first = TYPESTORE.fielddefs[type_name][1][0][1]
+    assert cache.starts_with_header(type_name) == (first == (Nodetype.NAME, "std_msgs/msg/Header"))
+
+
+def test_log_time_is_the_leading_stamp_of_the_cdr() -> None:
+    from rta_attitude.ros.foxglove_bridge import cdr_leading_time_ns
+
+    t = TYPESTORE.types
+    msg = t["geometry_msgs/msg/Vector3Stamped"](
+        header=t["std_msgs/msg/Header"](stamp=t["builtin_interfaces/msg/Time"](sec=12, nanosec=345), frame_id="b"),
+        vector=t["geometry_msgs/msg/Vector3"](x=1.0, y=2.0, z=3.0))
+    for little in (True, False):
+        raw = bytes(TYPESTORE.serialize_cdr(msg, "geometry_msgs/msg/Vector3Stamped", little_endian=little))
+        assert cdr_leading_time_ns(raw) == 12_000_000_345
+    zero = raw[:4] + bytes(8) + raw[12:]
+    assert cdr_leading_time_ns(zero) is None and cdr_leading_time_ns(zero, allow_zero=True) == 0
