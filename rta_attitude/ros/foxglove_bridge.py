@@ -572,6 +572,7 @@ class LegacySubprotocolRelay:
         self._host, self._port, self._upstream = host, port, upstream_port
         self._loop = asyncio.new_event_loop()
         self._server: asyncio.Server | None = None
+        self._writers: set[asyncio.StreamWriter] = set()
         self._thread = threading.Thread(target=self._loop.run_forever, name="foxglove-legacy-relay", daemon=True)
 
     def start(self) -> int:
@@ -593,6 +594,7 @@ class LegacySubprotocolRelay:
 
     async def _handle(self, down_r: asyncio.StreamReader, down_w: asyncio.StreamWriter) -> None:
         up_w: asyncio.StreamWriter | None = None
+        self._writers.add(down_w)
         try:
             request = await _read_head(down_r)
             offered = b""
@@ -601,6 +603,7 @@ class LegacySubprotocolRelay:
                 offered = m.group(0)
             legacy = LEGACY_SUBPROTOCOL.encode() in offered and SDK_SUBPROTOCOL.encode() not in offered
             up_r, up_w = await asyncio.open_connection(self._host, self._upstream)
+            self._writers.add(up_w)
             up_w.write(_with_protocol(request, SDK_SUBPROTOCOL) if legacy else request)
             await up_w.drain()
             response = await _read_head(up_r)
@@ -609,11 +612,12 @@ class LegacySubprotocolRelay:
             down_w.write(response)
             await down_w.drain()
             await asyncio.gather(self._pump(down_r, up_w), self._pump(up_r, down_w))
-        except (OSError, ValueError, asyncio.IncompleteReadError, asyncio.LimitOverrunError) as exc:
+        except Exception as exc:  # a connection's end (reset, EOF mid-handshake, bad head): never the relay's
             LOG.debug("legacy relay: connection ended: %s", exc)
         finally:
             for writer in (down_w, up_w):
                 if writer is not None:
+                    self._writers.discard(writer)
                     writer.close()
 
     @staticmethod
@@ -628,11 +632,16 @@ class LegacySubprotocolRelay:
                     sink.write_eof()
 
     def stop(self) -> None:
-        """Close the listening socket and stop the loop (open connections end with the process)."""
+        """Close the listening socket and every relayed connection, then stop the loop."""
 
         async def _close() -> None:
             if self._server is not None:
                 self._server.close()
+            for writer in list(self._writers):  # the handlers then end on their own (EOF or a reset)
+                writer.close()
+            tasks = [t for t in asyncio.all_tasks() if t is not asyncio.current_task()]
+            if tasks:
+                await asyncio.wait(tasks, timeout=2.0)
 
         if self._thread.is_alive():
             with contextlib.suppress(Exception):
