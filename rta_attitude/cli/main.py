@@ -8,6 +8,7 @@
     rta-attitude analyze BAG ...   (cli/analyze.py)
     rta-attitude replay BAG        (cli/replay.py)
     rta-attitude topics | echo     (cli/topics.py)
+    rta-attitude foxglove          (cli/foxglove.py)
 
 Each subcommand is one module of this package with `add_arguments(parser)` and `run(args) -> int`;
 their imports are light (the core, numba and rclpy load in `run`), so `--help` and argument errors
@@ -34,6 +35,7 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
     "replay": ("replay", "republish a bag's messages over DDS with /clock"),
     "topics": ("topics", "list live ROS topics with types, publishers and rates"),
     "echo": ("topics", "print the messages of one live topic as YAML"),
+    "foxglove": ("foxglove", "serve the live ROS topics to Foxglove/Lichtblick over WebSocket (raw CDR)"),
 }
 """Subcommand -> (module of rta_attitude.cli, help)."""
 
