@@ -36,10 +36,7 @@ def variant(model: str = "gyrostat", rotating_hill: bool = False, gravity_gradie
     """The default configuration with the plant (and the filter's model) set as asked."""
     sc = dataclasses.replace(BASE.spacecraft, model=model, torque_sign=torque_sign)
     env = dataclasses.replace(BASE.environment, rotating_hill=rotating_hill, gravity_gradient=gravity_gradient)
-    cfg = dataclasses.replace(BASE, spacecraft=sc, environment=env)
-    if hasattr(cfg.filter, "model"):  # the filter's own model of the plant, the same here
-        cfg = dataclasses.replace(cfg, filter=dataclasses.replace(cfg.filter, model=model))
-    return cfg
+    return dataclasses.replace(BASE, spacecraft=sc, environment=env).with_models(model, model)
 
 
 VARIANTS = {f"hill={'rot' if r else 'inertial'}-gg={'on' if g else 'off'}": (r, g)

@@ -67,9 +67,15 @@ PLANT_DTYPE = np.dtype([
 """The plant's parameters, in model units, as the compiled code reads them."""
 
 
-def plant_record(cfg: Config) -> NDArray[np.void]:
+def plant_record(cfg: Config, model: str | None = None) -> NDArray[np.void]:
     """The PLANT_DTYPE record (shape (1,)) of a configuration; constants formed as the first
-    implementation formed them (so its numbers are reproduced)."""
+    implementation formed them (so its numbers are reproduced).
+
+    Args:
+        cfg: the configuration.
+        model: PLANT_MODELS name; None: `spacecraft.model` (the simulated plant). The filter's model
+            of the plant is `plant_record(cfg, cfg.filter.model)`.
+    """
     sc, th, env, pw = cfg.spacecraft, cfg.thermal, cfg.environment, cfg.power
     rec = np.zeros(1, PLANT_DTYPE)
     p = rec[0]
@@ -77,7 +83,7 @@ def plant_record(cfg: Config) -> NDArray[np.void]:
     p["wheel_inertia_kgm2"] = sc.wheel_inertia_kgm2
     p["torque_sign"] = sc.torque_sign
     p["control_gain"] = sc.control_gain
-    p["wheel_gyroscopic"] = 1 if sc.model == "gyrostat" else 0
+    p["wheel_gyroscopic"] = 1 if (sc.model if model is None else model) == "gyrostat" else 0
     p["frame_rate_rad_s"] = env.mean_motion_rad_s if env.rotating_hill else 0.0
     p["gravity_gradient"] = 1 if env.gravity_gradient else 0
     p["mean_motion_rad_s"] = env.mean_motion_rad_s
