@@ -18,8 +18,9 @@ from rta_attitude.filter.asif import AsifFilter
 CFG = config.load()
 
 
-def clarabel_solve(gain, drift, slack_w, lo, hi, u_des):
-    """min ||u - u_des||^2 + sum p_i d_i^2 s.t. drift + gain u + d >= 0 (d only where p_i > 0), lo <= u <= hi.
+def clarabel_solve(gain, drift, slack_w, lo, hi, u_des, coupled=None):
+    """min ||u - u_des||^2 + sum p_i d_i^2 s.t. drift + gain u + d >= 0 (d only where p_i > 0), lo <= u <= hi,
+    and, if given, the coupled rows (gain (k, 3), lower (k,), upper (k,)): lower <= gain u <= upper.
 
     Returns (u, d) or None if Clarabel finds it infeasible."""
     import clarabel
@@ -48,6 +49,14 @@ def clarabel_solve(gain, drift, slack_w, lo, hi, u_des):
         b.append(hi[j])
         A.append(-a)
         b.append(-lo[j])
+    if coupled is not None:
+        for g, low, up in zip(*coupled):
+            a = np.zeros(n)
+            a[:3] = g
+            A.append(a.copy())
+            b.append(up)
+            A.append(-a)
+            b.append(-low)
     settings = clarabel.DefaultSettings()
     settings.verbose = False
     settings.tol_gap_abs = settings.tol_gap_rel = settings.tol_feas = 1e-10
@@ -67,6 +76,13 @@ def _rows(f: AsifFilter, x: np.ndarray) -> tuple[np.recarray, np.ndarray, np.nda
     """The filter's barrier table of states x and its box (lo, hi)."""
     t = f.constraints.evaluate(x)
     return t, t.lo, t.hi
+
+
+def _coupled(tab: np.recarray, k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The coupled zero-order-hold rate rows of state k of a table (gyrostat model, robust preset; none
+    otherwise), for `clarabel_solve`."""
+    n = int(tab.zoh_rows[k])
+    return tab.zoh_gain[k][:n], tab.zoh_lo[k][:n], tab.zoh_hi[k][:n]
 
 
 @pytest.fixture(scope="module")
@@ -91,7 +107,7 @@ def test_filter_matches_independent_solver(problems):
         res = f.filter(x[k], u_des[k])
         if res.status != "solved":
             continue
-        ref = clarabel_solve(tab.gain[k], tab.drift[k], w, lo[k], hi[k], res.u_des)
+        ref = clarabel_solve(tab.gain[k], tab.drift[k], w, lo[k], hi[k], res.u_des, _coupled(tab, k))
         if ref is None:
             infeasible += 1
             continue
@@ -106,7 +122,10 @@ def test_filter_matches_independent_solver(problems):
             np.testing.assert_allclose(res.u, u_ref, atol=2e-4 * (1 + np.abs(u_ref).max()))
             compared_u += 1
         checked += 1
-    assert checked > 150 and compared_u > 50
+    # the random states reach 1.5 w_max; with the gyrostat's coupled rate rows (docs/gyrostat.md) a state
+    # past (1 - margin) w_max that one hold cannot bring back is infeasible (fallback), so fewer are
+    # "solved" than with the paper model's first-order box (107 of 400 here, 150+ before)
+    assert checked > 90 and compared_u > 50
     assert infeasible == 0  # a QP the filter reports solved is one Clarabel can solve
 
 
@@ -136,7 +155,7 @@ def test_infeasible_problems_are_detected_and_fall_back(problems):
     assert len(fb) > 10
     w = f.slack_weights * f.slacked
     for k in fb[:40]:
-        assert clarabel_solve(tab.gain[k], tab.drift[k], w, lo[k], hi[k], u_des[k]) is None
+        assert clarabel_solve(tab.gain[k], tab.drift[k], w, lo[k], hi[k], u_des[k], _coupled(tab, k)) is None
     assert f.counters.fallbacks == len(fb)
 
 
@@ -153,7 +172,8 @@ def test_fast_path_is_the_exact_solution():
             continue
         n_pass += 1
         tab, lo, hi = _rows(f, x[None])
-        u_ref, _ = clarabel_solve(tab.gain[0], tab.drift[0], f.slack_weights * f.slacked, lo[0], hi[0], u_des)
+        u_ref, _ = clarabel_solve(tab.gain[0], tab.drift[0], f.slack_weights * f.slacked, lo[0], hi[0], u_des,
+                                  _coupled(tab, 0))
         np.testing.assert_allclose(res.u, u_ref, atol=1e-6)
         assert res.iterations == 0 and res.solver_status == ""
     assert n_pass > 40
@@ -207,10 +227,13 @@ def test_non_finite_u_des_is_a_counted_fallback():
 
 
 def test_paper_preset_has_no_zoh_bounds():
+    """The paper's model (its first-order rate interval in the box; the gyrostat's coupled rows:
+    test_zoh_gyrostat)."""
+    cfg = CFG.with_models("paper", "paper")
     x = CFG.scenario("paper-example").x0.copy()
     x[5] = 0.9 * CFG.limits.omega_max_rad_s
-    hi_r = _rows(AsifFilter(CFG.with_preset("robust")), x[None])[2]
-    hi_p = _rows(AsifFilter(CFG.with_preset("paper")), x[None])[2]
+    hi_r = _rows(AsifFilter(cfg.with_preset("robust")), x[None])[2]
+    hi_p = _rows(AsifFilter(cfg.with_preset("paper")), x[None])[2]
     np.testing.assert_array_equal(hi_p[0], CFG.u_max_rad_s2)
     # robust: the y rate may grow by at most (1 - margin) w_max - 0.9 w_max in one 1 s step
     G = CFG.spacecraft.control_gain[1]

@@ -82,14 +82,16 @@ def test_compiled_rows_and_box_equal_the_reference(variant: str) -> None:
 
 def test_zoh_box_hand_calculation() -> None:
     """omega_y at 0.9 omega_max, psi_y = 0: the robust box's upper bound on u_y keeps omega_y(t + dt)
-    at (1 - margin) omega_max, by hand from omega_y(t + dt) = omega_y + (f_y + G_y u_y) dt."""
-    x = CFG.scenario("paper-example").x0.copy()
+    at (1 - margin) omega_max, by hand from omega_y(t + dt) = omega_y + (f_y + G_y u_y) dt (the paper's
+    model; the gyrostat's coupled rows: test_zoh_gyrostat)."""
+    cfg = CFG.with_models("paper", "paper")
+    x = cfg.scenario("paper-example").x0.copy()
     x[4:7] = (0.0, 0.9 * CFG.limits.omega_max_rad_s, 0.0)  # no gyroscopic drift with omega_x = omega_z = 0
     x[7:10] = 0.0
-    out = ConstraintSet(CFG.with_preset("robust")).evaluate(x)
+    out = ConstraintSet(cfg.with_preset("robust")).evaluate(x)
     G = CFG.spacecraft.control_gain[1]
     dt = CFG.filter.sample_time_s
     expect = ((1 - CFG.filter.zoh_margin) * CFG.limits.omega_max_rad_s - x[5]) / (G * dt)
     assert out["hi"][1] == pytest.approx(min(expect, CFG.u_max_rad_s2[1]), rel=1e-12)
-    paper = ConstraintSet(CFG.with_preset("paper")).evaluate(x)
+    paper = ConstraintSet(cfg.with_preset("paper")).evaluate(x)
     np.testing.assert_array_equal(paper["hi"], CFG.u_max_rad_s2)

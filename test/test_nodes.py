@@ -312,7 +312,9 @@ def test_yaml_leaves_are_ros_parameters_and_overrides_reach_the_core() -> None:
                                                 "constraints.omega.k1": 0.3})
     assert cfg.filter.preset == "paper" and cfg.scenario("paper_example").duration_s == 50.0
     assert cfg.barriers["omega"].k1 == 0.3
-    assert cfg.spacecraft == CFG.spacecraft and knobs["rta"] is True
+    # the node runs its scenario (paper_example: the paper's model in plant and filter, `model: paper`)
+    assert cfg.spacecraft == CFG.for_scenario(CFG.scenario("paper_example")).spacecraft and knobs["rta"] is True
+    assert (cfg.spacecraft.model, cfg.filter.model) == ("paper", "paper")
     assert not refused[0].successful and "read-only" in refused[0].reason
 
 

@@ -22,6 +22,7 @@ def run(args: argparse.Namespace) -> int:
     print(f"{cfg.source}: ok")
     print(f"  preset {cfg.filter.preset}, fallback {cfg.filter.fallback}, dt {cfg.filter.sample_time_s} s, "
           f"{cfg.substeps} RK4 substeps")
+    print(f"  plant model {cfg.spacecraft.model}, filter model {cfg.filter.model}")
     print(f"  admissible |u| <= {np.array2string(cfg.u_max_rad_s2, precision=2)} rad/s^2 (x, y, z)")
     print(f"  slacked: {', '.join(cfg.slacked_constraints) or 'none'}")
     print(f"  scenarios: {', '.join(s.replace('_', '-') for s in cfg.scenarios)}")

@@ -7,7 +7,7 @@ import os
 import sys
 from pathlib import Path
 
-from rta_attitude.config.schema import PRESETS, SIMULATORS, SOLVERS
+from rta_attitude.config.schema import PLANT_MODELS, PRESETS, SIMULATORS, SOLVERS
 from rta_attitude.errors import ConfigError
 from rta_attitude.montecarlo import BACKENDS, DEFAULT_CHUNK_RUNS
 
@@ -18,6 +18,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--duration", type=float, default=2000.0, help="run length, s (default 2000)")
     parser.add_argument("--seed", type=int, default=1, help="seed of the initial states (default 1)")
     parser.add_argument("--preset", choices=PRESETS, default=None, help="filter preset (default: the config's)")
+    parser.add_argument("--plant-model", choices=PLANT_MODELS, default=None,
+                        help="model of the simulated plant (default: the config's spacecraft.model)")
+    parser.add_argument("--filter-model", choices=PLANT_MODELS, default=None,
+                        help="the filter's model of the plant (default: the config's filter.model)")
     parser.add_argument("--workers", type=int, default=os.cpu_count() or 1,
                         help="local worker processes (default: the machine's cores)")
     parser.add_argument("--backend", choices=BACKENDS, default="local", help="local processes or a Dask cluster")
@@ -56,6 +60,7 @@ def run(args: argparse.Namespace) -> int:
         cfg = cfg.with_solver(args.solver)
     if args.simulator is not None:
         cfg = cfg.with_simulator(args.simulator)
+    cfg = cfg.with_models(args.plant_model, args.filter_model)
     output_dir(args.out)  # before hours of work, not after
     result = montecarlo(cfg, args.runs, args.duration, args.seed, args.workers, args.backend, args.scheduler,
                         args.chunk_runs, progress=not args.no_progress and sys.stderr.isatty(),

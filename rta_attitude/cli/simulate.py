@@ -74,7 +74,7 @@ def run(args: argparse.Namespace) -> int:
     summary = summarize_trajectory(traj, cfg.limits.omega_dot_max_rad_s2, loop.cfg.slacked_constraints)
     summary["wall_time_s"] = wall
     summary["simulator"] = cfg.plant.simulator
-    summary["filter_model"] = cfg.spacecraft.model
+    summary["filter_model"] = cfg.filter.model
     write_trajectory(traj, out)
     write_text(out / "summary.json", json.dumps(summary, indent=2) + "\n")
     print(format_summary(summary))

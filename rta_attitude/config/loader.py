@@ -198,6 +198,7 @@ def _scenario(name: str, s: _Section) -> Scenario:
         schedule_s=tuple(float(t) for t in rows[:, 0]),
         schedule_q=tuple((float(a), float(b), float(c), float(d)) for a, b, c, d in qs),
         slack_weights=slack,
+        model=s.text("model") if "model" in s.data else None,
     )
     s.done()
     return scenario
@@ -212,7 +213,7 @@ def from_parameters(params: Mapping[str, Any], source: str = "<memory>") -> Conf
     root = _Section(params, "parameters")
     sc = root.section("spacecraft")
     spacecraft = Spacecraft(sc.vector("inertia_kgm2", 3), sc.number("wheel_inertia_kgm2"),  # type: ignore[arg-type]
-                            sc.number("torque_sign", 1.0), sc.text("model", "paper"))
+                            sc.number("torque_sign", 1.0), sc.text("model", "gyrostat"))
     sc.done()
     ev = root.section("environment")
     environment = Environment(
@@ -268,7 +269,7 @@ def from_parameters(params: Mapping[str, Any], source: str = "<memory>") -> Conf
         eps_primal_inf=fi.number("eps_primal_inf"), eps_dual_inf=fi.number("eps_dual_inf"),
         check_tolerance=fi.number("check_tolerance"), pole_guard_rad=fi.number("pole_guard_rad"),
         soften_weight=fi.number("soften_weight"), backup_solver=fi.text("backup_solver"),
-        solver=fi.text("solver", "active_set"))
+        solver=fi.text("solver", "active_set"), model=fi.text("model", "gyrostat"))
     fi.done()
     ct = root.section("controller")
     controller = ControllerGains(ct.number("kp"), ct.number("kd"))

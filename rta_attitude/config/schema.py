@@ -31,7 +31,9 @@ BACKUP_SOLVERS: tuple[str, ...] = ("quadprog", "none")
 SOLVERS: tuple[str, ...] = ("active_set", "proxsuite")
 CONTROLLERS: tuple[str, ...] = ("pd", "none")
 PLANT_MODELS: tuple[str, ...] = ("gyrostat", "paper")
-"""gyrostat: the wheels' momentum in Euler's equations (-omega x (J omega - D psi)); paper: without it."""
+"""Models of the spacecraft, for the simulated plant (`spacecraft.model`) and for the filter's barriers
+(`filter.model`): gyrostat: the wheels' momentum in Euler's equations (-omega x (J omega - s D psi));
+paper: without it (the paper's model)."""
 SIMULATORS: tuple[str, ...] = ("compiled", "basilisk")
 """What integrates the simulated spacecraft: `compiled`, the package's own RK4 of `spacecraft.model`
 (`dynamics.spacecraft`); `basilisk`, Basilisk (the optional `bsk` package) as an independent truth plant
@@ -64,8 +66,9 @@ class Spacecraft:
     """D, wheel spin-axis inertia, kg m^2."""
     torque_sign: float = 1.0
     """+1: tau = +D psi_dot (the paper); -1: a physical reaction torque."""
-    model: str = "paper"
-    """PLANT_MODELS: `gyrostat` (the wheels' gyroscopic torque included) or `paper` (dropped)."""
+    model: str = "gyrostat"
+    """The simulated plant (PLANT_MODELS): `gyrostat` (the wheels' gyroscopic torque included) or `paper`
+    (dropped). The filter's own model is `filter.model`."""
 
     def __post_init__(self) -> None:
         _choice("spacecraft.model", self.model, PLANT_MODELS)
@@ -262,8 +265,12 @@ class FilterOptions:
     soften_weight: float = 1e8
     backup_solver: str = "quadprog"
     solver: str = "active_set"
+    model: str = "gyrostat"
+    """The filter's model of the spacecraft in its barriers (PLANT_MODELS); the simulated plant is
+    `spacecraft.model`."""
 
     def __post_init__(self) -> None:
+        _choice("filter.model", self.model, PLANT_MODELS)
         _choice("filter.solver", self.solver, SOLVERS)
         _choice("filter.preset", self.preset, PRESETS)
         _choice("filter.backup_solver", self.backup_solver, BACKUP_SOLVERS)
@@ -308,9 +315,14 @@ class Scenario:
     """Commanded quaternions q_c, scalar last, unit norm."""
     slack_weights: tuple[tuple[str, float], ...] | None = None
     """If given, replaces every constraint's slack weight (others become hard)."""
+    model: str | None = None
+    """If given (PLANT_MODELS), the model of both the plant and the filter in this scenario (the paper's
+    figures: `paper`)."""
 
     def __post_init__(self) -> None:
         where = f"scenarios.{self.name}"
+        if self.model is not None:
+            _choice(f"{where}.model", self.model, PLANT_MODELS)
         _positive(f"{where}.duration_s", self.duration_s)
         _choice(f"{where}.controller", self.controller, CONTROLLERS)
         if self.schedule_s[0] != 0.0 or any(b <= a for a, b in zip(self.schedule_s, self.schedule_s[1:])):
@@ -410,15 +422,25 @@ class Config:
         """A copy using another fallback policy."""
         return replace(self, filter=replace(self.filter, fallback=fallback))
 
+    def with_models(self, plant: str | None = None, filter: str | None = None) -> Config:
+        """A copy with another model (PLANT_MODELS) of the simulated plant and/or of the filter."""
+        cfg = self
+        if plant is not None:
+            cfg = replace(cfg, spacecraft=replace(cfg.spacecraft, model=plant))
+        if filter is not None:
+            cfg = replace(cfg, filter=replace(cfg.filter, model=filter))
+        return cfg
+
     def for_scenario(self, scenario: Scenario) -> Config:
-        """A copy whose slack weights are the scenario's, if it names any."""
+        """A copy with the scenario's slack weights and model, where it names them."""
+        cfg = self if scenario.model is None else self.with_models(scenario.model, scenario.model)
         if scenario.slack_weights is None:
-            return self
+            return cfg
         weights = dict(scenario.slack_weights)
-        barriers = dict(self.barriers)
+        barriers = dict(cfg.barriers)
         for group in ("exclusion_zone", "communication", "temperature", "battery"):
             barriers[group] = replace(barriers[group], slack_weight=float(weights.get(group, 0.0)))
-        return replace(self, barriers=barriers)
+        return replace(cfg, barriers=barriers)
 
     def scenario(self, name: str) -> Scenario:
         """A scenario by name; '-' and '_' are interchangeable."""

@@ -69,12 +69,12 @@ class ConstraintSet:
     """The ordered, named safety constraints of one configuration (Python face of the compiled rows).
 
     Args:
-        cfg: configuration (limits, gains, preset; the plant model the barriers assume).
+        cfg: configuration (limits, gains, preset; `filter.model`, the plant model the barriers assume).
     """
 
     def __init__(self, cfg: Config) -> None:
         self.cfg = cfg
-        self.plant = plant_record(cfg)
+        self.plant = plant_record(cfg, cfg.filter.model)
         self.record = constraint_record(cfg)
         self.names: tuple[str, ...] = CONSTRAINT_NAMES
 

@@ -5,18 +5,35 @@
 
 Sampled data (the `robust` preset): under a zero-order hold over dt the CBF above does not keep
 |omega_i| <= omega_max (at omega_i = 0 its gradient vanishes, and one held step can change omega_i by
-2 omega_max). `zoh_interval` gives the interval of u_i that keeps the one-step-ahead rate
-omega_i + (f_omega,i + G_i u_i) dt inside (1 - zoh_margin) omega_max; omega is near-linear over a
-step, so the limit then holds between samples too.
+2 omega_max). With the paper's model, `zoh_interval` gives the interval of u_i that keeps the
+one-step-ahead rate omega_i + (f_omega,i + G_i u_i) dt inside (1 - zoh_margin) omega_max; omega is
+near-linear over a step, so the limit then holds between samples too.
+
+With the gyrostat model that is not so: the wheels' gyroscopic torque s D omega x psi / J couples the
+axes (a command on axis j turns omega_j, and with it the torque on axis i, within the hold; at
+|psi| ~ 500 rad/s the coupling's rate D psi / J_i is ~1 rad/s). `zoh_rows` then replaces the per-axis
+interval by coupled rows, affine in u, at ZOH_CHECKS times tau of the hold (docs/gyrostat.md):
+
+    omega(tau) = E(tau) omega + Phi(tau) (e0 + G u) + r(tau),   E = exp(Omega tau),  Phi = int_0^tau E
+    Omega = s D J^-1 [. x psi]  (the wheel term, linear in omega at the sample's psi)
+    e0    = f_omega - Omega omega (Euler's and the gravity-gradient torque at the sample)
+    |r_i(tau)| <= sqrt(sum_a J_a L_a^2 / J_i) tau^2 / 2   (E keeps omega^T J omega; L_a bounds de_a/dt)
+    |E omega + Phi (e0 + G u)|_i <= (1 - zoh_margin) omega_max - |r_i| - B_i h^2 / 8
+
+B_i bounds |omega_i''| over the hold and h is the spacing of the check points, so omega_i stays
+inside (1 - zoh_margin) omega_max between them too (the first spacing dt/8: B h^2/8 there is at most
+what the margin leaves).
 """
 
 from __future__ import annotations
+
+import math
 
 import numba
 import numpy as np
 from numpy.typing import NDArray
 
-from rta_attitude.constraints.base import OMEGA_X
+from rta_attitude.constraints.base import OMEGA_X, ZOH_CHECKS
 from rta_attitude.jit import LEAF
 
 NAMES = ("omega_x", "omega_y", "omega_z")
@@ -54,3 +71,97 @@ def zoh_interval(ctx: np.void, x: NDArray[np.float64], c: np.void, axis: int) ->
     ua = (limit - w_free) / (cg * dt)
     ub = (-limit - w_free) / (cg * dt)
     return (ua, ub) if ua < ub else (ub, ua)
+
+
+ZOH_TIMES = (0.125, 0.25, 0.5, 0.75, 1.0)
+"""Check points of `zoh_rows`, fractions of the hold (ZOH_CHECKS of them)."""
+ZOH_SPACING = (0.125, 0.25, 0.25, 0.25, 0.25)
+"""The longer of the two intervals next to each check point (the next hold starts with 1/8), fractions."""
+ZOH_SERIES_TERMS = 30
+"""Terms of the exp(Omega tau) series: |Omega| tau <= D psi / J_min dt ~ 1.6 here, 1.6^30 / 31! ~ 1e-28."""
+
+
+@numba.njit(**LEAF)
+def _hold_series(ctx: np.void, tau: float) -> None:
+    """ctx.zoh_sum = sum_n (Omega tau)^n / (n + 1)! (Phi = tau sum, E = I + Omega tau sum)."""
+    Om, S, T, N = ctx.zoh_omega, ctx.zoh_sum, ctx.zoh_term, ctx.zoh_next
+    for r in range(3):
+        for q in range(3):
+            S[r, q] = 1.0 if r == q else 0.0
+            T[r, q] = S[r, q]
+    for n in range(1, ZOH_SERIES_TERMS):
+        f = tau / (n + 1)
+        for r in range(3):
+            for q in range(3):
+                N[r, q] = (T[r, 0] * Om[0, q] + T[r, 1] * Om[1, q] + T[r, 2] * Om[2, q]) * f
+        for r in range(3):
+            for q in range(3):
+                T[r, q] = N[r, q]
+                S[r, q] += N[r, q]
+
+
+@numba.njit(**LEAF)
+def zoh_rows(ctx: np.void, x: NDArray[np.float64], c: np.void, p: np.void, t: np.void) -> None:
+    """The coupled zero-order-hold rate rows of state x into t (zoh_rows, zoh_axis, zoh_gain, zoh_lo,
+    zoh_hi): in the robust preset, with the rate constraint on and the gyrostat model (p); else none."""
+    t.zoh_rows = 0
+    if not (c.robust and p.wheel_gyroscopic and c.gains[OMEGA_X].enabled):
+        return
+    dt = c.dt_s
+    J = p.inertia_kgm2
+    D = p.wheel_inertia_kgm2
+    sD = p.torque_sign * D
+    G = ctx.control_gain
+    U = c.u_max_rad_s2
+    w_max = c.omega_max_rad_s
+    # Omega w = s D J^-1 (w x psi) at the sample's psi
+    p0, p1, p2 = x[7], x[8], x[9]
+    Om = ctx.zoh_omega
+    Om[0, 0], Om[0, 1], Om[0, 2] = 0.0, sD * p2 / J[0], -sD * p1 / J[0]
+    Om[1, 0], Om[1, 1], Om[1, 2] = -sD * p2 / J[1], 0.0, sD * p0 / J[1]
+    Om[2, 0], Om[2, 1], Om[2, 2] = sD * p1 / J[2], -sD * p0 / J[2], 0.0
+    w = ctx.omega
+    # e0 = f_omega - Omega w: Euler and gravity gradient at the sample
+    e0_0 = ctx.omega_drift[0] - (Om[0, 1] * w[1] + Om[0, 2] * w[2])
+    e0_1 = ctx.omega_drift[1] - (Om[1, 0] * w[0] + Om[1, 2] * w[2])
+    e0_2 = ctx.omega_drift[2] - (Om[2, 0] * w[0] + Om[2, 1] * w[1])
+    # bounds over the hold: |w_a| <= W_a, |psi_a| <= P_a, |u_a| <= U_a, |w_a'| <= A_a
+    W0, W1, W2 = max(abs(w[0]), w_max), max(abs(w[1]), w_max), max(abs(w[2]), w_max)
+    P0, P1, P2 = abs(p0) + U[0] * dt, abs(p1) + U[1] * dt, abs(p2) + U[2] * dt
+    k = 3.0 * p.mean_motion_rad_s * p.mean_motion_rad_s if p.gravity_gradient else 0.0
+    d0, d1, d2 = abs(J[1] - J[2]), abs(J[2] - J[0]), abs(J[0] - J[1])
+    w_rel = math.sqrt(W0 * W0 + W1 * W1 + W2 * W2) + abs(p.frame_rate_rad_s)
+    A0 = (d0 * W1 * W2 + D * (W1 * P2 + W2 * P1) + 0.5 * k * d0) / J[0] + abs(G[0]) * U[0]
+    A1 = (d1 * W2 * W0 + D * (W2 * P0 + W0 * P2) + 0.5 * k * d1) / J[1] + abs(G[1]) * U[1]
+    A2 = (d2 * W0 * W1 + D * (W0 * P1 + W1 * P0) + 0.5 * k * d2) / J[2] + abs(G[2]) * U[2]
+    # B_i >= |w_i''| (the rate of f_omega,i); L_a >= |de_a/dt| (e without the frozen wheel term)
+    B0 = (d0 * (A1 * W2 + W1 * A2) + D * (A1 * P2 + W1 * U[2] + A2 * P1 + W2 * U[1]) + 2.0 * k * d0 * w_rel) / J[0]
+    B1 = (d1 * (A2 * W0 + W2 * A0) + D * (A2 * P0 + W2 * U[0] + A0 * P2 + W0 * U[2]) + 2.0 * k * d1 * w_rel) / J[1]
+    B2 = (d2 * (A0 * W1 + W0 * A1) + D * (A0 * P1 + W0 * U[1] + A1 * P0 + W1 * U[0]) + 2.0 * k * d2 * w_rel) / J[2]
+    L0 = (d0 * (A1 * W2 + W1 * A2) + D * (W1 * U[2] + W2 * U[1]) + 2.0 * k * d0 * w_rel) / J[0]
+    L1 = (d1 * (A2 * W0 + W2 * A0) + D * (W2 * U[0] + W0 * U[2]) + 2.0 * k * d1 * w_rel) / J[1]
+    L2 = (d2 * (A0 * W1 + W0 * A1) + D * (W0 * U[1] + W1 * U[0]) + 2.0 * k * d2 * w_rel) / J[2]
+    energy = J[0] * L0 * L0 + J[1] * L1 * L1 + J[2] * L2 * L2
+    limit = (1.0 - c.zoh_margin) * w_max
+    S = ctx.zoh_sum
+    row = 0
+    for m in range(ZOH_CHECKS):
+        tau = ZOH_TIMES[m] * dt
+        h = ZOH_SPACING[m] * dt
+        _hold_series(ctx, tau)
+        for i in range(3):
+            # E = I + Omega tau S, Phi = tau S
+            ew = w[i]
+            for a in range(3):
+                oms = tau * (Om[i, 0] * S[0, a] + Om[i, 1] * S[1, a] + Om[i, 2] * S[2, a])
+                ew += oms * w[a]
+            free = ew + tau * (S[i, 0] * e0_0 + S[i, 1] * e0_1 + S[i, 2] * e0_2)
+            B = B0 if i == 0 else (B1 if i == 1 else B2)
+            slack = limit - math.sqrt(energy / J[i]) * 0.5 * tau * tau - B * h * h / 8.0
+            t.zoh_axis[row] = i
+            for a in range(3):
+                t.zoh_gain[row, a] = tau * S[i, a] * G[a]
+            t.zoh_lo[row] = -slack - free
+            t.zoh_hi[row] = slack - free
+            row += 1
+    t.zoh_rows = row

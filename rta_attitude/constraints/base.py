@@ -13,8 +13,10 @@ Records (structured NumPy arrays, read by name in compiled code):
 - GAIN_DTYPE: one constraint's switches and gains (one per row of CONSTRAINT_NAMES);
 - CONSTRAINT_DTYPE: the limits, the augmentation weights, the sampled-data options and the gains
   of every constraint (`constraint_record`);
-- TABLE_DTYPE: one state's evaluation: h, Psi_0, Psi_1, drift and gain of every constraint, and the
-  box lo <= u <= hi (U, intersected with the one-step zero-order-hold bounds in the robust preset).
+- TABLE_DTYPE: one state's evaluation: h, Psi_0, Psi_1, drift and gain of every constraint, the
+  box lo <= u <= hi (U, intersected with the one-step zero-order-hold bounds in the robust preset)
+  and, in the robust preset with the gyrostat model, the coupled zero-order-hold rate rows
+  (`angular_rate.zoh_rows`).
 """
 
 from __future__ import annotations
@@ -64,6 +66,10 @@ CONSTRAINT_DTYPE = np.dtype([
     ("u_max_rad_s2", np.float64, (3,)),    # the box U
 ])  # fmt: skip
 
+ZOH_CHECKS = 5
+"""Check points of the coupled rate rows in one hold (`angular_rate.zoh_rows`)."""
+ZOH_ROWS = 3 * ZOH_CHECKS
+
 TABLE_DTYPE = np.dtype([
     ("h", np.float64, (N_CONSTRAINTS,)),
     ("psi0", np.float64, (N_CONSTRAINTS,)),
@@ -72,6 +78,11 @@ TABLE_DTYPE = np.dtype([
     ("gain", np.float64, (N_CONSTRAINTS, 3)),
     ("lo", np.float64, (3,)),
     ("hi", np.float64, (3,)),
+    ("zoh_rows", np.int64),                      # coupled rate rows in use (0, or ZOH_ROWS)
+    ("zoh_axis", np.int64, (ZOH_ROWS,)),         # the body axis of each
+    ("zoh_gain", np.float64, (ZOH_ROWS, 3)),     # zoh_lo <= zoh_gain . u <= zoh_hi, rad/s
+    ("zoh_lo", np.float64, (ZOH_ROWS,)),
+    ("zoh_hi", np.float64, (ZOH_ROWS,)),
 ])  # fmt: skip
 
 
@@ -131,5 +142,6 @@ def nan_min(a: float, b: float) -> float:
 
 __all__ = [
     "BATTERY", "COMMUNICATION", "CONSTRAINT_DTYPE", "EXCLUSION_ZONE", "GAIN_DTYPE", "N_CONSTRAINTS", "OMEGA_X", "PSI_X",
-    "TABLE_DTYPE", "TEMPERATURE", "constraint_record", "group_of", "nan_max", "nan_min", "second_order",
+    "TABLE_DTYPE", "TEMPERATURE", "ZOH_CHECKS", "ZOH_ROWS", "constraint_record", "group_of", "nan_max", "nan_min",
+    "second_order",
 ]  # fmt: skip

@@ -54,6 +54,10 @@ CONTEXT_DTYPE = np.dtype([
     ("earth", np.float64, (3,)),       # r_E in body
     ("earth_rate", np.float64, (3,)),
     ("earth_acc", np.float64, (3,)),
+    ("zoh_omega", np.float64, (3, 3)),   # scratch of angular_rate.zoh_rows: Omega, the linear wheel term
+    ("zoh_sum", np.float64, (3, 3)),     # sum of (Omega tau)^n / (n + 1)!
+    ("zoh_term", np.float64, (3, 3)),
+    ("zoh_next", np.float64, (3, 3)),
 ])  # fmt: skip
 """Per-state quantities shared by the barriers (one record)."""
 

@@ -2,7 +2,8 @@
 
 `rows` evaluates each constraint's module in CONSTRAINT_NAMES order into a TABLE_DTYPE record and
 then the box lo <= u <= hi: U, intersected in the `robust` preset with the one-step-ahead
-zero-order-hold intervals of the enabled rate and wheel-speed constraints; where such an interval
+zero-order-hold intervals of the enabled rate and wheel-speed constraints (with the gyrostat model the
+rate's are coupled rows instead, `angular_rate.zoh_rows`); where such an interval
 misses U entirely (a state already past a limit by more than one step of U can undo) the box shrinks
 to the edge of U nearest to it. `safety_values` gives the physical h of every constraint (what the
 plant is judged by, at samples and at RK4 substeps) without the derivatives.
@@ -60,14 +61,15 @@ def rows(x: Array, p: np.void, c: np.void, ctx: np.void, t: np.void) -> None:
     for a in range(3):
         angular_rate.row(ctx, x, c, a, t)
         wheel_speed.row(ctx, x, c, a, t)
+    angular_rate.zoh_rows(ctx, x, c, p, t)
     box(ctx, x, c, t)
 
 
 @numba.njit(**LEAF)
 def box(ctx: np.void, x: Array, c: np.void, t: np.void) -> None:
     """t.lo, t.hi (3,), rad/s^2: U, and in the robust preset the one-step ZOH intervals of the enabled
-    rate and wheel-speed constraints."""
-    rate_on = c.gains[OMEGA_X].enabled
+    rate and wheel-speed constraints (the rate's only where no coupled rows, t.zoh_rows, replace them)."""
+    rate_on = c.gains[OMEGA_X].enabled and t.zoh_rows == 0
     wheel_on = c.gains[PSI_X].enabled
     for a in range(3):
         u_max = c.u_max_rad_s2[a]

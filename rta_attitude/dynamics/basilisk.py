@@ -5,7 +5,7 @@ What Basilisk integrates: a rigid hub with three balanced reaction wheels (`Bala
 body axes, torque-commanded, RK4 at h = dt / substeps (its `svIntegratorRK4`), optionally the
 gravity-gradient torque of a point-mass Earth (`GravityGradientEffector`) and a circular orbit
 (rotating Hill frame). Its equations carry the wheels' gyroscopic torque always, so it is the
-`gyrostat` model whatever `spacecraft.model` says (the filter keeps `spacecraft.model`).
+`gyrostat` model whatever `spacecraft.model` says (the filter keeps `filter.model`).
 
 Mapping (each line checked in test/test_basilisk.py):
 

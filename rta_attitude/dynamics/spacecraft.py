@@ -3,11 +3,13 @@ Monte Carlo and the filter's barriers all call.
 
 State x (19,), `dynamics.state`: q (Hill -> body, scalar last), omega (body rate w.r.t. inertial space,
 rad/s), psi (the wheels' momentum state, rad/s), T (K), E (J), theta_S (rad), Clohessy-Wiltshire (6).
-Control u = psi_dot (3,), rad/s^2; the body feels the torque D u.
+Control u = psi_dot (3,), rad/s^2; the body feels the torque s D u (s = spacecraft.torque_sign, +1 the
+paper's sign) and the wheels hold the momentum -s D psi, so without external torque the inertial
+angular momentum A(q)^T (J omega - s D psi) is constant (test_gyrostat, docs/gyrostat.md).
 
     q_dot      = 1/2 Xi(q) (omega - A(q) [0, 0, n_f])            n_f: Hill frame rate (0: Hill inertial)
-    J omega_dot = -omega x (J omega - D psi) + D u + tau_gg       gyrostat (`wheel_gyroscopic`)
-    J omega_dot = -omega x  J omega          + D u + tau_gg       the paper's model (no wheel momentum)
+    J omega_dot = -omega x (J omega - s D psi) + s D u + tau_gg   gyrostat (`wheel_gyroscopic`)
+    J omega_dot = -omega x  J omega            + s D u + tau_gg   the paper's model (no wheel momentum)
     tau_gg     = 3 n^2 r x (J r),  r = A(q) [1, 0, 0]             gravity gradient (optional)
     psi_dot    = u
     theta_S_dot = -n;  r_S = [cos theta_S, sin theta_S, 0] (Hill);  r_E = [-1, 0, 0] (Hill)
@@ -19,7 +21,7 @@ Control u = psi_dot (3,), rad/s^2; the body feels the torque D u.
 psi is the paper's "wheel speed" with the paper's sign (psi = -Omega, Omega the wheel's spin rate
 about its axis in inertial space) and J the inertia without the rotors' spin-axis part; with those
 readings the gyrostat equation above is exact for torque-commanded wheels whose motor torque is -D u
-(docs/decisions.md, "the gyrostat"). The paper's model drops the wheel term (-omega x (-D psi)).
+(docs/gyrostat.md). The paper's model drops the wheel term (-omega x (-s D psi)).
 
 Parameters reach the kernels by name, as one record of PLANT_DTYPE (`plant_record`): a structured
 NumPy array whose fields the compiled code reads as attributes (docs/decisions.md says why). The
@@ -45,6 +47,7 @@ Array = NDArray[np.float64]
 PLANT_DTYPE = np.dtype([
     ("inertia_kgm2", np.float64, (3,)),        # J1 J2 J3
     ("wheel_inertia_kgm2", np.float64),        # D
+    ("torque_sign", np.float64),               # s: the wheels' body torque is s D u, their momentum -s D psi
     ("control_gain", np.float64, (3,)),        # d omega_dot / d u = D / J_i
     ("wheel_gyroscopic", np.uint8),            # 1: gyrostat term -omega x (-D psi); 0: the paper's model
     ("frame_rate_rad_s", np.float64),          # n_f, rate of the Hill frame in the kinematics (0: inertial)
@@ -64,16 +67,23 @@ PLANT_DTYPE = np.dtype([
 """The plant's parameters, in model units, as the compiled code reads them."""
 
 
-def plant_record(cfg: Config) -> NDArray[np.void]:
+def plant_record(cfg: Config, model: str | None = None) -> NDArray[np.void]:
     """The PLANT_DTYPE record (shape (1,)) of a configuration; constants formed as the first
-    implementation formed them (so its numbers are reproduced)."""
+    implementation formed them (so its numbers are reproduced).
+
+    Args:
+        cfg: the configuration.
+        model: PLANT_MODELS name; None: `spacecraft.model` (the simulated plant). The filter's model
+            of the plant is `plant_record(cfg, cfg.filter.model)`.
+    """
     sc, th, env, pw = cfg.spacecraft, cfg.thermal, cfg.environment, cfg.power
     rec = np.zeros(1, PLANT_DTYPE)
     p = rec[0]
     p["inertia_kgm2"] = sc.inertia_kgm2
     p["wheel_inertia_kgm2"] = sc.wheel_inertia_kgm2
+    p["torque_sign"] = sc.torque_sign
     p["control_gain"] = sc.control_gain
-    p["wheel_gyroscopic"] = 1 if sc.model == "gyrostat" else 0
+    p["wheel_gyroscopic"] = 1 if (sc.model if model is None else model) == "gyrostat" else 0
     p["frame_rate_rad_s"] = env.mean_motion_rad_s if env.rotating_hill else 0.0
     p["gravity_gradient"] = 1 if env.gravity_gradient else 0
     p["mean_motion_rad_s"] = env.mean_motion_rad_s
@@ -120,8 +130,8 @@ def omega_drift(x: Array, A: Array, p: np.void, out: Array) -> None:
     t2 = (J3 - J1) * w3 * w1
     t3 = (J1 - J2) * w1 * w2
     if p.wheel_gyroscopic or p.gravity_gradient:
-        if p.wheel_gyroscopic:  # -omega x (-D psi) = D omega x psi
-            D = p.wheel_inertia_kgm2
+        if p.wheel_gyroscopic:  # -omega x (-s D psi) = s D omega x psi
+            D = p.torque_sign * p.wheel_inertia_kgm2
             p1, p2, p3 = x[7], x[8], x[9]
             t1 += D * (w2 * p3 - w3 * p2)
             t2 += D * (w3 * p1 - w1 * p3)

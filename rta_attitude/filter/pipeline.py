@@ -27,7 +27,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from rta_attitude.config.schema import Config
-from rta_attitude.constraints.base import CONSTRAINT_DTYPE, N_CONSTRAINTS, TABLE_DTYPE, constraint_record
+from rta_attitude.constraints.base import CONSTRAINT_DTYPE, N_CONSTRAINTS, OMEGA_X, TABLE_DTYPE, constraint_record
 from rta_attitude.constraints.geometry import CONTEXT_DTYPE
 from rta_attitude.constraints.rows import rows
 from rta_attitude.dynamics.spacecraft import PLANT_DTYPE, plant_record
@@ -117,7 +117,7 @@ def filter_record(cfg: Config) -> NDArray[np.void]:
     """The FILTER_DTYPE record (1,) of a configuration."""
     rec = np.zeros(1, FILTER_DTYPE)
     f = rec[0]
-    f["plant"] = plant_record(cfg)[0]
+    f["plant"] = plant_record(cfg, cfg.filter.model)[0]
     f["constraints"] = constraint_record(cfg)[0]
     o = cfg.filter
     f["policy"] = outcome.FALLBACKS.index(o.fallback)
@@ -188,6 +188,7 @@ def prepare(x_in: Array, u_des: Array, f: np.void, ws: np.void, r: np.void) -> t
         for a in range(3):
             t.lo[a] = -c.u_max_rad_s2[a]
             t.hi[a] = c.u_max_rad_s2[a]
+        t.zoh_rows = 0
         return False, finite_des, False
     need = not finite_des
     tol = f.check_tolerance
@@ -203,6 +204,15 @@ def prepare(x_in: Array, u_des: Array, f: np.void, ws: np.void, r: np.void) -> t
                 bc0 += t.gain[i, a] * min(max(ws.u_target[a], t.lo[a]), t.hi[a])
             if bc0 < -tol * max(1.0, ws.gnorm[i]):
                 need = True
+    for q in range(t.zoh_rows):  # the coupled rate rows (rad/s), checked normalised as the QP has them
+        v = 0.0
+        gn = 0.0
+        for a in range(3):
+            v += t.zoh_gain[q, a] * min(max(ws.u_target[a], t.lo[a]), t.hi[a])
+            gn += t.zoh_gain[q, a] * t.zoh_gain[q, a]
+        gn = math.sqrt(gn)
+        if v < t.zoh_lo[q] - tol * gn or v > t.zoh_hi[q] + tol * gn:
+            need = True
     return True, finite_des, need
 
 
@@ -213,7 +223,8 @@ def assemble(f: np.void, ws: np.void, soften: bool
 
     Rows of disabled constraints and rows that do not depend on u are left out; each slacked row
     (slack weight > 0, or every row if soften) gets a variable s with delta = s / sqrt(p). Rows are
-    normalised to unit norm; the last three rows are the box.
+    normalised to unit norm; then the coupled rate rows of the table (two-sided, `angular_rate.zoh_rows`,
+    reported as their axis's rate constraint; slacked only if soften); the last three rows are the box.
 
     Returns (C (r+3, n), lower, upper (r+3,), z0 (n,), row_of (r,) constraint of each row,
     slack_var (m,) variable of each constraint's slack or -1, scale (n,) delta = scale * s).
@@ -227,6 +238,10 @@ def assemble(f: np.void, ws: np.void, soften: bool
             r += 1
             if g[i].slack_weight > 0 or soften:
                 ns += 1
+    nz = t.zoh_rows
+    if soften:
+        ns += nz
+    r += nz
     n = 3 + ns
     C = np.zeros((r + 3, n))
     lower = np.full(r + 3, -BIG)
@@ -255,6 +270,23 @@ def assemble(f: np.void, ws: np.void, soften: bool
         for j in range(n):
             C[k, j] = C[k, j] / norm
         lower[k] = -t.drift[i] / norm
+        k += 1
+    for q in range(nz):
+        row_of[k] = OMEGA_X + t.zoh_axis[q]
+        for a in range(3):
+            C[k, a] = t.zoh_gain[q, a]
+        if soften:
+            scale[v] = 1.0 / math.sqrt(f.soften_weight)
+            C[k, v] = scale[v]
+            v += 1
+        ss = 0.0
+        for j in range(n):
+            ss += C[k, j] * C[k, j]
+        norm = math.sqrt(ss)
+        for j in range(n):
+            C[k, j] = C[k, j] / norm
+        lower[k] = t.zoh_lo[q] / norm
+        upper[k] = t.zoh_hi[q] / norm
         k += 1
     for a in range(3):
         C[r + a, a] = 1.0
@@ -294,7 +326,8 @@ def extract(z: Array, mult: Array, row_of: NDArray[np.int64], slack_var: NDArray
         r.u[a] = min(max(z[a], t.lo[a]), t.hi[a])
     for k in range(row_of.shape[0]):
         i = row_of[k]
-        r.intervening[i] = 1 if abs(mult[k]) > ACTIVE_MULTIPLIER else 0
+        if abs(mult[k]) > ACTIVE_MULTIPLIER:  # (several rows may report one constraint)
+            r.intervening[i] = 1
         if slack_var[i] >= 0:
             r.slack[i] = scale[slack_var[i]] * z[slack_var[i]]
 

@@ -123,9 +123,10 @@ def summary(result: MonteCarloResult) -> dict[str, Any]:
         },
         "setup": {
             "runs": len(failed), "duration_s": result.duration_s, "seed": result.seed,
-            "preset": result.cfg.filter.preset, "dt_s": result.cfg.filter.sample_time_s,
+            "preset": result.cfg.filter.preset, "plant_model": result.cfg.spacecraft.model,
+            "filter_model": result.cfg.filter.model, "dt_s": result.cfg.filter.sample_time_s,
             "substeps": result.cfg.substeps, "config": result.cfg.source, "backend": result.backend,
-            "simulator": result.cfg.plant.simulator, "filter_model": result.cfg.spacecraft.model,
+            "simulator": result.cfg.plant.simulator,
             "workers": result.workers, "wall_s": result.wall_s,
             "cpu_s": None if math.isnan(result.cpu_s) else result.cpu_s,
             "redraws_total": int(result.redraws.sum()),
@@ -140,10 +141,10 @@ def format_table(s: dict[str, Any]) -> str:
     a, b, p = s["at_samples"], s["incl_substeps"], s["paper"]
     setup = s["setup"]
     cpu = f", {setup['cpu_s']:.0f} s CPU" if setup.get("cpu_s") is not None else ""
+    models = f"plant {setup['plant_model']}, filter model {setup['filter_model']}, " if "plant_model" in setup else ""
     lines = [f"Monte Carlo: {setup['runs']} runs x {setup['duration_s']:.0f} s, preset {setup['preset']}, "
-             f"seed {setup['seed']}, {setup['wall_s']:.1f} s wall{cpu} "
-             f"({setup['backend']}, {setup['workers']} workers; plant {setup.get('simulator', 'compiled')}, "
-             f"filter model {setup.get('filter_model', '?')})",
+             f"{models}seed {setup['seed']}, {setup['wall_s']:.1f} s wall{cpu} "
+             f"({setup['backend']}, {setup['workers']} workers; simulator {setup.get('simulator', 'compiled')})",
              f"{'':<28}{'paper':>10}{'at samples':>14}{'incl. substeps':>16}",
              f"{'success rate':<28}{p['success_rate']:>10.2%}{a['success_rate']:>14.2%}{b['success_rate']:>16.2%}",
              f"{'failed runs':<28}{'84':>10}{a['failed']:>14d}{b['failed']:>16d}",

@@ -51,6 +51,20 @@ def sun_direction_rates(theta_S_rad: Array, n_rad_s: float) -> tuple[Array, Arra
     return dot, ddot
 
 
+def wheel_rate(omega_rad_s: Array, psi_rad_s: Array, cfg: Config, model: str) -> Array:
+    """The wheels' gyroscopic term of omega_dot (..., 3), rad/s^2: s D (omega x psi) / J for the
+    `gyrostat` model (the wheels hold -s D psi), zeros for the paper's. The oracle has no rotating Hill
+    frame nor gravity gradient: asking for them is an error, not a silent disagreement."""
+    env = cfg.environment
+    if env.rotating_hill or env.gravity_gradient:
+        raise NotImplementedError("the numpy oracle models neither the rotating Hill frame nor gravity gradient")
+    w, p = np.asarray(omega_rad_s, dtype=float), np.asarray(psi_rad_s, dtype=float)
+    if model == "paper":
+        return np.zeros(np.broadcast_shapes(w.shape, p.shape))
+    sc = cfg.spacecraft
+    return sc.torque_sign * sc.wheel_inertia_kgm2 * np.cross(w, p) / sc.J
+
+
 def gyroscopic_rate(omega_rad_s: Array, J_kgm2: Array) -> Array:
     """Drift of Euler's equations (..., 3), rad/s^2: ((J2-J3) w2 w3 / J1, (J3-J1) w3 w1 / J2, ...)."""
     w1, w2, w3 = omega_rad_s[..., 0], omega_rad_s[..., 1], omega_rad_s[..., 2]
@@ -110,6 +124,7 @@ def drift(x: Array, cfg: Config) -> Array:
     f[..., OMEGA.start] = (J2 - J3) * w2 * w3 / J1
     f[..., OMEGA.start + 1] = (J3 - J1) * w3 * w1 / J2
     f[..., OMEGA.start + 2] = (J1 - J2) * w1 * w2 / J3
+    f[..., OMEGA] += wheel_rate(w, x[..., PSI], cfg, cfg.spacecraft.model)
     # Rows 1 (j_B) and 2 (k_B) of A(q) are those body axes in Hill; r_S = [cos, sin, 0], r_E = -x.
     cs, sn = np.cos(x[..., THETA_S]), np.sin(x[..., THETA_S])
     a10, a11 = 2.0 * (q1 * q2 - q3 * q4), -q1 * q1 + q2 * q2 - q3 * q3 + q4 * q4
@@ -143,10 +158,11 @@ def _drift_one(x: Array, cfg: Config) -> Array:
     T_dot = float(thermal_fluxes(-(a10 * cs + a11 * sn), a10, float(x[TEMP]), cfg)) / heat_capacity
     n = cfg.environment.mean_motion_rad_s
     px, _py, pz, vx, vy, vz = (float(v) for v in x[CW])
+    wr = wheel_rate(x[OMEGA], x[PSI], cfg, cfg.spacecraft.model)
     return np.array([
         0.5 * (q4 * w1 - q3 * w2 + q2 * w3), 0.5 * (q3 * w1 + q4 * w2 - q1 * w3),
         0.5 * (-q2 * w1 + q1 * w2 + q4 * w3), -0.5 * (q1 * w1 + q2 * w2 + q3 * w3),
-        (J2 - J3) * w2 * w3 / J1, (J3 - J1) * w3 * w1 / J2, (J1 - J2) * w1 * w2 / J3,
+        (J2 - J3) * w2 * w3 / J1 + wr[0], (J3 - J1) * w3 * w1 / J2 + wr[1], (J1 - J2) * w1 * w2 / J3 + wr[2],
         0.0, 0.0, 0.0,
         T_dot, float(net_power(a20 * cs + a21 * sn, cfg)), -n,
         vx, vy, vz, 3 * n**2 * px + 2 * n * vy, -2 * n * vx, -(n**2) * pz,

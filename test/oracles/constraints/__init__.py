@@ -103,10 +103,14 @@ class ConstraintSet:
         )
 
     def zoh_bounds(self, ctx: Context, dt_s: float, margin: float) -> tuple[Array, Array]:
-        """Intersection of the one-step-ahead rate and wheel-speed intervals on u (..., 3) each."""
+        """Intersection of the one-step-ahead rate and wheel-speed intervals on u (..., 3) each (with the
+        gyrostat model the rate's are coupled rows, not intervals: left out here)."""
         lo = np.full((*ctx.batch_shape, 3), -np.inf)
         hi = np.full((*ctx.batch_shape, 3), np.inf)
+        coupled = ctx.cfg.filter.model == "gyrostat"
         for c in self.constraints:
+            if isinstance(c, AngularRate) and coupled:
+                continue
             if isinstance(c, (AngularRate, WheelSpeed)) and c.gains.enabled:
                 a, b = c.zoh_bounds(ctx, dt_s, margin)
                 lo[..., c.axis] = np.maximum(lo[..., c.axis], a)

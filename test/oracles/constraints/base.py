@@ -21,7 +21,7 @@ from numpy.typing import NDArray
 from oracles import model
 from oracles import quaternion as quat
 from rta_attitude.config.schema import BarrierGains, Config
-from rta_attitude.dynamics.state import OMEGA, THETA_S, Q
+from rta_attitude.dynamics.state import OMEGA, PSI, THETA_S, Q
 
 Array = NDArray[np.float64]
 
@@ -53,7 +53,8 @@ class Context:
         sun_dot, sun_ddot = model.sun_direction_rates(x[..., THETA_S], cfg.environment.mean_motion_rad_s)
         return cls(
             x=x, cfg=cfg, A=quat.attitude_matrix(x[..., Q]), omega=x[..., OMEGA],
-            omega_drift=model.gyroscopic_rate(x[..., OMEGA], cfg.spacecraft.J),
+            omega_drift=(model.gyroscopic_rate(x[..., OMEGA], cfg.spacecraft.J)
+                         + model.wheel_rate(x[..., OMEGA], x[..., PSI], cfg, cfg.filter.model)),
             sun=model.sun_direction(x[..., THETA_S]), sun_dot=sun_dot, sun_ddot=sun_ddot,
         )  # fmt: skip
 
