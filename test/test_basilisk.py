@@ -36,8 +36,10 @@ STEPS = 2000
 
 
 def _model(cfg: Config, model: str, **environment: bool) -> Config:
-    return replace(cfg, spacecraft=replace(cfg.spacecraft, model=model),
-                   environment=replace(cfg.environment, **environment))
+    """`model` in plant and filter, also for the scenarios that name their own (the paper's carry `paper`)."""
+    scenarios = {k: replace(v, model=None) for k, v in cfg.scenarios.items()}
+    return replace(cfg.with_models(model, model), environment=replace(cfg.environment, **environment),
+                   scenarios=scenarios)
 
 
 def _angle(qa: np.ndarray, qb: np.ndarray) -> np.ndarray:
