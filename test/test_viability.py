@@ -224,6 +224,22 @@ def test_a_state_only_a_fast_manoeuvre_saves_gets_a_witness(cfg: Config, model: 
         assert res.min_margins[g] == pytest.approx(worst[g], abs=1e-7)
 
 
+SEED7_RUN326 = np.array([0.4560378281631259, -0.8426256868543505, 0.0703053119312119, 0.2776123452797958,
+                         -0.012262079182708533, 0.0075059478726229355, -0.006944702000167159, -11.167478896036187,
+                         -258.6820548230665, 85.44390777244692, 276.3274950684983, 5390.6525382266,
+                         0.13167024647449801])
+"""Initial state of run 326 of `rta-attitude montecarlo --runs 5000 --duration 2000 --seed 7` (robust
+preset, paper model): the filter enters the exclusion zone at 129.8 s (h = -7.1e-3 rad) after 13
+infeasible QPs (measured on this branch; docs/viability.md)."""
+
+
+def test_a_failed_monte_carlo_run_gets_a_witness_over_its_whole_run(cfg: Config) -> None:
+    c = with_model(cfg, "paper")
+    res = find_witness(SEED7_RUN326, 2000.0, c, compile=False)
+    worst = check_witness(c, SEED7_RUN326, res, 2000)
+    assert worst["exclusion_zone"] > 0.1  # the witness keeps the sensor well out of the cone
+
+
 def test_a_law_witness_is_checked_on_the_project_plant(cfg: Config) -> None:
     x0 = sun_safe_state(with_model(cfg, "gyrostat"), 45.0, -0.9, (500.0, -500.0, 500.0), 280.0, 3000.0)
     c = with_model(cfg, "gyrostat")
