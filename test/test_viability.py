@@ -303,6 +303,7 @@ def run_cli(*args: str) -> subprocess.CompletedProcess[str]:
     (["--state", "a,b"], "--state must be comma-separated numbers"),
     (["--runs", "/nonexistent/runs.csv"], "no such file"),
     (["--state", ",".join(["0"] * 13)], "zero quaternion"),
+    (["--state", ",".join(["0.5"] * 13), "--limit", "0"], "--limit must be >= 1"),
 ])  # fmt: skip
 def test_cli_errors_are_one_line_and_exit_1(args: list[str], message: str) -> None:
     out = run_cli(*args, "--no-progress")

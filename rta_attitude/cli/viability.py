@@ -3,7 +3,7 @@ failed runs of a Monte Carlo.
 
     rta-attitude viability --state q1,q2,q3,q4,wx,wy,wz,psix,psiy,psiz,T,E,theta_S [--state ...]
     rta-attitude viability --runs out/montecarlo/runs.csv [--select failed|failed_incl_substeps|all]
-                           [--horizon S] [--time-limit S] [--no-compile] --out DIR
+                           [--limit N] [--horizon S] [--time-limit S] [--no-compile] --out DIR
 
 States are in model units (rad/s, K, J, rad), as runs.csv writes them. Prints the verdict table and
 writes viability.json (every result with its witness) and viability.csv to --out.
@@ -30,6 +30,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     src.add_argument("--runs", type=Path, default=None, help="a Monte Carlo's runs.csv: check its failed runs")
     parser.add_argument("--select", choices=("failed", "failed_incl_substeps", "all"), default="failed",
                         help="which runs of --runs (default: failed at the samples)")
+    parser.add_argument("--limit", type=int, default=None, help="check only the first N selected runs or states")
     parser.add_argument("--horizon", type=float, default=None,
                         help=f"horizon, s (default: the Monte Carlo's run length, else {DEFAULT_HORIZON_S:.0f})")
     parser.add_argument("--time-limit", type=float, default=900.0, help="wall-clock budget per state, s (default 900)")
@@ -66,6 +67,8 @@ def run(args: argparse.Namespace) -> int:
 
     if args.horizon is not None and not (math.isfinite(args.horizon) and args.horizon >= 1.0):
         raise ConfigError(f"--horizon must be >= 1 s, got {args.horizon}")
+    if args.limit is not None and args.limit < 1:
+        raise ConfigError(f"--limit must be >= 1, got {args.limit}")
     if not args.time_limit > 0:
         raise ConfigError(f"--time-limit must be > 0 s, got {args.time_limit}")
     states = [parse_state(s) for s in args.state] if args.state else None
@@ -83,12 +86,14 @@ def run(args: argparse.Namespace) -> int:
     else:
         items = read_runs(args.runs, args.select)
         horizon = args.horizon or horizon_of_runs(args.runs) or DEFAULT_HORIZON_S
+    items = items[:args.limit] if args.limit else items
     output_dir(args.out)
     results = check_states(items, horizon, cfg, progress=not args.no_progress and sys.stderr.isatty(),
                            enforce=enforce, time_limit_s=args.time_limit, compile=not args.no_compile)
     setup = {"config": cfg.source, "model": cfg.spacecraft.model, "horizon_s": horizon, "enforce": list(enforce),
              "time_limit_s": args.time_limit, "compiled": not args.no_compile,
-             "source": str(args.runs) if args.runs else "--state", "select": args.select if args.runs else None}
+             "source": str(args.runs) if args.runs else "--state", "select": args.select if args.runs else None,
+             "limit": args.limit}
     paths = write_report(args.out, results, setup, with_trajectory=not args.no_trajectory)
     c = counts(results)
     print(format_table(results))
