@@ -16,7 +16,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("constraints",),
     ("filter",),
     ("simulation",),
-    ("montecarlo", "recording"),
+    ("montecarlo", "recording", "viability"),
     ("ros",),
     ("cli",),
 )

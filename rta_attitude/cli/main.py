@@ -5,6 +5,7 @@
     rta-attitude check-config [--config FILE]
     rta-attitude launch ...        (the nodes over DDS: cli/launch.py)
     rta-attitude montecarlo ...    (cli/montecarlo.py)
+    rta-attitude viability ...     (cli/viability.py)
     rta-attitude analyze BAG ...   (cli/analyze.py)
     rta-attitude replay BAG        (cli/replay.py)
     rta-attitude topics | echo     (cli/topics.py)
@@ -31,6 +32,7 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
     "check-config": ("check_config", "validate a parameter file and print what it sets"),
     "launch": ("launch", "run the closed loop as ROS 2 nodes over DDS, record an MCAP bag"),
     "montecarlo": ("montecarlo", "the paper's Monte Carlo of the filter from Latin-hypercube states"),
+    "viability": ("viability", "the viability oracle: is a state recoverable? (states or a Monte Carlo's failures)"),
     "analyze": ("analyze", "summary and figure of a recorded MCAP bag"),
     "replay": ("replay", "republish a bag's messages over DDS with /clock"),
     "topics": ("topics", "list live ROS topics with types, publishers and rates"),

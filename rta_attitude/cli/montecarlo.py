@@ -6,6 +6,7 @@ import argparse
 import os
 import sys
 from pathlib import Path
+from typing import Any
 
 from rta_attitude.config.schema import PLANT_MODELS, PRESETS, SIMULATORS, SOLVERS
 from rta_attitude.errors import ConfigError
@@ -41,6 +42,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-plot", action="store_true", help="skip the PNG figure")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     parser.add_argument("--config", type=Path, default=None, help="parameter YAML (default: the package's)")
+    parser.add_argument("--viability", action="store_true",
+                        help="then run the viability oracle on every failed run over the run length (slow: up to "
+                             "--viability-time-limit per run); writes viability.json/.csv and reports the failures "
+                             "with and without a witness")
+    parser.add_argument("--viability-time-limit", type=float, default=900.0,
+                        help="the oracle's wall-clock budget per failed run, s (default 900)")
+    parser.add_argument("--viability-no-compile", action="store_true",
+                        help="the oracle in casadi's virtual machine (no C compiler; ~10x slower)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -51,6 +60,8 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError(f"--chunk-runs must be >= 1, got {args.chunk_runs}")
     if args.max_runs is not None and args.max_runs < 1:
         raise ConfigError(f"--max-runs must be >= 1, got {args.max_runs}")
+    if not args.viability_time_limit > 0:
+        raise ConfigError(f"--viability-time-limit must be > 0 s, got {args.viability_time_limit}")
     from rta_attitude import config as config_module
     from rta_attitude.files import output_dir
     from rta_attitude.montecarlo.campaign import format_table, montecarlo, summary, write_outputs
@@ -68,7 +79,38 @@ def run(args: argparse.Namespace) -> int:
     paths = write_outputs(result, args.out, plot=not args.no_plot)
     print(format_table(summary(result)))
     print("wrote " + ", ".join(str(p) for p in paths.values()))
+    if args.viability:
+        check_failures(result, args.out, args.viability_time_limit,
+                       progress=not args.no_progress and sys.stderr.isatty(), compile=not args.viability_no_compile)
     return 0
 
 
-__all__ = ["add_arguments", "run"]
+def check_failures(result: Any, out: Path, time_limit_s: float, progress: bool, compile: bool = True) -> dict[str, Any]:
+    """The viability oracle on every failed run (at samples) of a MonteCarloResult, over the run length;
+    writes viability.json / viability.csv to out, prints the table and the counts. Returns the counts."""
+    import numpy as np
+
+    from rta_attitude.viability.batch import check_states, counts, write_report
+    from rta_attitude.viability.params import default_enforce
+    from rta_attitude.viability.result import format_table
+
+    cfg = result.cfg
+    items = [(f"run {k}", result.x0[k]) for k in np.flatnonzero(result.failed())]
+    found = check_states(items, result.duration_s, cfg, progress=progress, time_limit_s=time_limit_s,
+                         compile=compile)
+    setup = {"config": cfg.source, "model": cfg.spacecraft.model, "horizon_s": result.duration_s,
+             "enforce": list(default_enforce(cfg)), "time_limit_s": time_limit_s, "compiled": compile,
+             "source": f"montecarlo seed {result.seed}, {len(result.x0)} runs, preset {cfg.filter.preset}",
+             "select": "failed"}
+    paths = write_report(out, found, setup)
+    c = counts(found)
+    if found:
+        print(format_table(found))
+    print(f"viability of the {c['states']} failed runs over {result.duration_s:.0f} s: {c['recoverable']} with a "
+          f"witness (a filter shortfall), {c['no witness found']} without (no witness found), "
+          f"{c['unrecoverable']} proven unrecoverable")
+    print("wrote " + ", ".join(str(p) for p in paths.values()))
+    return c
+
+
+__all__ = ["add_arguments", "check_failures", "run"]

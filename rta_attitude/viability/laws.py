@@ -1,0 +1,131 @@
+"""Warm-start laws: simple closed-loop attitude laws whose exactly simulated trajectory is either a
+witness by itself or the optimiser's initial guess.
+
+The sun-safe attitude (rows i, j, k of the body axes in Hill): k_B = r_S (panel on the sun),
+j_B = the unit part of r_E perpendicular to r_S (antenna on the Earth side), i_B = j_B x k_B (sensor
+perpendicular to the sun). Laws (tried in LAWS order):
+
+- `sun_safe_ff`: rate command w_ref = clip(-(kp/kd) dq_v, +-0.7 w_max) towards the sun-safe attitude,
+  tracked by u = clip(s (w x H)/D + s J (w_ref - w) / (tau D), U): the gyroscopic feed-forward
+  cancels w x H (H = J w - D psi, gyrostat; J w, paper), a first-order rate loop of time constant tau.
+  Why: with large wheel momentum, w x D psi is as large as the PD law's rate-loop torque and drags
+  the rates past w_max.
+- `hold`: the same with w_ref = 0 (stop and hold the attitude).
+- `sun_safe`: the PD law of the primary controller aimed at the sun-safe attitude,
+  u = clip(s psi_dot_max tanh(-kp dq_v - kd w), U) (dq sign-fixed to the shorter rotation).
+
+s is the config's torque sign; kp, kd, psi_dot_max are the config's controller gains and actuator limit.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numpy.typing import NDArray
+
+from rta_attitude.viability.model import constraint_values, exact_step, sun_hill
+from rta_attitude.viability.params import N_X, OracleModel
+
+Array = NDArray[np.float64]
+
+LAWS: tuple[str, ...] = ("sun_safe_ff", "hold", "sun_safe")
+"""Warm-start laws, in the order they are tried."""
+RATE_LIMIT_FRACTION = 0.7
+"""The feed-forward laws command |w_ref_i| <= this fraction of w_max."""
+RATE_TIME_CONSTANT_S = 2.0
+"""Rate-loop time constant of the feed-forward laws, s."""
+
+
+def quat_product(q: Array, p: Array) -> Array:
+    """q (x) p = [q4 p_v + p4 q_v - q_v x p_v; q4 p4 - q_v . p_v], so A(q (x) p) = A(q) A(p)."""
+    qv, q4, pv, p4 = q[:3], q[3], p[:3], p[3]
+    return np.concatenate([q4 * pv + p4 * qv - np.cross(qv, pv), [q4 * p4 - qv @ pv]])
+
+
+def quat_from_matrix(a: Array) -> Array:
+    """The unit quaternion (scalar last, q4 >= 0) with attitude_matrix(q) == a (Shepperd)."""
+    tr = float(np.trace(a))
+    i = int(np.argmax([a[0, 0], a[1, 1], a[2, 2], tr]))
+    q = np.empty(4)
+    if i == 3:
+        q[3] = 0.5 * math.sqrt(1.0 + tr)
+        f = 0.25 / q[3]
+        q[0], q[1], q[2] = (a[1, 2] - a[2, 1]) * f, (a[2, 0] - a[0, 2]) * f, (a[0, 1] - a[1, 0]) * f
+    else:
+        j, k = (i + 1) % 3, (i + 2) % 3
+        q[i] = 0.5 * math.sqrt(1.0 + 2.0 * a[i, i] - tr)
+        f = 0.25 / q[i]
+        q[j], q[k], q[3] = (a[i, j] + a[j, i]) * f, (a[i, k] + a[k, i]) * f, (a[j, k] - a[k, j]) * f
+    q /= np.linalg.norm(q)
+    return q if q[3] >= 0 else -q
+
+
+def sun_safe_matrix(theta_S_rad: float, m: OracleModel) -> Array:
+    """The sun-safe attitude, rows i_B, j_B, k_B in Hill (3, 3). At a Sun-Earth conjunction
+    (r_E parallel to r_S) j_B is taken as z_Hill x r_S."""
+    k = sun_hill(theta_S_rad)
+    e = np.array(m.earth_hill)
+    j = e - (e @ k) * k
+    if np.linalg.norm(j) < 1e-6:
+        j = np.array([-k[1], k[0], 0.0])
+    j = j / np.linalg.norm(j)
+    return np.vstack([np.cross(j, k), j, k])
+
+
+def attitude_error(x: Array, m: OracleModel) -> Array:
+    """dq_v (3,) of dq = q (x) q_c^-1 towards the sun-safe attitude q_c, sign so that dq4 >= 0."""
+    qc = quat_from_matrix(sun_safe_matrix(float(x[12]), m))
+    dq = quat_product(x[0:4], np.array([-qc[0], -qc[1], -qc[2], qc[3]]))
+    return -dq[:3] if dq[3] < 0 else dq[:3]
+
+
+def law_command(x: Array, law: str, m: OracleModel) -> Array:
+    """The command (3,) of a warm-start law at state x (13,), inside U."""
+    s, J, D = m.torque_sign, m.J, m.wheel_inertia_kgm2
+    w = x[4:7]
+    if law == "sun_safe":
+        u = s * m.wheel_accel_max_rad_s2 * np.tanh(-m.kp * attitude_error(x, m) - m.kd * w)
+        return np.clip(u, -m.u_max, m.u_max)
+    if law == "hold":
+        w_ref = np.zeros(3)
+    elif law == "sun_safe_ff":
+        lim = RATE_LIMIT_FRACTION * m.omega_max_rad_s
+        w_ref = np.clip(-(m.kp / m.kd) * attitude_error(x, m), -lim, lim)
+    else:
+        raise ValueError(f"unknown law {law!r}; known: {', '.join(LAWS)}")
+    h = J * w - D * x[7:10] if m.gyrostat else J * w
+    u = s * np.cross(w, h) / D + s * J * (w_ref - w) / (RATE_TIME_CONSTANT_S * D)
+    return np.clip(u, -m.u_max, m.u_max)
+
+
+def simulate_law(x0: Array, steps: int, m: OracleModel, law: str,
+                 stop_enforce: tuple[str, ...] | None = None) -> tuple[Array, Array, Array]:
+    """Closed loop of a law (command at each sample, held over the step), exact model.
+
+    With `stop_enforce`, stops after the first step in which an enforced constraint has h < 0 at a
+    substep (the arrays are then shorter).
+
+    Returns:
+        (u (k, 3), samples (k + 1, 13), substep states (k * substeps, 13)), k = steps simulated.
+    """
+    S = m.substeps
+    us = np.empty((steps, 3))
+    xs = np.empty((steps + 1, N_X))
+    subs = np.empty((steps * S, N_X))
+    xs[0] = x0
+    step = exact_step(m)
+    for k in range(steps):
+        us[k] = law_command(xs[k], law, m)
+        xn, sb = step(xs[k], us[k])
+        xs[k + 1] = np.asarray(xn).ravel()
+        subs[k * S:(k + 1) * S] = np.asarray(sb).T
+        if stop_enforce:
+            h = constraint_values(subs[k * S:(k + 1) * S], m)
+            if any(float(np.min(h[g])) < 0.0 for g in stop_enforce):
+                return us[:k + 1], xs[:k + 2], subs[:(k + 1) * S]
+    return us, xs, subs
+
+
+__all__ = ["LAWS", "RATE_LIMIT_FRACTION", "RATE_TIME_CONSTANT_S", "attitude_error",
+           "law_command", "quat_from_matrix", "quat_product", "simulate_law", "sun_safe_matrix"]

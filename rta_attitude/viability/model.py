@@ -1,0 +1,194 @@
+"""The oracle's own model of the plant (casadi), its exact re-simulation and its constraint values.
+
+Written from the equations (docs/viability.md), not from the plant's compiled code, so the test
+suite can hold it against the project's plant (`dynamics.spacecraft`, the code the simulator runs)
+as an independent check. State (13,) = the project's first 13 entries; u = psi_dot (rad/s^2)::
+
+    A(q)      = (q4^2 - |qv|^2) I + 2 qv qv^T - 2 q4 [qv x]              (Hill -> body)
+    q_dot     = 1/2 Xi(q) (omega - n_f A [0, 0, 1])
+    J w_dot   = -w x (J w - D psi) + s D u + tau_gg      gyrostat;  -w x J w + s D u + tau_gg   paper
+    psi_dot   = u,   theta_S_dot = -n
+    T_dot     = (aAS max(0, c_S) + (aAS A_f + sigma eps A T_E^4) F max(0, c_E) - sigma eps A T^4) / (m c_p)
+    E_dot     = P_peak max(0, c_panel) - P_out
+
+One zero-order-hold step is `substeps` classical RK4 steps, the quaternion renormalised after each
+(as the plant). `exact` expressions use max(0, .) itself; inside the optimiser the heat input uses a
+smooth upper bound and the panel power a smooth lower bound of it (`smooth_over`, `smooth_under`), so
+for one attitude history the optimiser's T is >= and its E is <= the exact ones.
+
+Constraint values h (safe >= 0), natural units, `constraint_values`:
+exclusion_zone angle(+i_B, sun) - (FOV/2 + beta) (rad); communication FOV/2 - angle(+j_B, Earth)
+(rad); temperature T_max - T (K); battery E - E_min (J); omega w_max - max_i |w_i| (rad/s);
+psi psi_max - max_i |psi_i| (rad/s).
+"""
+
+from __future__ import annotations
+
+from functools import lru_cache
+
+import casadi as ca
+import numpy as np
+from numpy.typing import NDArray
+
+from rta_attitude.viability.params import GROUPS, N_X, OracleModel
+
+Array = NDArray[np.float64]
+
+SMOOTH_EPS = 1e-3
+"""Width of the smooth max(0, .) inside the optimiser (cosine units)."""
+
+
+# ----------------------------------------------------------------------------- numpy
+def attitude_matrix(q: Array) -> Array:
+    """A(q) (3, 3), Hill -> body, scalar-last quaternion (unit)."""
+    qv, q4 = q[:3], q[3]
+    cx = np.array([[0.0, -qv[2], qv[1]], [qv[2], 0.0, -qv[0]], [-qv[1], qv[0], 0.0]])
+    return (q4 * q4 - qv @ qv) * np.eye(3) + 2.0 * np.outer(qv, qv) - 2.0 * q4 * cx
+
+
+def sun_hill(theta_S_rad: float) -> Array:
+    """r_S = [cos theta_S, sin theta_S, 0] in Hill."""
+    return np.array([np.cos(theta_S_rad), np.sin(theta_S_rad), 0.0])
+
+
+def _rotate(xs: Array, v: Array) -> Array:
+    """A(q_k) v_k for a batch of states xs (n, 13) and vectors v (n, 3)."""
+    qv, q4 = xs[:, 0:3], xs[:, 3]
+    return ((q4**2 - np.sum(qv * qv, axis=1))[:, None] * v + 2.0 * qv * np.sum(qv * v, axis=1)[:, None]
+            - 2.0 * q4[:, None] * np.cross(qv, v))
+
+
+def constraint_values(xs: Array, m: OracleModel) -> dict[str, Array]:
+    """h (n,) of every constraint group (GROUPS) at states xs (n, 13) or (13,), natural units."""
+    xs = np.atleast_2d(np.asarray(xs, dtype=float))
+    th = xs[:, 12]
+    s_b = _rotate(xs, np.stack([np.cos(th), np.sin(th), np.zeros_like(th)], axis=1))
+    e_b = _rotate(xs, np.broadcast_to(np.array(m.earth_hill), s_b.shape))
+    return {
+        "exclusion_zone": np.arccos(np.clip(s_b[:, 0], -1.0, 1.0)) - m.exclusion_angle_rad,
+        "communication": m.comm_angle_rad - np.arccos(np.clip(e_b[:, 1], -1.0, 1.0)),
+        "temperature": m.temperature_max_K - xs[:, 10],
+        "battery": xs[:, 11] - m.energy_min_J,
+        "omega": m.omega_max_rad_s - np.max(np.abs(xs[:, 4:7]), axis=1),
+        "psi": m.psi_max_rad_s - np.max(np.abs(xs[:, 7:10]), axis=1),
+    }
+
+
+def min_margins(x0: Array, subs: Array, m: OracleModel) -> dict[str, float]:
+    """The smallest h of every group over x0 and the substep states subs (k, 13)."""
+    vals = constraint_values(np.vstack([x0[None, :], subs]), m)
+    return {g: float(np.min(vals[g])) for g in GROUPS}
+
+
+def is_safe(margins: dict[str, float], enforce: tuple[str, ...]) -> bool:
+    """Every enforced group has h >= 0."""
+    return all(margins[g] >= 0.0 for g in enforce)
+
+
+def worst_normalised(margins: dict[str, float], enforce: tuple[str, ...], m: OracleModel) -> float:
+    """min over the enforced groups of h / scale (the best candidate has the largest)."""
+    return min((margins[g] / m.scale(g) for g in enforce), default=np.inf)
+
+
+# ----------------------------------------------------------------------------- casadi
+def smooth_over(z: ca.SX) -> ca.SX:
+    """C^1 upper bound of max(0, z): 0 for z <= -eps, (z + eps)^2 / (4 eps) on |z| < eps, z above
+    ((z + eps)^2 / (4 eps) - z = (z - eps)^2 / (4 eps) >= 0); error <= eps/4, exactly 0 for |z| >= eps."""
+    e = SMOOTH_EPS
+    return ca.if_else(z <= -e, 0.0, ca.if_else(z >= e, z, (z + e) ** 2 / (4.0 * e)))
+
+
+def smooth_under(z: ca.SX) -> ca.SX:
+    """C^1 lower bound of max(0, z): 0 for z <= 0, z^2 / (2 eps) on (0, eps), z - eps/2 above;
+    error <= eps/2, exactly 0 for z <= 0 (no spurious power in the dark)."""
+    e = SMOOTH_EPS
+    return ca.if_else(z <= 0.0, 0.0, ca.if_else(z >= e, z - 0.5 * e, z * z / (2.0 * e)))
+
+
+def ca_attitude(q: ca.SX) -> ca.SX:
+    """A(q) as a casadi expression."""
+    qv, q4 = q[0:3], q[3]
+    return (q4 * q4 - ca.dot(qv, qv)) * ca.SX.eye(3) + 2.0 * (qv @ qv.T) - 2.0 * q4 * ca.skew(qv)
+
+
+def ca_directions(x: ca.SX, m: OracleModel) -> tuple[ca.SX, ca.SX]:
+    """(sun in body, Earth in body) of a state expression."""
+    a = ca_attitude(x[0:4])
+    return a @ ca.vertcat(ca.cos(x[12]), ca.sin(x[12]), 0.0), a @ ca.DM(m.earth_hill)
+
+
+def ca_dynamics(m: OracleModel, exact: bool) -> ca.Function:
+    """x_dot (13,) of (x, u); `exact`: max(0, .) itself, else the smooth bounds (module docstring)."""
+    x = ca.SX.sym("x", N_X)
+    u = ca.SX.sym("u", 3)
+    q, w, psi, temp = x[0:4], x[4:7], x[7:10], x[10]
+    a = ca_attitude(q)
+    s_b = a @ ca.vertcat(ca.cos(x[12]), ca.sin(x[12]), 0.0)
+    e_b = a @ ca.DM(m.earth_hill)
+    jd = ca.DM(m.inertia_kgm2)
+    d = m.wheel_inertia_kgm2
+    h = jd * w - d * psi if m.gyrostat else jd * w
+    torque = -ca.cross(w, h) + m.torque_sign * d * u
+    if m.gravity_gradient:
+        r = a[:, 0]
+        torque = torque + 3.0 * m.mean_motion_rad_s**2 * ca.cross(r, jd * r)
+    w_rel = w - m.frame_rate_rad_s * a[:, 2] if m.frame_rate_rad_s != 0.0 else w
+    q1, q2, q3, q4 = q[0], q[1], q[2], q[3]
+    xi = ca.vertcat(ca.horzcat(q4, -q3, q2), ca.horzcat(q3, q4, -q1), ca.horzcat(-q2, q1, q4),
+                    ca.horzcat(-q1, -q2, -q3))
+    over = (lambda z: ca.fmax(0.0, z)) if exact else smooth_over
+    under = (lambda z: ca.fmax(0.0, z)) if exact else smooth_under
+    view = m.earth_view_factor * (over(-e_b[1]) if m.clamp_view_factor else -e_b[1])
+    t_dot = (m.solar_W * over(-s_b[1]) + (m.albedo_W + m.sigma_eps_A_W_K4 * m.earth_T4_K4) * view
+             - m.sigma_eps_A_W_K4 * temp**4) / m.heat_capacity_J_K
+    e_dot = m.panel_peak_W * under(s_b[2]) - m.load_W
+    xdot = ca.vertcat(0.5 * (xi @ w_rel), torque / jd, u, t_dot, e_dot, -m.mean_motion_rad_s)
+    return ca.Function("f", [x, u], [xdot])
+
+
+def rk4_chain(f: ca.Function, x: ca.SX, u: ca.SX, m: OracleModel) -> list[ca.SX]:
+    """The states after each of the `substeps` RK4 steps of one hold (q renormalised after each)."""
+    h = m.dt_s / m.substeps
+    out: list[ca.SX] = []
+    xs = x
+    for _ in range(m.substeps):
+        k1 = f(xs, u)
+        k2 = f(xs + 0.5 * h * k1, u)
+        k3 = f(xs + 0.5 * h * k2, u)
+        k4 = f(xs + h * k3, u)
+        xs = xs + (h / 6.0) * (k1 + 2 * k2 + 2 * k3 + k4)
+        xs = ca.vertcat(xs[0:4] / ca.norm_2(xs[0:4]), xs[4:N_X])
+        out.append(xs)
+    return out
+
+
+@lru_cache(maxsize=8)
+def exact_step(m: OracleModel) -> ca.Function:
+    """(x, u) -> (x after the hold, substep states (13, substeps)), exact max(0, .)."""
+    x = ca.SX.sym("x", N_X)
+    u = ca.SX.sym("u", 3)
+    subs = rk4_chain(ca_dynamics(m, exact=True), x, u, m)
+    return ca.Function("exact_step", [x, u], [subs[-1], ca.horzcat(*subs)])
+
+
+@lru_cache(maxsize=32)
+def _exact_sim(m: OracleModel, n_steps: int) -> ca.Function:
+    return exact_step(m).mapaccum("exact_sim", n_steps)
+
+
+def simulate(x0: Array, u: Array, m: OracleModel) -> tuple[Array, Array]:
+    """Exact re-simulation of a command sequence u (N, 3) from x0 (13,).
+
+    Returns:
+        (samples (N+1, 13), substep states (N * substeps, 13)).
+    """
+    u = np.atleast_2d(np.asarray(u, dtype=float))
+    if len(u) == 0:
+        return np.asarray(x0, dtype=float)[None, :].copy(), np.zeros((0, N_X))
+    xs, subs = _exact_sim(m, len(u))(x0, u.T)
+    return np.vstack([np.asarray(x0, dtype=float)[None, :], np.asarray(xs).T]), np.asarray(subs).T.copy()
+
+
+__all__ = ["SMOOTH_EPS", "attitude_matrix", "ca_attitude", "ca_directions", "ca_dynamics", "constraint_values",
+           "exact_step", "is_safe", "min_margins", "rk4_chain", "simulate", "smooth_over", "smooth_under", "sun_hill",
+           "worst_normalised"]

@@ -1,0 +1,347 @@
+"""The viability oracle (rta_attitude.viability), checked against the project's own plant.
+
+Every witness is re-simulated here by the project's plant (`dynamics.spacecraft.integrate`: the RK4
+with zero-order hold the simulator runs) and checked at every substep with the project's safety
+values (`constraints.ConstraintSet`), both independent of the oracle's casadi model. The search runs
+in casadi's virtual machine (compile=False) on short horizons: no C compiler in CI.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import subprocess
+import sys
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from rta_attitude import config
+from rta_attitude.config.schema import CONSTRAINT_NAMES, Config
+from rta_attitude.constraints import ConstraintSet, group_of
+from rta_attitude.dynamics.spacecraft import integrate, plant_record
+from rta_attitude.dynamics.state import STATE_NAMES, STATE_SIZE
+from rta_attitude.viability import find_witness
+from rta_attitude.viability.laws import LAWS, quat_from_matrix, simulate_law, sun_safe_matrix
+from rta_attitude.viability.params import default_enforce, from_config
+from rta_attitude.viability.result import NO_WITNESS, RECOVERABLE, UNRECOVERABLE, Result
+from rta_attitude.viability.rules import battery_rule, check_rules
+
+MODELS = ("paper", "gyrostat")
+
+
+def with_model(cfg: Config, model: str) -> Config:
+    return replace(cfg, spacecraft=replace(cfg.spacecraft, model=model))
+
+
+@pytest.fixture(scope="module")
+def cfg() -> Config:
+    return config.load()
+
+
+# ----------------------------------------------------------------------------- the project's plant
+def project_run(cfg: Config, x0: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Samples (N + 1, 19) and every substep state (N * substeps, 19) of the project's plant."""
+    p = plant_record(cfg)
+    x = np.zeros(STATE_SIZE)
+    x[:13] = x0[:13]
+    samples, subs = [x.copy()], []
+    for uk in u:
+        x, s = integrate(x, uk, cfg.filter.sample_time_s, p, cfg.substeps)
+        samples.append(x)
+        subs.append(s)
+    return np.array(samples), np.concatenate(subs) if subs else np.zeros((0, STATE_SIZE))
+
+
+def project_h(cfg: Config, x0: np.ndarray, subs: np.ndarray) -> np.ndarray:
+    """The project's safety values (n, 10) at x0 and every substep."""
+    x = np.zeros(STATE_SIZE)
+    x[:13] = x0[:13]
+    return ConstraintSet(cfg).safety_values(np.vstack([x[None, :], subs]))
+
+
+def check_witness(cfg: Config, x0: np.ndarray, res: Result, steps: int) -> dict[str, float]:
+    """The box, the oracle's x against the project's plant, every enforced constraint at every substep."""
+    assert res.verdict == RECOVERABLE and res.rule is None
+    assert res.u is not None and res.x is not None
+    assert res.u.shape == (steps, 3) and res.x.shape == (steps + 1, 13)
+    assert np.all(np.abs(res.u) <= cfg.u_max_rad_s2), "a command leaves the box U"
+    samples, subs = project_run(cfg, x0, res.u)
+    np.testing.assert_allclose(res.x, samples[:, :13], rtol=0, atol=1e-7)
+    h = project_h(cfg, x0, subs)
+    worst: dict[str, float] = {}
+    for i, name in enumerate(CONSTRAINT_NAMES):
+        if group_of(name) in res.enforce:
+            worst[name] = float(h[:, i].min())
+            assert worst[name] >= 0.0, f"{name} violated by the witness on the project's plant: {worst[name]}"
+    return worst
+
+
+# ----------------------------------------------------------------------------- states
+def sun_safe_state(cfg: Config, tilt_deg: float, omega_y_deg_s: float, psi: tuple[float, float, float],
+                   T_K: float, E_J: float, theta: float = 1.0) -> np.ndarray:
+    """The sun-safe attitude with the sensor (+i_B) tilted tilt_deg towards the sun about j_B."""
+    i, j, k = sun_safe_matrix(theta, from_config(cfg))
+    b = math.radians(tilt_deg)
+    rows = np.vstack([math.cos(b) * i + math.sin(b) * k, j, -math.sin(b) * i + math.cos(b) * k])
+    return np.concatenate([quat_from_matrix(rows), [0.0, math.radians(omega_y_deg_s), 0.0], psi, [T_K, E_J, theta]])
+
+
+def near_cone_state(cfg: Config) -> np.ndarray:
+    """Sensor 40.3 deg from the sun (0.3 deg outside the keep-out cone), turning towards it at 0.9 deg/s:
+    only braking at once, about as hard as U allows, keeps it out."""
+    return sun_safe_state(cfg, 90.0 - 40.3, -0.9, (0.0, 0.0, 0.0), 280.0, 3000.0)
+
+
+def dark_panel_state(cfg: Config, E_J: float, theta: float = 1.0) -> np.ndarray:
+    """Panel (+k_B) pointing straight away from the sun, at rest."""
+    i, j, k = sun_safe_matrix(theta, from_config(cfg))
+    return np.concatenate([quat_from_matrix(np.vstack([-i, j, -k])), np.zeros(6), [270.0, E_J, theta]])
+
+
+# ----------------------------------------------------------------------------- the model
+@pytest.mark.parametrize("model", MODELS)
+def test_the_casadi_model_agrees_with_the_project_plant(cfg: Config, model: str) -> None:
+    from rta_attitude.viability.model import simulate
+
+    c = with_model(cfg, model)
+    rng = np.random.default_rng(14)
+    x0 = sun_safe_state(c, 30.0, 0.5, (400.0, -300.0, 200.0), 280.0, 3000.0)
+    x0[4:7] += rng.uniform(-0.5, 0.5, 3) * c.limits.omega_max_rad_s
+    u = rng.uniform(-1.0, 1.0, (20, 3)) * c.u_max_rad_s2
+    xs, subs = simulate(x0, u, from_config(c))
+    ref_x, ref_subs = project_run(c, x0, u)
+    np.testing.assert_allclose(xs, ref_x[:, :13], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(subs, ref_subs[:, :13], rtol=0, atol=1e-9)
+    # the two models differ on this state (the wheels' gyroscopic term matters)
+    other = from_config(with_model(cfg, MODELS[1 - MODELS.index(model)]))
+    assert np.max(np.abs(simulate(x0, u, other)[0] - xs)) > 1e-6
+
+
+def test_the_assembled_derivatives_equal_casadi_ad(cfg: Config) -> None:
+    """jac_g and hess_lag assembled from the per-step blocks equal casadi's AD of the same NLP."""
+    import casadi as ca
+
+    from rta_attitude.viability.transcription import build_nlp
+
+    m = from_config(with_model(cfg, "gyrostat"))
+    nlp = build_nlp(2, m, True, True, compiled=False)
+    z, g, f = nlp.problem["x"], nlp.problem["g"], nlp.problem["f"]
+    lf, lg = ca.MX.sym("lf"), ca.MX.sym("lg", g.shape[0])
+    jac_ref = ca.Function("J", [z], [ca.jacobian(g, z)])
+    hess_ref = ca.Function("H", [z, lf, lg], [ca.triu(ca.hessian(lf * f + ca.dot(lg, g), z)[0])])
+    rng = np.random.default_rng(1)
+    zz = rng.normal(size=nlp.n_z) * 0.3
+    for k in range(3):
+        zz[13 * k:13 * k + 4] /= np.linalg.norm(zz[13 * k:13 * k + 4])
+        zz[13 * k + 10], zz[13 * k + 11] = 2.8, 3.0
+    lam = rng.normal(size=g.shape[0])
+    _, jac = nlp.opts["jac_g"](zz, np.zeros(0))
+    np.testing.assert_allclose(np.array(jac), np.array(jac_ref(zz)), rtol=0, atol=1e-12)
+    hess = nlp.opts["hess_lag"](zz, np.zeros(0), 0.7, lam)
+    np.testing.assert_allclose(np.array(hess), np.array(hess_ref(zz, 0.7, lam)), rtol=0, atol=1e-12)
+
+
+# ----------------------------------------------------------------------------- rules
+def test_a_state_violated_at_x0_is_unrecoverable(cfg: Config) -> None:
+    x0 = near_cone_state(cfg)
+    x0[10] = cfg.limits.temperature_max_K + 0.5
+    res = find_witness(x0, 100.0, cfg, compile=False)
+    assert (res.verdict, res.rule, res.u, res.x) == (UNRECOVERABLE, "violated_at_x0", None, None)
+    assert res.min_margins["temperature"] == pytest.approx(-0.5)
+
+
+@pytest.mark.parametrize("model", MODELS)
+def test_the_battery_rule_proves_a_dark_panel_unrecoverable(cfg: Config, model: str) -> None:
+    c = with_model(cfg, model)
+    x0 = dark_panel_state(c, 1200.0)
+    res = find_witness(x0, 300.0, c, compile=False)
+    assert (res.verdict, res.rule, res.u) == (UNRECOVERABLE, "battery_drain", None)
+    assert "E_min" in res.detail and res.iterations == 0
+    # not contradicted: every warm-start law, on the project's plant, drains the battery below E_min
+    battery = CONSTRAINT_NAMES.index("battery")
+    for law in LAWS:
+        u, _, _ = simulate_law(x0, 300, from_config(c), law)
+        _, subs = project_run(c, x0, u)
+        assert project_h(c, x0, subs)[:, battery].min() < 0.0, law
+
+
+def test_the_temperature_rule_proves_a_hot_face_unrecoverable(cfg: Config) -> None:
+    theta = 1.0
+    s = np.array([math.cos(theta), math.sin(theta), 0.0])
+    z = np.array([0.0, 0.0, 1.0])
+    rows = np.vstack([np.cross(-s, z), -s, z])  # -j_B on the sun; sensor and panel perpendicular to it
+    x0 = np.concatenate([quat_from_matrix(rows), np.zeros(6), [cfg.limits.temperature_max_K - 0.02, 9000.0, theta]])
+    h0 = project_h(cfg, x0, np.zeros((0, STATE_SIZE)))[0]
+    assert all(h0[i] >= 0 for i, n in enumerate(CONSTRAINT_NAMES) if group_of(n) in default_enforce(cfg))
+    res = find_witness(x0, 300.0, cfg, compile=False)
+    assert (res.verdict, res.rule, res.u) == (UNRECOVERABLE, "temperature_heating", None)
+
+
+def test_the_battery_rule_is_silent_with_reserve_and_then_a_witness_exists(cfg: Config) -> None:
+    x0 = dark_panel_state(cfg, 3000.0)
+    m = from_config(cfg)
+    assert check_rules(x0, 2000.0, m, default_enforce(cfg)) is None
+    res = find_witness(x0, 60.0, cfg, compile=False)
+    check_witness(cfg, x0, res, 60)
+
+
+def test_just_above_the_rules_threshold_the_answer_is_never_unrecoverable(cfg: Config) -> None:
+    """Where no rule fires, a failed search says "no witness found", never "unrecoverable"."""
+    m = from_config(cfg)
+    x0 = dark_panel_state(cfg, 1000.0)
+    lo, hi = 1000.0, 5000.0
+    for _ in range(40):
+        x0[11] = 0.5 * (lo + hi)
+        lo, hi = (x0[11], hi) if battery_rule(x0, 30.0, m) else (lo, x0[11])
+    x0[11] = hi + 1e-3
+    res = find_witness(x0, 30.0, cfg, compile=False, use_warm_start=False, max_iter=25, time_limit_s=10.0)
+    assert res.rule is None and res.verdict in (NO_WITNESS, RECOVERABLE)
+    if res.verdict == RECOVERABLE:
+        check_witness(cfg, x0, res, 30)
+
+
+# ----------------------------------------------------------------------------- witnesses
+@pytest.mark.parametrize("model", MODELS)
+def test_a_state_only_a_fast_manoeuvre_saves_gets_a_witness(cfg: Config, model: str) -> None:
+    c = with_model(cfg, model)
+    m = from_config(c)
+    x0 = near_cone_state(c)
+    for law in LAWS:  # the warm-start laws do not brake hard enough (checked on the project's plant)
+        u, _, _ = simulate_law(x0, 20, m, law)
+        _, subs = project_run(c, x0, u)
+        h = project_h(c, x0, subs)
+        enforced = [i for i, n in enumerate(CONSTRAINT_NAMES) if group_of(n) in default_enforce(c)]
+        assert h[:, enforced].min() < 0.0, law
+    res = find_witness(x0, 20.0, c, compile=False)
+    assert res.method == "direct" and res.iterations > 0
+    worst = check_witness(c, x0, res, 20)
+    assert 0.0 <= worst["exclusion_zone"] < math.radians(0.1)  # it did approach the cone
+    for g in ("exclusion_zone", "temperature", "battery"):  # the oracle's margins are the plant's
+        assert res.min_margins[g] == pytest.approx(worst[g], abs=1e-7)
+
+
+SEED7_RUN326 = np.array([0.4560378281631259, -0.8426256868543505, 0.0703053119312119, 0.2776123452797958,
+                         -0.012262079182708533, 0.0075059478726229355, -0.006944702000167159, -11.167478896036187,
+                         -258.6820548230665, 85.44390777244692, 276.3274950684983, 5390.6525382266,
+                         0.13167024647449801])
+"""Initial state of run 326 of `rta-attitude montecarlo --runs 5000 --duration 2000 --seed 7` (robust
+preset, paper model): the filter enters the exclusion zone at 129.8 s (h = -7.1e-3 rad) after 13
+infeasible QPs (measured on this branch; docs/viability.md)."""
+
+
+def test_a_failed_monte_carlo_run_gets_a_witness_over_its_whole_run(cfg: Config) -> None:
+    c = with_model(cfg, "paper")
+    res = find_witness(SEED7_RUN326, 2000.0, c, compile=False)
+    worst = check_witness(c, SEED7_RUN326, res, 2000)
+    assert worst["exclusion_zone"] > 0.1  # the witness keeps the sensor well out of the cone
+
+
+def test_a_law_witness_is_checked_on_the_project_plant(cfg: Config) -> None:
+    x0 = sun_safe_state(with_model(cfg, "gyrostat"), 45.0, -0.9, (500.0, -500.0, 500.0), 280.0, 3000.0)
+    c = with_model(cfg, "gyrostat")
+    res = find_witness(x0, 100.0, c, compile=False)
+    assert res.method == "warm_start" and res.ipopt_status == "not needed"
+    check_witness(c, x0, res, 100)
+
+
+def test_segments_give_one_witness_over_the_whole_horizon(cfg: Config) -> None:
+    x0 = near_cone_state(cfg)
+    res = find_witness(x0, 40.0, cfg, compile=False, direct_max_s=10.0, window_s=20.0, commit_s=10.0)
+    assert res.method == "segmented" and res.segments
+    check_witness(cfg, x0, res, 40)
+
+
+def test_the_slacked_constraint_is_not_enforced_by_default_but_can_be(cfg: Config) -> None:
+    assert "communication" in cfg.slacked_constraints and "communication" not in default_enforce(cfg)
+    x0 = dark_panel_state(cfg, 8000.0)
+    x0[:4] = quat_from_matrix(sun_safe_matrix(1.0, from_config(cfg)))  # antenna on the Earth side
+    res = find_witness(x0, 50.0, cfg, compile=False, enforce=(*default_enforce(cfg), "communication"))
+    assert "communication" in res.enforce
+    check_witness(cfg, x0, res, 50)
+
+
+def test_bad_inputs_raise(cfg: Config) -> None:
+    from rta_attitude.errors import ConfigError
+
+    with pytest.raises(ValueError, match="13 or 19"):
+        find_witness(np.zeros(7), 10.0, cfg)
+    with pytest.raises(ValueError, match="horizon"):
+        find_witness(near_cone_state(cfg), 0.2, cfg)
+    with pytest.raises(ConfigError, match="unknown constraint"):
+        find_witness(near_cone_state(cfg), 10.0, cfg, enforce=("exclusion",))
+
+
+def test_the_cache_lives_in_the_user_cache_dir(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    from rta_attitude.viability.transcription import CACHE_ENV, cache_dir
+
+    monkeypatch.delenv(CACHE_ENV, raising=False)
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    assert cache_dir() == tmp_path / "rta_attitude" / "viability"
+    monkeypatch.setenv(CACHE_ENV, str(tmp_path / "x"))
+    assert cache_dir() == tmp_path / "x"
+
+
+def test_importing_the_package_does_not_load_casadi() -> None:
+    code = ("import sys, rta_attitude.cli.main, rta_attitude.montecarlo.campaign; "
+            "print('casadi' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "False"
+
+
+# ----------------------------------------------------------------------------- CLI
+def run_cli(*args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([sys.executable, "-m", "rta_attitude.cli", "viability", *args], capture_output=True,
+                          text=True, timeout=300)
+
+
+@pytest.mark.parametrize(("args", "message"), [
+    (["--state", "1,2,3"], "--state must be 13"),
+    (["--state", "a,b"], "--state must be comma-separated numbers"),
+    (["--runs", "/nonexistent/runs.csv"], "no such file"),
+    (["--state", ",".join(["0"] * 13)], "zero quaternion"),
+    (["--state", ",".join(["0.5"] * 13), "--limit", "0"], "--limit must be >= 1"),
+])  # fmt: skip
+def test_cli_errors_are_one_line_and_exit_1(args: list[str], message: str) -> None:
+    out = run_cli(*args, "--no-progress")
+    assert out.returncode == 1
+    assert out.stderr.count("\n") == 1 and out.stderr.startswith("ERROR: ") and message in out.stderr
+
+
+def test_cli_checks_the_failed_runs_of_a_runs_csv(cfg: Config, tmp_path: Path) -> None:
+    hot = near_cone_state(cfg)
+    hot[10] = cfg.limits.temperature_max_K + 1.0
+    dark = dark_panel_state(cfg, 1200.0)
+    runs = tmp_path / "runs.csv"
+    with runs.open("w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(["run", *STATE_NAMES[:13], "failed"])
+        for k, (x, failed) in enumerate([(hot, 1), (near_cone_state(cfg), 0), (dark, 1)]):
+            w.writerow([k, *[repr(float(v)) for v in x], failed])
+    (tmp_path / "summary.json").write_text(json.dumps({"setup": {"duration_s": 300.0}}))
+    out = run_cli("--runs", str(runs), "--out", str(tmp_path / "v"), "--no-progress", "--no-compile")
+    assert out.returncode == 0, out.stderr
+    doc = json.loads((tmp_path / "v" / "viability.json").read_text())
+    assert [r["state"] for r in doc["results"]] == ["run 0", "run 2"]
+    assert [r["rule"] for r in doc["results"]] == ["violated_at_x0", "battery_drain"]
+    assert doc["setup"]["horizon_s"] == 300.0 and doc["counts"]["unrecoverable"] == 2
+    assert "2 unrecoverable" in out.stdout
+
+
+def test_montecarlo_reports_its_failures_with_and_without_a_witness(tmp_path: Path,
+                                                                   capsys: pytest.CaptureFixture[str]) -> None:
+    from rta_attitude.cli.main import main as cli_main
+
+    out = tmp_path / "mc"
+    status = cli_main(["montecarlo", "--runs", "6", "--duration", "20", "--seed", "2", "--workers", "1", "--out",
+                       str(out), "--no-progress", "--no-plot", "--viability", "--viability-no-compile",
+                       "--viability-time-limit", "30"])
+    assert status == 0
+    failed = json.loads((out / "summary.json").read_text())["at_samples"]["failed"]
+    doc = json.loads((out / "viability.json").read_text())
+    assert doc["counts"]["states"] == failed and doc["setup"]["horizon_s"] == 20.0
+    assert sum(doc["counts"][v] for v in (RECOVERABLE, NO_WITNESS, UNRECOVERABLE)) == failed
+    assert f"viability of the {failed} failed runs" in capsys.readouterr().out
