@@ -57,6 +57,10 @@ def bag_qos(spec: topics.QosSpec, lease_s: float = 0.0) -> Qos:
                liveliness="automatic" if lease != (0, 0) else "system_default", liveliness_lease_duration=lease)
 
 
+PLANT_WATCH_S = 0.5
+"""How often the recorder checks that the plant is still there before its final run_status [s]."""
+
+
 class RecorderNode(RtaNode):
     """The bag recorder; see the module docstring."""
 
@@ -85,7 +89,23 @@ class RecorderNode(RtaNode):
         for name, spec in specs.items():
             bag.add_topic(name, spec.type_name, bag_qos(spec.qos, self.knobs["liveliness_lease_s"]))
         self.bag = bag
+        self._plant_seen = False
+        self.wall_timer(PLANT_WATCH_S, self._watch_plant)
         self.get_logger().info(f"recording {len(self.received)} topics to {path}")
+
+    def _watch_plant(self) -> None:
+        """The plant left (its run_status writer is gone, as after a clean exit) without a final
+        run_status reaching us (lost with the process, e.g. under load): drain and close rather than
+        wait for a message that cannot come. A killed plant stays matched until its lease expires;
+        the recorder then closes when told (or here, once the writer is gone)."""
+        if self._terminal or self.stopping or self.bag is None or self._drain is not None:
+            return
+        if self.count_publishers(self.status_topic) > 0:
+            self._plant_seen = True
+        elif self._plant_seen:
+            self.get_logger().warning("the plant left without a final run_status reaching the recorder; closing "
+                                      "once the last messages are in")
+            self._start_drain()
 
     def _on_message(self, topic: str, data: bytes) -> None:
         if self.bag is None:

@@ -227,7 +227,10 @@ class RtaNode(Node):
         total). Returns True if all did."""
         deadline = self.wall_now_s() + timeout_s
         ok = True
-        for pub in self.own_publishers():
+        # run_status first: the final status is what readers wait for; a dead reader of another topic
+        # (a killed node stays matched until its lease expires) must not use up the time before it
+        status = "/" + topics.RUN_STATUS
+        for pub in sorted(self.own_publishers(), key=lambda p: not p.topic_name.endswith(status)):
             left = max(deadline - self.wall_now_s(), 0.0)
             ok = pub.wait_for_all_acked(Duration(nanoseconds=int(left * 1e9))) and ok
         return ok
