@@ -27,6 +27,7 @@ from rta_attitude.config.schema import (
     PlantOptions,
     Power,
     Scenario,
+    Sensors,
     Spacecraft,
     Thermal,
 )
@@ -283,6 +284,21 @@ def from_parameters(params: Mapping[str, Any], source: str = "<memory>") -> Conf
         pl = root.section("plant")
         plant = PlantOptions(pl.text("simulator", "compiled"))
         pl.done()
+    sensors = Sensors()
+    root.used.add("sensors")
+    if "sensors" in root.data:  # optional section: exact measurements without it
+        se = root.section("sensors")
+        sensors = Sensors(
+            enabled=se.flag("enabled", False), seed=se.integer("seed", 1),
+            attitude_noise_rad=math.radians(se.number("attitude_noise_deg", 0.0)),
+            gyro_noise_rad_s=math.radians(se.number("gyro_noise_deg_s", 0.0)),
+            gyro_bias_rad_s=math.radians(se.number("gyro_bias_deg_s", 0.0)),
+            gyro_bias_walk_rad_s_sqrt_s=math.radians(se.number("gyro_bias_walk_deg_s_sqrt_s", 0.0)),
+            wheel_speed_noise_rad_s=se.number("wheel_speed_noise_rad_s", 0.0),
+            temperature_noise_K=se.number("temperature_noise_K", 0.0), energy_noise_J=se.number("energy_noise_J", 0.0),
+            torque_noise_rad_s2=se.number("torque_noise_rad_s2", 0.0), actuator_lag_s=se.number("actuator_lag_s", 0.0),
+            bound_sigma=se.number("bound_sigma", 4.0), bias_horizon_s=se.number("bias_horizon_s", 2000.0))
+        se.done()
     sn = root.section("scenarios")
     scenarios = {}
     for name in list(sn.data):
@@ -290,7 +306,8 @@ def from_parameters(params: Mapping[str, Any], source: str = "<memory>") -> Conf
     sn.done()
     root.done()
     return Config(spacecraft, environment, thermal, power, limits, barriers, Augmentation(d0, d1, d2),
-                  filter_options, controller, substeps, scenarios, source=source, plant=plant)
+                  filter_options, controller, substeps, scenarios, source=source, plant=plant,
+                  sensors=sensors)
 
 
 def load(path: str | os.PathLike[str] | None = None, *, preset: str | None = None) -> Config:

@@ -104,6 +104,42 @@ class PlantOptions:
 
 
 @dataclass(frozen=True)
+class Sensors:
+    """Noise and bias on what the plant publishes, torque noise and lag on what it applies
+    (`dynamics.sensors`, docs/noise.md); all 1 sigma, model units. Off: the exact state and command."""
+
+    enabled: bool = False
+    seed: int = 1
+    attitude_noise_rad: float = 0.0
+    """Per axis, a small body-frame rotation (star tracker)."""
+    gyro_noise_rad_s: float = 0.0
+    """White noise on each rate sample."""
+    gyro_bias_rad_s: float = 0.0
+    """Initial gyro bias per axis."""
+    gyro_bias_walk_rad_s_sqrt_s: float = 0.0
+    """Random walk of the gyro bias."""
+    wheel_speed_noise_rad_s: float = 0.0
+    temperature_noise_K: float = 0.0
+    energy_noise_J: float = 0.0
+    torque_noise_rad_s2: float = 0.0
+    """On each held wheel acceleration (torque / D)."""
+    actuator_lag_s: float = 0.0
+    """Time constant of the wheels' first-order lag; 0: none."""
+    bound_sigma: float = 4.0
+    """The filter's error bounds (measurement-robust margins) are bound_sigma standard deviations."""
+    bias_horizon_s: float = 2000.0
+    """The gyro bias bound covers its random walk over this long."""
+
+    def __post_init__(self) -> None:
+        if not (isinstance(self.seed, int) and 0 <= self.seed < 2**63):
+            raise ConfigError(f"sensors.seed must be an integer in [0, 2^63), got {self.seed!r}")
+        for name in ("attitude_noise_rad", "gyro_noise_rad_s", "gyro_bias_rad_s", "gyro_bias_walk_rad_s_sqrt_s",
+                     "wheel_speed_noise_rad_s", "temperature_noise_K", "energy_noise_J", "torque_noise_rad_s2",
+                     "actuator_lag_s", "bound_sigma", "bias_horizon_s"):
+            _nonneg(f"sensors.{name}", getattr(self, name))
+
+
+@dataclass(frozen=True)
 class Environment:
     """Orbit, sun and Earth radiation constants."""
 
@@ -359,6 +395,8 @@ class Config:
     source: str = "<memory>"
     plant: PlantOptions = field(default_factory=PlantOptions)
     """The simulator of the spacecraft (`plant:` section; optional, default compiled)."""
+    sensors: Sensors = field(default_factory=Sensors)
+    """Sensor and actuator errors (`sensors:` section; optional, default off)."""
 
     def __post_init__(self) -> None:
         if self.plant.simulator == "basilisk" and self.spacecraft.torque_sign != 1.0:
@@ -417,6 +455,11 @@ class Config:
             ConfigError: unknown simulator, or basilisk without the optional extra.
         """
         return replace(self, plant=PlantOptions(simulator))
+
+    def with_noise(self, enabled: bool = True, seed: int | None = None) -> Config:
+        """A copy with the `sensors:` errors on (or off), optionally with another seed."""
+        sensors = replace(self.sensors, enabled=enabled)
+        return replace(self, sensors=sensors if seed is None else replace(sensors, seed=seed))
 
     def with_fallback(self, fallback: str) -> Config:
         """A copy using another fallback policy."""

@@ -53,6 +53,9 @@ def row(ctx: np.void, x: NDArray[np.float64], c: np.void, axis: int, t: np.void)
     w = x[4 + axis]
     hw = c.omega_max_rad_s**2 - w * w
     t.h[i] = hw
+    if c.err_omega_axis_rad_s > 0.0:  # measurement-robust: the measured rate keeps clear of the limit
+        w_lim = c.omega_max_rad_s - c.err_omega_axis_rad_s
+        hw = w_lim * w_lim - w * w
     t.psi0[i] = hw
     t.psi1[i] = hw
     for a in range(3):
@@ -66,7 +69,8 @@ def zoh_interval(ctx: np.void, x: NDArray[np.float64], c: np.void, axis: int) ->
     """(lower, upper) on u_axis, rad/s^2, keeping |omega_axis(t + dt)| <= (1 - zoh_margin) omega_max."""
     dt = c.dt_s
     cg = ctx.control_gain[axis]
-    limit = (1.0 - c.zoh_margin) * c.omega_max_rad_s
+    # measurement-robust (0 without sensor errors): the gyro's error now, the actuator's over the hold
+    limit = (1.0 - c.zoh_margin) * c.omega_max_rad_s - c.err_omega_axis_rad_s - abs(cg) * dt * c.err_u_rad_s2[axis]
     w_free = x[4 + axis] + ctx.omega_drift[axis] * dt
     ua = (limit - w_free) / (cg * dt)
     ub = (-limit - w_free) / (cg * dt)
@@ -126,7 +130,8 @@ def zoh_rows(ctx: np.void, x: NDArray[np.float64], c: np.void, p: np.void, t: np
     e0_1 = ctx.omega_drift[1] - (Om[1, 0] * w[0] + Om[1, 2] * w[2])
     e0_2 = ctx.omega_drift[2] - (Om[2, 0] * w[0] + Om[2, 1] * w[1])
     # bounds over the hold: |w_a| <= W_a, |psi_a| <= P_a, |u_a| <= U_a, |w_a'| <= A_a
-    W0, W1, W2 = max(abs(w[0]), w_max), max(abs(w[1]), w_max), max(abs(w[2]), w_max)
+    ew = c.err_omega_rad_s  # the true rate is within this of the measured one (0 without sensor errors)
+    W0, W1, W2 = max(abs(w[0]) + ew, w_max), max(abs(w[1]) + ew, w_max), max(abs(w[2]) + ew, w_max)
     P0, P1, P2 = abs(p0) + U[0] * dt, abs(p1) + U[1] * dt, abs(p2) + U[2] * dt
     k = 3.0 * p.mean_motion_rad_s * p.mean_motion_rad_s if p.gravity_gradient else 0.0
     d0, d1, d2 = abs(J[1] - J[2]), abs(J[2] - J[0]), abs(J[0] - J[1])
@@ -143,6 +148,7 @@ def zoh_rows(ctx: np.void, x: NDArray[np.float64], c: np.void, p: np.void, t: np
     L2 = (d2 * (A0 * W1 + W0 * A1) + D * (W0 * U[1] + W1 * U[0]) + 2.0 * k * d2 * w_rel) / J[2]
     energy = J[0] * L0 * L0 + J[1] * L1 * L1 + J[2] * L2 * L2
     limit = (1.0 - c.zoh_margin) * w_max
+    ew_axis, eu = c.err_omega_axis_rad_s, c.err_u_rad_s2
     S = ctx.zoh_sum
     row = 0
     for m in range(ZOH_CHECKS):
@@ -152,12 +158,14 @@ def zoh_rows(ctx: np.void, x: NDArray[np.float64], c: np.void, p: np.void, t: np
         for i in range(3):
             # E = I + Omega tau S, Phi = tau S
             ew = w[i]
+            robust = 0.0  # measurement-robust: |E delta_omega|_i + |Phi G delta_u|_i (0 without sensor errors)
             for a in range(3):
                 oms = tau * (Om[i, 0] * S[0, a] + Om[i, 1] * S[1, a] + Om[i, 2] * S[2, a])
                 ew += oms * w[a]
+                robust += abs((1.0 if a == i else 0.0) + oms) * ew_axis + abs(tau * S[i, a] * G[a]) * eu[a]
             free = ew + tau * (S[i, 0] * e0_0 + S[i, 1] * e0_1 + S[i, 2] * e0_2)
             B = B0 if i == 0 else (B1 if i == 1 else B2)
-            slack = limit - math.sqrt(energy / J[i]) * 0.5 * tau * tau - B * h * h / 8.0
+            slack = limit - math.sqrt(energy / J[i]) * 0.5 * tau * tau - B * h * h / 8.0 - robust
             t.zoh_axis[row] = i
             for a in range(3):
                 t.zoh_gain[row, a] = tau * S[i, a] * G[a]

@@ -64,6 +64,16 @@ CONSTRAINT_DTYPE = np.dtype([
     ("dt_s", np.float64),                  # the hold the filter plans for
     ("zoh_margin", np.float64),            # ZOH bounds aim at (1 - zoh_margin) of the limit
     ("u_max_rad_s2", np.float64, (3,)),    # the box U
+    # measurement-robust margins (robust preset with sensors on; 0 otherwise): bounds on the errors of
+    # what the filter reads (docs/noise.md, `measurement_errors`)
+    ("err_att_rad", np.float64),           # attitude (angle of the error rotation, + the actuator's over a hold)
+    ("err_omega_rad_s", np.float64),       # body rate (norm)
+    ("err_omega_axis_rad_s", np.float64),  # body rate, one axis
+    ("err_psi_rad_s", np.float64),         # one wheel speed
+    ("err_u_rad_s2", np.float64, (3,)),    # the held wheel acceleration (lag and torque noise), per axis
+    ("err_T_K", np.float64),
+    ("err_E_J", np.float64),
+    ("target_rate_rad_s", np.float64),     # sun and Earth directions turn at the mean motion
 ])  # fmt: skip
 
 ZOH_CHECKS = 5
@@ -111,7 +121,60 @@ def constraint_record(cfg: Config) -> NDArray[np.void]:
     c["robust"] = robust
     c["dt_s"], c["zoh_margin"] = cfg.filter.sample_time_s, cfg.filter.zoh_margin
     c["u_max_rad_s2"] = cfg.u_max_rad_s2
+    if robust and cfg.sensors.enabled:
+        for key, value in measurement_errors(cfg).items():
+            c[key] = value
     return rec
+
+
+def measurement_errors(cfg: Config) -> dict[str, float | NDArray[np.float64]]:
+    """Bounds on the errors of what the filter reads and of what the wheels do over one hold, from the
+    `sensors:` standard deviations (b = bound_sigma of them; docs/noise.md derives each):
+
+    - err_u,a = 2 U_a (tau/dt)(1 - e^(-dt/tau)) + b sigma_u: the lag's largest departure from a held
+      command (a full reversal inside U) plus torque noise, per axis, rad/s^2;
+    - err_omega_axis = b sqrt(sigma_g^2 + sigma_b^2 + walk^2 horizon); err_omega = sqrt(3) of it (norm);
+    - err_att = sqrt(3) b sigma_att + |G err_u| dt^2 / 2 (the actuator's drift of the attitude in a hold);
+    - err_psi = b sigma_psi; err_T = b sigma_T; err_E = b sigma_E.
+    """
+    s, b, dt = cfg.sensors, cfg.sensors.bound_sigma, cfg.filter.sample_time_s
+    tau = s.actuator_lag_s
+    lag = (tau / dt) * (1.0 - math.exp(-dt / tau)) if tau > 0 else 0.0
+    err_u = 2.0 * cfg.u_max_rad_s2 * lag + b * s.torque_noise_rad_s2
+    gyro = b * math.sqrt(s.gyro_noise_rad_s**2 + s.gyro_bias_rad_s**2
+                         + s.gyro_bias_walk_rad_s_sqrt_s**2 * s.bias_horizon_s)
+    drift = float(np.linalg.norm(cfg.spacecraft.control_gain * err_u)) * dt * dt / 2
+    return {
+        "err_att_rad": math.sqrt(3.0) * b * s.attitude_noise_rad + drift,
+        "err_omega_rad_s": math.sqrt(3.0) * gyro,
+        "err_omega_axis_rad_s": gyro,
+        "err_psi_rad_s": b * s.wheel_speed_noise_rad_s,
+        "err_u_rad_s2": err_u,
+        "err_T_K": b * s.temperature_noise_K,
+        "err_E_J": b * s.energy_noise_J,
+        "target_rate_rad_s": cfg.environment.mean_motion_rad_s,
+    }
+
+
+@numba.njit(**LEAF)
+def angle_rate_error(sin_theta: float, x: Array, c: np.void) -> float:
+    """Bound on |theta_dot(true) - theta_dot(measured)| (rad/s) of a body axis' angle to a target, given
+    the measured sin theta and state x (its |omega|) and the error bounds of c (0 when they are 0): with
+    g = d/dt cos theta, |g' - g| <= err_omega + err_att (|omega| + n) and |g| <= |omega| + n,
+    |g'/s' - g/s| <= |g' - g| / s' + |g| err_att / (s' (s' - err_att)); never more than both rates'
+    bound (|omega'| + n) + (|omega| + n) (docs/noise.md)."""
+    e, dw, n = c.err_att_rad, c.err_omega_rad_s, c.target_rate_rad_s
+    if e == 0.0 and dw == 0.0:
+        return 0.0
+    omega_norm = math.sqrt(x[4] * x[4] + x[5] * x[5] + x[6] * x[6])
+    w_true = omega_norm + dw
+    g_true = w_true + n
+    whole = (omega_norm + n) + g_true
+    s_lo = sin_theta - e
+    if s_lo <= 0.0:
+        return whole
+    local = (dw + e * g_true) / sin_theta + g_true * e / (sin_theta * s_lo)
+    return local if local < whole else whole
 
 
 @numba.njit(**LEAF)
@@ -142,6 +205,6 @@ def nan_min(a: float, b: float) -> float:
 
 __all__ = [
     "BATTERY", "COMMUNICATION", "CONSTRAINT_DTYPE", "EXCLUSION_ZONE", "GAIN_DTYPE", "N_CONSTRAINTS", "OMEGA_X", "PSI_X",
-    "TABLE_DTYPE", "TEMPERATURE", "ZOH_CHECKS", "ZOH_ROWS", "constraint_record", "group_of", "nan_max", "nan_min",
-    "second_order",
+    "TABLE_DTYPE", "TEMPERATURE", "ZOH_CHECKS", "ZOH_ROWS", "angle_rate_error", "constraint_record", "group_of",
+    "measurement_errors", "nan_max", "nan_min", "second_order",
 ]  # fmt: skip

@@ -13,11 +13,13 @@ attitude) and pi.
 
 from __future__ import annotations
 
+import math
+
 import numba
 import numpy as np
 from numpy.typing import NDArray
 
-from rta_attitude.constraints.base import BATTERY, second_order
+from rta_attitude.constraints.base import BATTERY, angle_rate_error, second_order
 from rta_attitude.constraints.geometry import pointing
 from rta_attitude.dynamics.spacecraft import net_power
 from rta_attitude.jit import LEAF
@@ -44,5 +46,9 @@ def row(ctx: np.void, x: NDArray[np.float64], c: np.void, p: np.void, t: np.void
     E_dot = net_power(cp, p)
     E_ddot = p.panel_peak_W * (1.0 if cp > 0 else 0.0) * cp_dot
     d2 = c.delta2_J_rad
-    second_order(t, i, t.h[i] - g.margin - d2 * th, E_dot - d2 * th_dot, E_ddot - d2 * th_dd, g)
+    psi0 = t.h[i] - g.margin - d2 * th
+    e = c.err_att_rad
+    if e > 0.0 or c.err_E_J > 0.0:  # measurement-robust margin (docs/noise.md)
+        psi0 -= c.err_E_J + d2 * e + (p.panel_peak_W * e + d2 * angle_rate_error(math.sin(th), x, c)) / g.k1
+    second_order(t, i, psi0, E_dot - d2 * th_dot, E_ddot - d2 * th_dd, g)
     t.gain[i, 0], t.gain[i, 1], t.gain[i, 2] = -d2 * g0, -d2 * g1, -d2 * g2

@@ -10,11 +10,13 @@ The paper's slacked constraint. Safest at theta_GS = 0 (antenna at Earth), an ar
 
 from __future__ import annotations
 
+import math
+
 import numba
 import numpy as np
 from numpy.typing import NDArray
 
-from rta_attitude.constraints.base import COMMUNICATION, second_order
+from rta_attitude.constraints.base import COMMUNICATION, angle_rate_error, second_order
 from rta_attitude.constraints.geometry import angle, pointing
 from rta_attitude.jit import LEAF
 
@@ -37,5 +39,6 @@ def row(ctx: np.void, x: NDArray[np.float64], c: np.void, t: np.void) -> None:
     _, _, th, th_dot, th_ddot, g0, g1, g2 = pointing(0.0, 1.0, 0.0, ctx.earth, ctx.earth_rate, ctx.earth_acc, ctx,
                                                      c.sin_pole_guard)
     t.h[i] = c.comm_angle_rad - th
-    second_order(t, i, t.h[i] - g.margin, -th_dot, -th_ddot, g)
+    robust = c.err_att_rad + angle_rate_error(math.sin(th), x, c) / g.k1  # 0 without sensor errors
+    second_order(t, i, t.h[i] - g.margin - robust, -th_dot, -th_ddot, g)
     t.gain[i, 0], t.gain[i, 1], t.gain[i, 2] = -g0, -g1, -g2

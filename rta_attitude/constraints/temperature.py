@@ -24,7 +24,7 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
-from rta_attitude.constraints.base import TEMPERATURE, nan_max, second_order
+from rta_attitude.constraints.base import TEMPERATURE, angle_rate_error, nan_max, second_order
 from rta_attitude.constraints.geometry import pointing
 from rta_attitude.dynamics.spacecraft import thermal_rate
 from rta_attitude.jit import LEAF
@@ -63,6 +63,16 @@ def row(ctx: np.void, x: NDArray[np.float64], c: np.void, p: np.void, t: np.void
     earth_in = 1.0 if th_e < half_pi else 0.0
     t.h[i] = c.temperature_max_K - T
     psi0 = t.h[i] - g.margin - d0 * nan_max(0.0, half_pi - th_s) - d1 * nan_max(0.0, half_pi - th_e)
+    e = c.err_att_rad
+    if e > 0.0 or c.err_T_K > 0.0:  # measurement-robust margin (docs/noise.md)
+        T_hi = T + c.err_T_K
+        T_dot_err = ((p.solar_W + earth_coeff * p.earth_view_factor) * e
+                     + 4.0 * p.sigma_eps_A_W_K4 * T_hi * T_hi * T_hi * c.err_T_K) / p.heat_capacity_J_K
+        s_near = 1.0 if th_s < half_pi + e else 0.0
+        e_near = 1.0 if th_e < half_pi + e else 0.0
+        rate_err = (T_dot_err + d0 * s_near * angle_rate_error(math.sin(th_s), x, c)
+                    + d1 * e_near * angle_rate_error(math.sin(th_e), x, c))
+        psi0 -= c.err_T_K + (d0 * s_near + d1 * e_near) * e + rate_err / g.k1
     psi0_dot = -T_dot + d0 * sun_on * th_s_dot + d1 * earth_in * th_e_dot
     psi0_dd = -T_ddot + d0 * sun_on * th_s_dd + d1 * earth_in * th_e_dd
     second_order(t, i, psi0, psi0_dot, psi0_dd, g)

@@ -34,6 +34,9 @@ def row(ctx: np.void, x: NDArray[np.float64], c: np.void, axis: int, t: np.void)
     pa = x[7 + axis]
     hp = c.psi_max_rad_s**2 - pa * pa
     t.h[i] = hp
+    if c.err_psi_rad_s > 0.0:  # measurement-robust: the measured speed keeps clear of the limit
+        p_lim = c.psi_max_rad_s - c.err_psi_rad_s
+        hp = p_lim * p_lim - pa * pa
     t.psi0[i] = hp
     t.psi1[i] = hp
     for a in range(3):
@@ -45,5 +48,6 @@ def row(ctx: np.void, x: NDArray[np.float64], c: np.void, axis: int, t: np.void)
 @numba.njit(**LEAF)
 def zoh_interval(ctx: np.void, x: NDArray[np.float64], c: np.void, axis: int) -> tuple[float, float]:
     """(lower, upper) on u_axis, rad/s^2, keeping |psi_axis(t + dt)| <= (1 - zoh_margin) psi_max."""
-    limit = (1.0 - c.zoh_margin) * c.psi_max_rad_s
+    # measurement-robust (0 without sensor errors): the tachometer's error now, the actuator's over the hold
+    limit = (1.0 - c.zoh_margin) * c.psi_max_rad_s - c.err_psi_rad_s - c.dt_s * c.err_u_rad_s2[axis]
     return (-limit - x[7 + axis]) / c.dt_s, (limit - x[7 + axis]) / c.dt_s

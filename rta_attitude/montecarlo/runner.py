@@ -36,6 +36,7 @@ from rta_attitude.constraints.base import N_CONSTRAINTS
 from rta_attitude.constraints.geometry import CONTEXT_DTYPE
 from rta_attitude.constraints.rows import safety_values
 from rta_attitude.dynamics.plant import Plant
+from rta_attitude.dynamics.sensors import INSTRUMENT_DTYPE, measure
 from rta_attitude.dynamics.spacecraft import RK4_WORK_ROWS
 from rta_attitude.dynamics.state import STATE_SIZE
 from rta_attitude.errors import RtaError
@@ -95,9 +96,10 @@ def _mark(h: Array, t: float, sample: bool, k: int, viol_s: NDArray[np.bool_], v
 def run_batch(X0: Array, steps: int, loop: NDArray[np.void], viol_s: NDArray[np.bool_],
               viol_sub: NDArray[np.bool_], first: Array, min_h: Array, qp_steps: NDArray[np.int64],
               fb_steps: NDArray[np.int64], qp_fail: NDArray[np.int64], max_slack: Array, x_final: Array,
-              traj: Array, record: bool) -> None:
+              traj: Array, record: bool, first_run: int) -> None:
     """Run every initial state X0 (N, 19) for `steps` samples with u_des = 0; outputs with a leading N
-    (see BatchOutcome; traj (N, steps + 1, 19) is filled only if record)."""
+    (see BatchOutcome; traj (N, steps + 1, 19) is filled only if record). Run k of X0 has the sensors'
+    noise sequence first_run + k (its index in the campaign)."""
     lp = loop[0]
     p, c = lp.plant, lp.filter.constraints
     S = lp.substeps
@@ -106,6 +108,8 @@ def run_batch(X0: Array, steps: int, loop: NDArray[np.void], viol_s: NDArray[np.
     ctx = np.zeros(1, CONTEXT_DTYPE)
     r = np.zeros(1, RESULT_DTYPE)
     u_des, u = np.zeros(3), np.empty(3)
+    y = np.empty(STATE_SIZE)
+    ins = np.zeros(1, INSTRUMENT_DTYPE)
     subs = np.empty((S, STATE_SIZE))
     work = np.zeros((RK4_WORK_ROWS, STATE_SIZE))
     hs = np.empty((S, M))
@@ -118,6 +122,10 @@ def run_batch(X0: Array, steps: int, loop: NDArray[np.void], viol_s: NDArray[np.
         sub_t[j] = dt * (j + 1) / S
     for k in range(X0.shape[0]):
         x = X0[k].copy()
+        lp.sensors.stream = first_run + k
+        ins[0].started = 0
+        for a in range(3):
+            ins[0].u_end[a] = 0.0
         if record:
             traj[k, 0] = x
         for i in range(M):
@@ -130,7 +138,8 @@ def run_batch(X0: Array, steps: int, loop: NDArray[np.void], viol_s: NDArray[np.
                 if h[i] < min_h[k, i]:
                     min_h[k, i] = h[i]
             _mark(h, t, True, k, viol_s, viol_sub, first)
-            advance(x, u_des, lp, ws[0], r[0], u, subs, hs, ctx[0], work)
+            measure(x, step, lp.sensors, ins[0], y)
+            advance(x, y, u_des, step, lp, ins[0], ws[0], r[0], u, subs, hs, ctx[0], work)
             status = r[0].status
             if status != PASS:
                 qp_steps[k] += 1
@@ -168,11 +177,12 @@ def _check_states(x0: Array) -> Array:
 
 
 def run_runs(cfg: Config, x0: Array, duration_s: float, record: bool = False,
-             progress: Callable[[int], None] | None = None) -> BatchOutcome:
+             progress: Callable[[int], None] | None = None, first_run: int = 0) -> BatchOutcome:
     """Run initial states x0 (N, 19) for duration_s in this process; progress(runs done) after each
-    group of PROGRESS_RUNS runs (each run with another simulator than the compiled one)."""
+    group of PROGRESS_RUNS runs (each run with another simulator than the compiled one). x0[k] is run
+    first_run + k of its campaign (its sensor noise sequence)."""
     if cfg.plant.simulator != "compiled":
-        return run_runs_stepped(cfg, x0, duration_s, record=record, progress=progress)
+        return run_runs_stepped(cfg, x0, duration_s, record=record, progress=progress, first_run=first_run)
     x0 = _check_states(x0)
     steps = round(duration_s / cfg.filter.sample_time_s)
     N = x0.shape[0]
@@ -184,14 +194,15 @@ def run_runs(cfg: Config, x0: Array, duration_s: float, record: bool = False,
         run_batch(x0[a:b], steps, loop, out.violated_samples[a:b], out.violated_substeps[a:b],
                   out.first_violation_s[a:b], out.min_h_samples[a:b], out.qp_steps[a:b], out.fallback_steps[a:b],
                   out.qp_failures[a:b], out.max_comm_slack[a:b], out.x_final[a:b],
-                  traj[a:b] if record else traj, record)
+                  traj[a:b] if record else traj, record, first_run + a)
         if progress is not None:
             progress(b)
     return out
 
 
 def run_runs_stepped(cfg: Config, x0: Array, duration_s: float, plant: Callable[[Config, Array], Plant] | None = None,
-                     record: bool = False, progress: Callable[[int], None] | None = None) -> BatchOutcome:
+                     record: bool = False, progress: Callable[[int], None] | None = None, first_run: int = 0
+                     ) -> BatchOutcome:
     """Run initial states x0 (N, 19) for duration_s with u_des = 0, one `run_stepped` each, on the plant
     `plant(cfg, x0)` builds (default `dynamics.plant.make_plant`: the configured simulator); the outcome
     of `run_runs`, marked as `run_batch` marks it (samples and substeps in time order). progress(runs
@@ -222,7 +233,7 @@ def run_runs_stepped(cfg: Config, x0: Array, duration_s: float, plant: Callable[
     for k in range(N):
         scenario = Scenario(name="montecarlo", description="", duration_s=steps * dt, x0=x0[k], controller="none")
         with build(cfg, x0[k]) as p:
-            run = run_stepped(cfg, scenario, steps, p, filt)
+            run = run_stepped(cfg, scenario, steps, p, filt, stream=first_run + k)
         h = np.empty((steps * S + 1, M))
         h[::S] = run.h
         for j in range(S - 1):
@@ -261,7 +272,7 @@ class ChunkTask:
 
 def run_chunk(task: ChunkTask, progress: Callable[[int], None] | None = None) -> tuple[int, BatchOutcome]:
     """Simulate one chunk; returns (start index, outcome)."""
-    return task.start, run_runs(task.cfg, task.x0, task.duration_s, progress=progress)
+    return task.start, run_runs(task.cfg, task.x0, task.duration_s, progress=progress, first_run=task.start)
 
 
 _COUNTER: Any = None

@@ -2,7 +2,9 @@
 
 At each sample t_k = k dt: u_des = controller(x_k, q_c(t_k)) crosses the torque interface (u -> tau =
 D u -> u), as over DDS; u = filter(x_k, u_des) (or u_des without RTA), across the interface again;
-the actuator saturates u at psi_dot_max; the plant holds it over [t_k, t_k + dt] with `substeps` RK4
+the sensors and the actuator (`dynamics.sensors`: exact unless `sensors.enabled`) give the controller
+and the filter the measured state y_k and the plant the actuated command; the actuator saturates u at
+psi_dot_max; the plant holds it over [t_k, t_k + dt] with `substeps` RK4
 steps (`dynamics.spacecraft.rk4_hold`); the safety values of every substep are kept, so violations
 between samples are seen. `advance` is that step (filter, actuator, plant, checks) for one state:
 `simulate` and the Monte Carlo (`montecarlo.runner`) both run it, so a Monte Carlo run equals
@@ -29,6 +31,14 @@ from rta_attitude.constraints.geometry import CONTEXT_DTYPE
 from rta_attitude.constraints.rows import safety_values
 from rta_attitude.dynamics.controller import CONTROLLER_DTYPE, controller_record, desired_command, pd_command
 from rta_attitude.dynamics.plant import Plant, make_plant, simulated_model
+from rta_attitude.dynamics.sensors import (
+    INSTRUMENT_DTYPE,
+    SENSORS_DTYPE,
+    Instruments,
+    actuate,
+    measure,
+    sensors_record,
+)
 from rta_attitude.dynamics.spacecraft import (
     PLANT_DTYPE,
     RK4_WORK_ROWS,
@@ -56,6 +66,7 @@ LOOP_DTYPE = np.dtype([
     ("plant", PLANT_DTYPE),          # the spacecraft that is simulated
     ("filter", FILTER_DTYPE),        # the filter, with its own model of the plant
     ("controller", CONTROLLER_DTYPE),
+    ("sensors", SENSORS_DTYPE),      # what the controller and the filter read, what the wheels do
     ("rta", np.uint8),               # 0: u_des goes to the plant unfiltered
     ("dt_s", np.float64),            # sample time (zero-order hold)
     ("substeps", np.int64),          # RK4 steps per sample
@@ -68,24 +79,27 @@ def loop_record(cfg: Config, rta: bool = True, pd: bool = True) -> NDArray[np.vo
     rec[0]["plant"] = plant_record(cfg)[0]
     rec[0]["filter"] = filter_record(cfg)[0]
     rec[0]["controller"] = controller_record(cfg, pd)[0]
+    rec[0]["sensors"] = sensors_record(cfg)[0]
     rec[0]["rta"], rec[0]["dt_s"], rec[0]["substeps"] = rta, cfg.filter.sample_time_s, cfg.substeps
     return rec
 
 
 @numba.njit(**JIT)
-def advance(x: Array, u_des: Array, lp: np.void, ws: np.void, r: np.void, u: Array, subs: Array, hs: Array,
-            ctx: np.void, work: Array) -> None:
-    """One sample of the loop from state x (19,) with the desired command u_des (3,), already across
-    the torque interface: filter (result r) if RTA, torque interface, actuator saturation (u), RK4
-    hold (subs (substeps, 19): the states after each substep, the last is x(t + dt)) and the safety
+def advance(x: Array, y: Array, u_des: Array, k: int, lp: np.void, ins: np.void, ws: np.void, r: np.void, u: Array,
+            subs: Array, hs: Array, ctx: np.void, work: Array) -> None:
+    """Sample k of the loop from the true state x (19,), measured as y (`sensors.measure`), with the
+    desired command u_des (3,), already across the torque interface: filter of y (result r) if RTA,
+    torque interface, the actuator (`sensors.actuate`, instruments ins) and its saturation (u), RK4 hold
+    of x (subs (substeps, 19): the states after each substep, the last is x(t + dt)) and the safety
     values of every substep (hs (substeps, m)). work: `rk4_work()` scratch."""
     p = lp.plant
     if lp.rta:
-        filter_state(x, u_des, lp.filter, ws, r)
+        filter_state(y, u_des, lp.filter, ws, r)
         torque_round_trip(r.u, p, u)
     else:
         for a in range(3):
             u[a] = u_des[a]
+    actuate(u, k, lp.sensors, ins, u)
     saturate(u, p, u)
     rk4_hold(x, u, lp.dt_s, lp.substeps, p, subs, work)
     for j in range(lp.substeps):
@@ -103,13 +117,14 @@ def _command_at(times: Array, t_s: float) -> int:
 
 @numba.njit(**JIT)
 def run_scenario(x0: Array, steps: int, sched_t: Array, sched_q: Array, loop: NDArray[np.void], X: Array,
-                 H: Array, Hsub: Array, Q_C: Array, U_DES: Array, U: Array, W_DOT: Array, R: NDArray[np.void]
-                 ) -> None:
+                 Y: Array, H: Array, Hsub: Array, Q_C: Array, U_DES: Array, U: Array, W_DOT: Array,
+                 R: NDArray[np.void]) -> None:
     """Simulate `steps` samples from x0 with the controller tracking the command schedule (sched_t (K,),
-    sched_q (K, 4)); fills X (steps + 1, 19), H (steps + 1, m) at the samples, Hsub (steps, substeps, m),
-    Q_C, U_DES, U, W_DOT (steps, ...) and the filter results R (steps,)."""
+    sched_q (K, 4)); fills X (steps + 1, 19) (the truth), H (steps + 1, m) at the samples, Hsub (steps,
+    substeps, m), the measured states Y, Q_C, U_DES, U, W_DOT (steps, ...) and the filter results R (steps,)."""
     lp = loop[0]
     p = lp.plant
+    ins = np.zeros(1, INSTRUMENT_DTYPE)
     ws = np.zeros(1, WORKSPACE_DTYPE)
     ctx = np.zeros(1, CONTEXT_DTYPE)
     u_des = np.empty(3)
@@ -121,9 +136,10 @@ def run_scenario(x0: Array, steps: int, sched_t: Array, sched_q: Array, loop: ND
     for k in range(steps):
         t = k * lp.dt_s
         Q_C[k] = sched_q[_command_at(sched_t, t)]
-        pd_command(X[k], Q_C[k], lp.controller, u_des)
+        measure(X[k], k, lp.sensors, ins[0], Y[k])
+        pd_command(Y[k], Q_C[k], lp.controller, u_des)
         torque_round_trip(u_des, p, U_DES[k])
-        advance(X[k], U_DES[k], lp, ws[0], R[k], U[k], subs, Hsub[k], ctx[0], work)
+        advance(X[k], Y[k], U_DES[k], k, lp, ins[0], ws[0], R[k], U[k], subs, Hsub[k], ctx[0], work)
         attitude_matrix(X[k, 0], X[k, 1], X[k, 2], X[k, 3], A)
         omega_drift(X[k], A, p, wd)
         for a in range(3):
@@ -162,7 +178,7 @@ class ClosedLoop:
             sched_t = np.asarray(self.scenario.schedule_s, dtype=float)
             sched_q = np.ascontiguousarray(self.scenario.schedule_q, dtype=float)
             run_scenario(np.ascontiguousarray(self.scenario.x0, dtype=float), n, sched_t, sched_q, lp, run.x,
-                         run.h, run.h_sub, run.q_c, run.u_des, run.u, run.omega_dot, run.results)
+                         run.y, run.h, run.h_sub, run.q_c, run.u_des, run.u, run.omega_dot, run.results)
             if self.rta:
                 self.filter.counters.add(run.results)
         else:
@@ -191,6 +207,7 @@ class ClosedLoop:
             iterations=R["iterations"].copy() if self.rta else np.zeros(n, dtype=np.int64),
             solve_time_s=np.zeros(n), rta=self.rta, preset=cfg.filter.preset, scenario=self.scenario.name,
             meta={"config": cfg.source, "dt_s": dt, "substeps": cfg.substeps},
+            y=run.y if cfg.sensors.enabled else None,
         )  # fmt: skip
 
 
@@ -199,7 +216,8 @@ class StepArrays:
     """What a closed-loop run records, step by step (N steps, S substeps, m constraints).
 
     Attributes:
-        x: states at the samples (N + 1, 19); h: safety values there (N + 1, m).
+        x: true states at the samples (N + 1, 19); h: safety values there (N + 1, m).
+        y: the measured states the controller and the filter read (N, 19) (= x[:-1] without sensor errors).
         h_sub: safety values after each substep (N, S, m) (the last is the next sample).
         q_c (N, 4), u_des, u, omega_dot (N, 3): command, desired and applied wheel accelerations
             (u after saturation), body angular acceleration at each step's start (the plant's model).
@@ -207,6 +225,7 @@ class StepArrays:
     """
 
     x: Array
+    y: Array
     h: Array
     h_sub: Array
     q_c: Array
@@ -218,15 +237,18 @@ class StepArrays:
     @classmethod
     def empty(cls, steps: int, substeps: int) -> StepArrays:
         """Arrays for `steps` steps of `substeps` substeps (results zeroed)."""
-        return cls(np.empty((steps + 1, STATE_SIZE)), np.empty((steps + 1, M)), np.empty((steps, substeps, M)),
+        return cls(np.empty((steps + 1, STATE_SIZE)), np.empty((steps, STATE_SIZE)), np.empty((steps + 1, M)),
+                   np.empty((steps, substeps, M)),
                    np.empty((steps, 4)), np.empty((steps, 3)), np.empty((steps, 3)), np.empty((steps, 3)),
                    np.zeros(steps, RESULT_DTYPE))
 
 
-def run_stepped(cfg: Config, scenario: Scenario, steps: int, plant: Plant, filt: AsifFilter | None) -> StepArrays:
+def run_stepped(cfg: Config, scenario: Scenario, steps: int, plant: Plant, filt: AsifFilter | None,
+                stream: int = 0) -> StepArrays:
     """The closed loop of `run_scenario`, one Python step at a time over any plant (`dynamics.plant`):
-    at each sample the PD law (`pd_command`, if the scenario has it), the torque interface, the filter
-    (`AsifFilter.filter`, if given), the interface again, the actuator, `plant.step`, and the safety
+    at each sample the sensors (`dynamics.sensors.Instruments`), the PD law (`pd_command`, if the
+    scenario has it), the torque interface, the filter
+    (`AsifFilter.filter`, if given), the interface again, the actuator and its limit, `plant.step`, and the safety
     values of every substep. Over `CompiledPlant` it equals `run_scenario` bit for bit (tested).
 
     Args:
@@ -235,6 +257,7 @@ def run_stepped(cfg: Config, scenario: Scenario, steps: int, plant: Plant, filt:
         steps: samples to run.
         plant: the plant, at the scenario's initial state.
         filt: the filter; None: u_des goes to the plant unfiltered.
+        stream: the sensors' noise sequence (the Monte Carlo: the run's index).
     """
     S = cfg.substeps
     run = StepArrays.empty(steps, S)
@@ -245,19 +268,21 @@ def run_stepped(cfg: Config, scenario: Scenario, steps: int, plant: Plant, filt:
     lim = cfg.limits.wheel_accel_max_rad_s2
     sched_t = np.asarray(scenario.schedule_s, dtype=float)
     sched_q = np.ascontiguousarray(scenario.schedule_q, dtype=float)
+    instruments = Instruments(cfg, stream)
     run.x[0] = plant.x
     run.h[0] = constraints.safety_values(plant.x)
     for k in range(steps):
         x = run.x[k]
+        y = run.y[k] = instruments.measure(x, k)
         run.q_c[k] = sched_q[_command_at(sched_t, k * plant.dt_s)]
-        run.u_des[k] = torque_to_wheel_accel(wheel_accel_to_torque(desired_command(x, run.q_c[k], ctrl), D), D)
+        run.u_des[k] = torque_to_wheel_accel(wheel_accel_to_torque(desired_command(y, run.q_c[k], ctrl), D), D)
         if filt is not None:
-            result = filt.filter(x, run.u_des[k])
+            result = filt.filter(y, run.u_des[k])
             run.results[k] = result.record
             u = torque_to_wheel_accel(wheel_accel_to_torque(result.u, D), D)
         else:
             u = run.u_des[k]
-        run.u[k] = np.clip(u, -lim, lim)
+        run.u[k] = np.clip(instruments.actuate(u, k), -lim, lim)
         run.omega_dot[k] = omega_dot(x, run.u[k], truth)
         x_next, subs = plant.step(run.u[k])
         run.h_sub[k] = constraints.safety_values(subs)

@@ -27,6 +27,7 @@ class Trajectory:
         bc, slack, intervening: filter records per step (N, m); zeros without RTA.
         box_active: (N, 3); status, fallback: (N,) strings ('off' without RTA); iterations (N,);
         solve_time_s (N,).
+        y: the measured states the controller and the filter read (N, 19) (None: the exact states x).
     """
 
     names: tuple[str, ...]
@@ -51,6 +52,7 @@ class Trajectory:
     preset: str
     scenario: str
     meta: dict[str, object] = field(default_factory=dict)
+    y: Array | None = None
 
     @property
     def steps(self) -> int:
