@@ -33,9 +33,10 @@ Points are coloured by time; samples whose command the filter changed (|u - u_de
 some axis at the step that starts there; never without RTA) have a black core. The angles named
 in each panel's title are `constraints.ConstraintSet.angles`, the geometry the barriers act on.
 
-`sky_track` is pure NumPy (testable without matplotlib); `plot_skymap` draws one run or several side
-by side (`analyze --compare`) and writes `skymap.png`. matplotlib is imported only through
-`plots._pyplot` (Agg backend).
+`sky_track` returns the map coordinates without matplotlib (NumPy and the package's compiled
+geometry: `quaternion.attitude_matrices`, `sun_hill`, `ConstraintSet.angles`), so it is testable
+alone; `plot_skymap` draws one run or several side by side (`analyze --compare`) and writes
+`skymap.png`. matplotlib is imported only through `plots._pyplot` (Agg backend).
 """
 
 from __future__ import annotations
@@ -171,7 +172,7 @@ def _body_axis_in_hill(A: Array, axis_body: tuple[float, float, float]) -> Array
 
 
 def sky_track(run: SkyRun, cfg: Config) -> SkyTrack:
-    """The run on the sun-centred map (pure NumPy).
+    """The run on the sun-centred map (no matplotlib).
 
     Args:
         run: the run's samples and commands.
