@@ -339,6 +339,7 @@ def test_analyze_compare_writes_summaries_table_and_figure(bags: dict[str, Path]
     assert om["b_minus_a"] == pytest.approx(om["b"] - om["a"]) and om["b"] < 0 < om["a"]
     assert "A: RTA on (robust)" in text and "B: RTA off" in text and "UNSAFE: " in text
     assert (out / "figure.png").stat().st_size > 50_000
+    assert (out / "skymap.png").stat().st_size > 50_000  # both runs, one panel each (recording.skymap)
     with np.load(out / "timeseries.npz") as z:
         np.testing.assert_array_equal(z["x"], runs[True].traj.x)
     assert elapsed < 30

@@ -1,5 +1,5 @@
-"""`rta-attitude analyze BAG [--compare BAG2]`: summary, verdict and figure of a recorded run
-(`recording.analysis`), optionally beside a second run."""
+"""`rta-attitude analyze BAG [--compare BAG2]`: summary, verdict, figure and boresight sky map of a
+recorded run (`recording.analysis`, `recording.plots`, `recording.skymap`), optionally beside a second run."""
 
 from __future__ import annotations
 
@@ -20,11 +20,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="scenario of the run (names the report, sets its slack weights; default: recorded)")
     parser.add_argument("--config", type=Path, default=None,
                         help="parameter YAML of the run (default: $RTA_ATTITUDE_CONFIG or the package's)")
-    parser.add_argument("--no-plot", action="store_true", help="skip the PNG figure")
+    parser.add_argument("--no-plot", action="store_true", help="skip the PNG figures (figure.png, skymap.png)")
 
 
 def run(args: argparse.Namespace) -> int:
-    """`rta-attitude analyze`: summary (printed, summary.json), time series and figure of a bag."""
+    """`rta-attitude analyze`: summary (printed, summary.json), time series, figure and sky map of a bag."""
     from rta_attitude import config as config_module
     from rta_attitude.files import output_dir, write_text
     from rta_attitude.recording.analysis import load_run, resolve_bag_path
@@ -72,10 +72,12 @@ def run(args: argparse.Namespace) -> int:
         written += [out / "summary_compare.json", out / "comparison.json"]
     if not args.no_plot:
         from rta_attitude.recording.plots import plot_runs
+        from rta_attitude.recording.skymap import plot_skymap
 
         title = f"{run_a.scenario}: " + " vs ".join(label for label, _ in runs) + \
             f" (from {' and '.join(r.path.name for _, r in runs)})"
         written.append(plot_runs(runs, cfg, out / "figure.png", title))
+        written.append(plot_skymap(runs, cfg, out / "skymap.png", title))
     print(f"wrote {', '.join(str(p) for p in written)} (bags read and analysed in {wall:.2f} s)")
     return 0
 

@@ -1,4 +1,4 @@
-"""`rta-attitude simulate`: a scenario in process (no DDS): summary, time series, figure."""
+"""`rta-attitude simulate`: a scenario in process (no DDS): summary, time series, figure, sky map."""
 
 from __future__ import annotations
 
@@ -24,7 +24,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="what integrates the spacecraft (default: the config's plant.simulator); basilisk "
                              "needs pip install rta_attitude[basilisk]")
     parser.add_argument("--out", type=Path, default=Path("out/simulate"), help="output directory")
-    parser.add_argument("--no-plot", action="store_true", help="skip the PNG figure")
+    parser.add_argument("--no-plot", action="store_true", help="skip the PNG figures (figure.png, skymap.png)")
     parser.add_argument("--config", type=Path, default=None,
                         help="parameter YAML (default: $RTA_ATTITUDE_CONFIG or the package's config/rta_attitude.yaml)")
 
@@ -80,10 +80,12 @@ def run(args: argparse.Namespace) -> int:
     print(format_summary(summary))
     if not args.no_plot:
         from rta_attitude.recording.plots import plot_runs
+        from rta_attitude.recording.skymap import plot_skymap
 
         rta = f"RTA on ({cfg.filter.preset})" if not args.no_rta else "RTA off"
         png = plot_runs([(rta, traj)], loop.cfg, out / "figure.png", f"{scenario.name}: {rta}")
-        print(f"figure: {png}")
+        sky = plot_skymap([(rta, traj)], loop.cfg, out / "skymap.png", f"{scenario.name}: {rta}")
+        print(f"figure: {png}\nsky map: {sky}")
     print(f"wrote {out / 'summary.json'}, {out / 'timeseries.npz'} ({traj.steps} steps in {wall:.2f} s)")
     return 0
 

@@ -52,6 +52,17 @@ def _pyplot() -> Any:
     return plt
 
 
+def _save(plt: Any, fig: Any, path: str | Path, dpi: int = 110) -> Path:
+    """Write the figure as PNG through `files.atomic` (never a half-written file) and close it."""
+    out = Path(path)
+    try:
+        with atomic(out) as tmp:
+            fig.savefig(tmp, dpi=dpi)
+    finally:
+        plt.close(fig)
+    return out
+
+
 def _shade(ax: Any, lo: float | None, hi: float | None, safe_lo: float, safe_hi: float) -> None:
     """Dashed limits; red outside [safe_lo, safe_hi], green inside (within the current y range)."""
     y0, y1 = ax.get_ylim()
@@ -141,13 +152,7 @@ def plot_runs(runs: Sequence[tuple[str, RunSeries]], cfg: Config, path: str | Pa
             a.legend(fontsize=7, loc="best")
     fig.suptitle(title)
     fig.tight_layout()
-    out = Path(path)
-    try:
-        with atomic(out) as tmp:
-            fig.savefig(tmp, dpi=110)
-    finally:
-        plt.close(fig)
-    return out
+    return _save(plt, fig, path)
 
 
 __all__ = ["RunSeries", "plot_runs"]
