@@ -109,6 +109,7 @@ class TopicSpec:
 
 CLOCK = "/clock"
 STATE = "state"
+STATE_TRUE = "state_true"
 ATTITUDE_COMMAND = "attitude_command"
 TORQUE_DES = "torque_des"
 TORQUE_CMD = "torque_cmd"
@@ -128,7 +129,10 @@ TOPICS: dict[str, TopicSpec] = {
                   "simulation time t_k, one per step (nodes run with use_sim_time)"),
         TopicSpec(STATE, "sensor_msgs/msg/JointState", STATE_QOS, PLANT,
                   ((CONTROLLER, False, False), (FILTER, True, False), *_ALL),
-                  "the whole state: name = STATE_NAMES, position = values (model units), stamp = t_k"),
+                  "the whole state: name = STATE_NAMES, position = values (model units), stamp = t_k; "
+                  "as measured (sensors: on, docs/noise.md)"),
+        TopicSpec(STATE_TRUE, "sensor_msgs/msg/JointState", STREAM_QOS, PLANT, _ALL,
+                  "the true state, as `state` (published and recorded only with sensors: on)"),
         TopicSpec(ATTITUDE_COMMAND, "geometry_msgs/msg/QuaternionStamped", COMMAND_QOS, "",
                   ((CONTROLLER, False, False), *_ALL),
                   "operator override of q_c (Hill -> body, x y z w), in force from its stamp on"),
@@ -157,6 +161,12 @@ TOPICS: dict[str, TopicSpec] = {
 """Every topic of a run, by (relative) name."""
 
 INSPECTION_TOPICS: tuple[str, ...] = (ODOMETRY, TEMPERATURE, BATTERY, SUN_VECTOR)
+TRUTH_TOPICS: tuple[str, ...] = (STATE_TRUE,)
+"""Topics of a run with sensor errors only (`truth`): the true state beside the measured one."""
+
+
+def _in_run(name: str, truth: bool) -> bool:
+    return truth or name not in TRUTH_TOPICS
 
 
 
@@ -171,26 +181,31 @@ def subscribed(role: str, rta: bool) -> list[TopicSpec]:
     return out
 
 
-def published(role: str, rta: bool) -> list[TopicSpec]:
-    """Topics a role publishes (filter_status only with RTA: without, the filter passes through)."""
-    return [t for t in TOPICS.values() if t.publisher == role and (rta or t.name != FILTER_STATUS)]
+def published(role: str, rta: bool, truth: bool = False) -> list[TopicSpec]:
+    """Topics a role publishes (filter_status only with RTA: without, the filter passes through;
+    TRUTH_TOPICS only with sensor errors, `truth`)."""
+    return [t for t in TOPICS.values()
+            if t.publisher == role and (rta or t.name != FILTER_STATUS) and _in_run(t.name, truth)]
 
 
-def recorded(rta: bool) -> list[TopicSpec]:
-    """Topics the recorder writes to the bag: all of the run's (filter_status only with RTA)."""
-    return [t for t in subscribed(RECORDER, rta) if rta or t.name != FILTER_STATUS]
+def recorded(rta: bool, truth: bool = False) -> list[TopicSpec]:
+    """Topics the recorder writes to the bag: all of the run's (filter_status only with RTA,
+    TRUTH_TOPICS only with sensor errors)."""
+    return [t for t in subscribed(RECORDER, rta) if (rta or t.name != FILTER_STATUS) and _in_run(t.name, truth)]
 
 
-def reader_roles(topic: str, rta: bool, record: bool) -> list[str]:
+def reader_roles(topic: str, rta: bool, record: bool, truth: bool = False) -> list[str]:
     """The roles of the run's own nodes that subscribe to `topic`."""
+    if not _in_run(topic, truth):
+        return []
     return [who for who, only_rta, only_plain in TOPICS[topic].readers
             if not ((only_rta and not rta) or (only_plain and rta) or (who == RECORDER and not record))]
 
 
-def expected_readers(topic: str, rta: bool, record: bool) -> int:
+def expected_readers(topic: str, rta: bool, record: bool, truth: bool = False) -> int:
     """How many of the run's own nodes subscribe to `topic`; a writer waits for this many matches
     before its first message (tools such as `ros2 topic echo` only add readers)."""
-    return len(reader_roles(topic, rta, record))
+    return len(reader_roles(topic, rta, record, truth))
 
 
 # ----------------------------------------------------------------------------- diagnostics
@@ -364,7 +379,8 @@ __all__ = [
     "FILTER_STATUS", "HILL_FRAME", "INPUT_COUNTERS", "INPUT_SOURCE_KEY", "INSPECTION_TOPICS", "KNOBS", "MODULES",
     "NODE_NAMES", "NO_FALLBACK", "ODOMETRY", "PACKAGE", "PLANT", "PLANT_COUNTERS", "QP_KEYS", "QP_STATUS_NAME",
     "RECORDER", "RUN_DONE", "RUN_FAILED", "RUN_INTERRUPTED", "RUN_RUNNING", "RUN_STATUS",
-    "RUN_STATUS_NAME", "STATE", "STATE_QOS", "STATUS_HARDWARE_ID", "STATUS_QOS", "STREAM_QOS", "SUN_VECTOR",
+    "RUN_STATUS_NAME", "STATE", "STATE_QOS", "STATE_TRUE", "TRUTH_TOPICS",
+    "STATUS_HARDWARE_ID", "STATUS_QOS", "STREAM_QOS", "SUN_VECTOR",
     "SYSTEM_PARAMETERS",
     "TEMPERATURE", "TOPICS", "TORQUE_APPLIED", "TORQUE_CMD", "TORQUE_DES", "Knob", "QosSpec", "TopicSpec",
     "expected_readers", "reader_roles", "knobs_for", "published", "recorded", "subscribed",

@@ -172,6 +172,37 @@ def test_lockstep_run_over_dds_equals_in_process_run(rta: bool, tmp_path: Path, 
     assert np.array_equal(q_odom, ref.x[:, :4])
 
 
+@pytest.mark.slow
+def test_lockstep_with_sensor_errors_publishes_measured_and_true_states(tmp_path: Path) -> None:
+    """sensors.enabled:=true: `state` carries what the sensors measure (the controller and the filter
+    read it), `state_true` the truth; the run equals the in-process run with the same noise bit for bit,
+    and the analysis judges safety on the truth."""
+    from rosbags.highlevel import AnyReader
+
+    from rta_attitude.recording.analysis import load_run
+    from rta_attitude.simulation.closed_loop import simulate
+
+    noisy = CFG.with_noise()
+    ref = simulate(noisy, "paper-example")
+    n = ref.steps
+    out = run_nodes(tmp_path, params={"sensors.enabled": True})
+    assert out["plant"].exit_code == 0 and out["plant"].k == n
+    with AnyReader([out["bag"]]) as reader:
+        got: dict[str, list[np.ndarray]] = {}
+        for c, _, raw in reader.messages():
+            if c.topic in (_topic(topics.STATE), _topic(topics.STATE_TRUE)):
+                got.setdefault(c.topic, []).append(np.array(reader.deserialize(raw, c.msgtype).position))
+    measured, truth = np.array(got[_topic(topics.STATE)]), np.array(got[_topic(topics.STATE_TRUE)])
+    assert truth.shape == ref.x.shape and np.array_equal(truth, ref.x)
+    assert ref.y is not None and np.array_equal(measured[:n], ref.y)
+    assert np.abs(measured[:n] - truth[:n]).max() > 0
+    run = load_run(out["bag"], noisy)
+    assert np.array_equal(run.x, ref.x) and run.y is not None and np.array_equal(run.y[:n], ref.y)
+    assert any("true state" in note for note in run.notes)
+    assert run.reintegration_residual < 1e-9  # torque_applied is what the wheels held
+    assert np.allclose(run.h_substep_min, ref.h_substep_min, rtol=1e-9, atol=1e-12)  # re-integrated: D u / D rounds
+
+
 # ----------------------------------------------------------------------------- real time
 
 
@@ -288,7 +319,10 @@ def test_wiring_counts_every_reader_of_the_run() -> None:
     assert topics.expected_readers(topics.TORQUE_DES, rta=False, record=False) == 1
     assert topics.expected_readers(topics.TORQUE_CMD, rta=True, record=True) == 2
     assert topics.expected_readers(topics.CLOCK, rta=True, record=False) == 0
-    assert {t.name for t in topics.recorded(False)} == set(topics.TOPICS) - {topics.FILTER_STATUS}
+    assert {t.name for t in topics.recorded(False)} == set(topics.TOPICS) - {topics.FILTER_STATUS, topics.STATE_TRUE}
+    assert {t.name for t in topics.recorded(True, truth=True)} == set(topics.TOPICS)
+    assert topics.expected_readers(topics.STATE_TRUE, rta=True, record=True) == 0
+    assert topics.expected_readers(topics.STATE_TRUE, rta=True, record=True, truth=True) == 1
 
 
 # ----------------------------------------------------------------------------- parameters

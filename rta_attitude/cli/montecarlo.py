@@ -38,6 +38,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--max-runs", type=int, default=None,
                         help="run only the first N of the --runs sampled states (the same states as the whole "
                              "campaign of that seed)")
+    parser.add_argument("--noise", action="store_true",
+                        help="sensor and actuator errors on (the config's sensors: section; docs/noise.md)")
     parser.add_argument("--out", type=Path, default=Path("out/montecarlo"), help="output directory")
     parser.add_argument("--no-plot", action="store_true", help="skip the PNG figure")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -72,6 +74,8 @@ def run(args: argparse.Namespace) -> int:
     if args.simulator is not None:
         cfg = cfg.with_simulator(args.simulator)
     cfg = cfg.with_models(args.plant_model, args.filter_model)
+    if args.noise:
+        cfg = cfg.with_noise()
     output_dir(args.out)  # before hours of work, not after
     result = montecarlo(cfg, args.runs, args.duration, args.seed, args.workers, args.backend, args.scheduler,
                         args.chunk_runs, progress=not args.no_progress and sys.stderr.isatty(),

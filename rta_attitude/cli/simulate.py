@@ -23,6 +23,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--simulator", choices=SIMULATORS, default=None,
                         help="what integrates the spacecraft (default: the config's plant.simulator); basilisk "
                              "needs pip install rta_attitude[basilisk]")
+    parser.add_argument("--noise", action="store_true",
+                        help="sensor and actuator errors on (the config's sensors: section; docs/noise.md)")
     parser.add_argument("--out", type=Path, default=Path("out/simulate"), help="output directory")
     parser.add_argument("--no-plot", action="store_true", help="skip the PNG figures (figure.png, skymap.png)")
     parser.add_argument("--config", type=Path, default=None,
@@ -59,6 +61,8 @@ def run(args: argparse.Namespace) -> int:
         cfg = cfg.with_solver(args.solver)
     if args.simulator is not None:
         cfg = cfg.with_simulator(args.simulator)
+    if args.noise:
+        cfg = cfg.with_noise()
     scenario = cfg.scenario(args.scenario)
     if args.duration is not None:
         if not args.duration > 0:

@@ -127,6 +127,7 @@ def summary(result: MonteCarloResult) -> dict[str, Any]:
             "filter_model": result.cfg.filter.model, "dt_s": result.cfg.filter.sample_time_s,
             "substeps": result.cfg.substeps, "config": result.cfg.source, "backend": result.backend,
             "simulator": result.cfg.plant.simulator,
+            "sensors": f"on (seed {result.cfg.sensors.seed})" if result.cfg.sensors.enabled else "off",
             "workers": result.workers, "wall_s": result.wall_s,
             "cpu_s": None if math.isnan(result.cpu_s) else result.cpu_s,
             "redraws_total": int(result.redraws.sum()),
@@ -144,7 +145,8 @@ def format_table(s: dict[str, Any]) -> str:
     models = f"plant {setup['plant_model']}, filter model {setup['filter_model']}, " if "plant_model" in setup else ""
     lines = [f"Monte Carlo: {setup['runs']} runs x {setup['duration_s']:.0f} s, preset {setup['preset']}, "
              f"{models}seed {setup['seed']}, {setup['wall_s']:.1f} s wall{cpu} "
-             f"({setup['backend']}, {setup['workers']} workers; simulator {setup.get('simulator', 'compiled')})",
+             f"({setup['backend']}, {setup['workers']} workers; simulator {setup.get('simulator', 'compiled')}; "
+             f"sensor errors {setup.get('sensors', 'off')})",
              f"{'':<28}{'paper':>10}{'at samples':>14}{'incl. substeps':>16}",
              f"{'success rate':<28}{p['success_rate']:>10.2%}{a['success_rate']:>14.2%}{b['success_rate']:>16.2%}",
              f"{'failed runs':<28}{'84':>10}{a['failed']:>14d}{b['failed']:>16d}",

@@ -69,8 +69,10 @@ DEFAULT_NAMESPACE = topics.DEFAULT_NAMESPACE
 STATE_TOPIC, TORQUE_DES_TOPIC, TORQUE_CMD_TOPIC = topics.STATE, topics.TORQUE_DES, topics.TORQUE_CMD
 FILTER_STATUS_TOPIC, TORQUE_APPLIED_TOPIC, RUN_STATUS_TOPIC = topics.FILTER_STATUS, topics.TORQUE_APPLIED, \
     topics.RUN_STATUS
+STATE_TRUE_TOPIC = topics.STATE_TRUE
 TOPIC_TYPES: dict[str, str] = {name: topics.TOPICS[name].type_name for name in (
-    STATE_TOPIC, TORQUE_DES_TOPIC, TORQUE_CMD_TOPIC, FILTER_STATUS_TOPIC, TORQUE_APPLIED_TOPIC, RUN_STATUS_TOPIC)}
+    STATE_TOPIC, TORQUE_DES_TOPIC, TORQUE_CMD_TOPIC, FILTER_STATUS_TOPIC, TORQUE_APPLIED_TOPIC, RUN_STATUS_TOPIC,
+    STATE_TRUE_TOPIC)}
 """Relative topic names read from a bag and their types (the vocabulary of rta_attitude.topics)."""
 REQUIRED_TOPICS = (STATE_TOPIC, TORQUE_CMD_TOPIC)
 METADATA_RECORD = "rta_attitude"
@@ -95,7 +97,7 @@ class BagRun:
         namespace: the namespace of the run's topics, e.g. '/rta'.
         names: constraint names (m,).
         t_s: sample times (N + 1,), s (the state stamps).
-        x: recorded states (N + 1, 19), model units.
+        x: recorded states (N + 1, 19), model units: the true state where the bag has it (state_true).
         u_des, u: desired and applied wheel accelerations (N, 3), rad/s^2 (u saturated like the plant).
         omega_dot: body angular acceleration at the start of each step (N, 3), rad/s^2.
         h: physical constraint values at the samples (N + 1, m).
@@ -142,6 +144,9 @@ class BagRun:
     counts: dict[str, int] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
     run_facts: dict[str, Any] = field(default_factory=dict)
+    y: Array | None = None
+    """The measured states the controller and the filter read (N + 1, 19), when the bag has the true
+    state beside them (sensor errors on; `x` is then the truth); None: x is what everyone read."""
 
     @property
     def steps(self) -> int:
@@ -226,7 +231,7 @@ def _flag(text: str | None) -> bool:
 def _decoded(name: str | None, msg: Any) -> tuple[int, Any]:
     """(stamp [ns], payload) of a message decoded by mcap_ros2, as the raw readers give it."""
     stamp = _stamp_ns(msg)
-    if name == STATE_TOPIC:
+    if name in (STATE_TOPIC, STATE_TRUE_TOPIC):
         return stamp, (tuple(msg.name), np.asarray(msg.position, dtype=float))
     if name in (FILTER_STATUS_TOPIC, RUN_STATUS_TOPIC):
         return stamp, parse_diagnostics(msg)
@@ -237,7 +242,7 @@ def _raw(name: str | None, data: bytes) -> tuple[int, Any]:
     """(stamp [ns], payload) read straight from CDR bytes; CdrError if they are not as expected."""
     try:
         c = Cdr(data)
-        if name == STATE_TOPIC:
+        if name in (STATE_TOPIC, STATE_TRUE_TOPIC):
             stamp, names, pos = read_state(c)
             return stamp, (names, pos)
         if name in (FILTER_STATUS_TOPIC, RUN_STATUS_TOPIC):
@@ -252,6 +257,7 @@ class _Records:
     """The topics of one run, keyed by stamp [ns]."""
 
     states: dict[int, Array] = field(default_factory=dict)
+    true_states: dict[int, Array] = field(default_factory=dict)
     torque_des: dict[int, Array] = field(default_factory=dict)
     torque_cmd: dict[int, Array] = field(default_factory=dict)
     torque_applied: dict[int, Array] = field(default_factory=dict)
@@ -304,6 +310,9 @@ def _collect(contents: bagio.BagContents, namespace: str, path: Path) -> _Record
                 continue
             names, positions = payload
             rec.states[stamp] = _state_vector(names, positions, stamp, path, order)
+        elif name == STATE_TRUE_TOPIC:
+            names, positions = payload
+            rec.true_states.setdefault(stamp, _state_vector(names, positions, stamp, path, order))
         elif name in torques:
             if not np.all(np.isfinite(payload)):
                 raise BagError(f"{path}: the torque on {m.topic} at t = {stamp / NS_PER_S:.3f} s is not finite")
@@ -444,6 +453,17 @@ def load_run(
     dt_steps = np.diff(t_ns) / NS_PER_S  # (N,)
     t_s = t_ns / NS_PER_S
     x = np.array([rec.states[s] for s in stamps])
+    y = None
+    if rec.true_states:  # sensor errors: safety is judged on the truth; the filter read `state`
+        if all(s in rec.true_states for s in stamps):
+            y = x
+            x = np.array([rec.true_states[s] for s in stamps])
+            err = np.abs(y - x).max(axis=0)
+            notes.append(f"safety judged on the true state ({STATE_TRUE_TOPIC}); the controller and the filter "
+                         f"read {STATE_TOPIC} (largest error: omega {err[4:7].max():.3g} rad/s, psi "
+                         f"{err[7:10].max():.3g} rad/s, T {err[10]:.3g} K, E {err[11]:.3g} J)")
+        else:
+            notes.append(f"{STATE_TRUE_TOPIC} does not cover every step: safety judged on {STATE_TOPIC} (measured)")
 
     # re-integrate every step with the plant's own integrator: its substeps, exactly
     constraints = ConstraintSet(run_cfg)
@@ -511,7 +531,7 @@ def load_run(
         preset=preset if rta else None, scenario=scen_name, dt_s=float(np.median(dt_steps)),
         truncated=contents.truncated, data_end_s=float(t_s[-1]), reintegration_residual=residual,
         topic_types={t: available[t] for t in wanted if t in available}, counts=dict(contents.counts), notes=notes,
-        run_facts={k: info[k] for k in RUN_FACTS if k in info},
+        run_facts={k: info[k] for k in RUN_FACTS if k in info}, y=y,
     )  # fmt: skip
     log.debug("read %s: %d steps in %.2f s", file, n, time.perf_counter() - t_start)
     return run

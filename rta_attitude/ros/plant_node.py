@@ -41,6 +41,7 @@ import numpy as np
 from rta_attitude import topics
 from rta_attitude.dynamics import spacecraft
 from rta_attitude.dynamics.plant import make_plant
+from rta_attitude.dynamics.sensors import Instruments
 from rta_attitude.errors import MessageError
 from rta_attitude.kernel_cache import drop_stale_caches
 from rta_attitude.ros import convert, interface, spin
@@ -78,6 +79,7 @@ class PlantNode(RtaNode):
         with spin.interruptible():
             spacecraft.integrate(self.x, np.zeros(3), self.dt_s, self.plant, 1)  # compile (or load) it now
         self.simulator = make_plant(self.cfg, self.x, self.dt_s)
+        self.instruments = Instruments(self.cfg)  # measured state, actuated command (exact when sensors: off)
         self.get_logger().info(f"plant integrator ({self.cfg.plant.simulator}) ready in "
                                f"{self.wall_now_s() - t0:.2f} s")
         self.held_tau = np.zeros(3)
@@ -87,7 +89,8 @@ class PlantNode(RtaNode):
         self.latency_s: list[float] = []
         self.published: dict[str, int] = {}
         self.pubs = {name: self.create_publisher(interface.msg_class(spec.type_name), spec.name, self.qos(name))
-                     for name, spec in topics.TOPICS.items() if spec.publisher == topics.PLANT}  # fmt: skip
+                     for name, spec in topics.TOPICS.items()
+                     if spec in topics.published(topics.PLANT, True, self.truth)}  # fmt: skip
         self.diagnostics = DiagnosticsPublisher(self, "run")
         self.command_topic = topics.TORQUE_CMD
         self.subscribe(self.command_topic, self._on_command)
@@ -112,7 +115,7 @@ class PlantNode(RtaNode):
         alive = {name for name, node_ns in self.get_node_names_and_namespaces() if node_ns == ns}
         roles: set[str] = set()
         for n, pub in self.pubs.items():
-            want = topics.reader_roles(n, self.rta, self.record)
+            want = topics.reader_roles(n, self.rta, self.record, self.truth)
             if len(want) > pub.get_subscription_count():
                 roles |= set(want)
         names = sorted(topics.NODE_NAMES[r] for r in roles)
@@ -123,7 +126,7 @@ class PlantNode(RtaNode):
 
     def _check_ready(self) -> None:
         missing = [(self.pubs[n].topic_name, self.pubs[n].get_subscription_count(), want)
-                   for n in self.pubs if (want := topics.expected_readers(n, self.rta, self.record))
+                   for n in self.pubs if (want := topics.expected_readers(n, self.rta, self.record, self.truth))
                    and self.pubs[n].get_subscription_count() < want]  # fmt: skip
         if missing:
             if self.wall_now_s() - self._progress_s > self.knobs["startup_timeout_s"]:
@@ -161,13 +164,17 @@ class PlantNode(RtaNode):
 
     def _publish_sample(self) -> None:
         """/clock(t_k) first (a reader's sim time reaches t_k before the state stamped t_k arrives, so
-        `ros2 topic delay --use-sim-time` reads >= 0), then state(t_k) and the inspection views."""
-        t_ns, x = self._t_ns(self.k), self.x
+        `ros2 topic delay --use-sim-time` reads >= 0), then state(t_k) as measured, the true state (sensor
+        errors on) and the inspection views (measured)."""
+        t_ns = self._t_ns(self.k)
+        x = self.instruments.measure(self.x, self.k) if self.truth else self.x
         self._publish(topics.CLOCK, convert.clock_msg(t_ns))
         self._diagnose(topics.RUN_RUNNING)
         self._sent_s = self.wall_now_s()
         self._progress_s = self._sent_s
         self._publish(topics.STATE, convert.state_msg(x, t_ns))
+        if self.truth:
+            self._publish(topics.STATE_TRUE, convert.state_msg(self.x, t_ns))
         if self.k % max(self.knobs["inspection_every"], 1) == 0 or self.k == self.steps:
             self._publish(topics.ODOMETRY, convert.odometry_msg(x, t_ns))
             self._publish(topics.TEMPERATURE, convert.temperature_msg(x, t_ns))
@@ -175,11 +182,15 @@ class PlantNode(RtaNode):
             self._publish(topics.SUN_VECTOR, convert.sun_vector_msg(x, t_ns))
 
     def _step(self, tau_Nm: np.ndarray) -> None:
-        """Hold tau over [t_k, t_k+1) (the core saturates and integrates), publish the new sample."""
+        """Hold tau over [t_k, t_k+1) through the actuator (the core saturates and integrates), publish the
+        new sample; torque_applied is what the wheels held (before saturation)."""
+        self.held_tau = tau_Nm
         u = spacecraft.torque_to_wheel_accel(tau_Nm, self.D)
+        if self.truth:
+            u = self.instruments.actuate(u, self.k)
+            tau_Nm = spacecraft.wheel_accel_to_torque(u, self.D)
         x_next, _ = self.simulator.step(u)
         t_ns = self._t_ns(self.k)
-        self.held_tau = tau_Nm
         self.k += 1
         self.x = x_next
         self._publish_sample()

@@ -78,7 +78,7 @@ class RecorderNode(RtaNode):
         self._terminal = False
         self.status_topic = self.resolve_topic_name(topics.RUN_STATUS)
         self._status_type = interface.msg_class(topics.TOPICS[topics.RUN_STATUS].type_name)
-        specs = {self.resolve_topic_name(spec.name): spec for spec in topics.recorded(self.rta)}
+        specs = {self.resolve_topic_name(spec.name): spec for spec in topics.recorded(self.rta, self.truth)}
         for name, spec in specs.items():
             self.received[name] = 0
             self.subscribe(spec.name, partial(self._on_message, name), raw=True,

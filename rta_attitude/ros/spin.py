@@ -93,6 +93,8 @@ class RtaNode(Node):
             raise
         self.cfg = self.cfg.for_scenario(self.scenario)
         self.rta: bool = self.knobs["rta"]
+        self.truth: bool = self.cfg.sensors.enabled
+        """Sensor errors on: the plant publishes the true state beside the measured one (TRUTH_TOPICS)."""
         self.record: bool = self.knobs["record"]
         self.stopping = ""
         """The signal name once a stop was requested ('' before)."""
@@ -166,7 +168,7 @@ class RtaNode(Node):
 
     def gate(self, topic: str, publisher: Publisher) -> PublishGate:
         """A PublishGate for one of this node's publishers, expecting the run's readers of `topic`."""
-        expected = topics.expected_readers(topic, self.rta, self.record)
+        expected = topics.expected_readers(topic, self.rta, self.record, self.truth)
         self.gates[topic] = PublishGate(self, publisher, expected, self.knobs["startup_timeout_s"])
         return self.gates[topic]
 
