@@ -33,7 +33,7 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
-from rta_attitude.constraints.base import OMEGA_X, ZOH_CHECKS
+from rta_attitude.constraints.base import OMEGA_X, ZOH_CHECKS, speed_limit_row
 from rta_attitude.jit import LEAF
 
 NAMES = ("omega_x", "omega_y", "omega_z")
@@ -49,19 +49,8 @@ def h(ctx: np.void, x: NDArray[np.float64], c: np.void, axis: int) -> float:
 def row(ctx: np.void, x: NDArray[np.float64], c: np.void, axis: int, t: np.void) -> None:
     """h and the CBF row of one axis into table t."""
     i = OMEGA_X + axis
-    g = c.gains[i]
-    w = x[4 + axis]
-    hw = c.omega_max_rad_s**2 - w * w
-    t.h[i] = hw
-    if c.err_omega_axis_rad_s > 0.0:  # measurement-robust: the measured rate keeps clear of the limit
-        w_lim = c.omega_max_rad_s - c.err_omega_axis_rad_s
-        hw = w_lim * w_lim - w * w
-    t.psi0[i] = hw
-    t.psi1[i] = hw
-    for a in range(3):
-        t.gain[i, a] = 0.0
-    t.gain[i, axis] = -2.0 * w * ctx.control_gain[axis]
-    t.drift[i] = -2.0 * w * ctx.omega_drift[axis] + g.k1 * hw + g.bias
+    speed_limit_row(t, i, axis, x[4 + axis], c.omega_max_rad_s, c.err_omega_axis_rad_s, ctx.control_gain[axis],
+                    ctx.omega_drift[axis], c.gains[i])
 
 
 @numba.njit(**LEAF)

@@ -188,6 +188,26 @@ def second_order(t: np.void, i: int, psi0: float, psi0_dot: float, psi0_ddot_dri
 
 
 @numba.njit(**LEAF)
+def speed_limit_row(t: np.void, i: int, axis: int, v: float, v_max: float, err: float, v_gain: float,
+                    v_drift: float, g: np.void) -> None:
+    """The relative-degree-1 CBF h = v_max^2 - v^2 of a speed v (a body rate or a wheel speed) into row i
+    of table t, with v_dot = v_drift + v_gain u_axis: h (the truth's formula), Psi = the measured speed
+    kept err clear of the limit (measurement-robust; err = 0: h itself), gain -2 v v_gain on u_axis and
+    drift -2 v v_drift + k1 Psi + bias."""
+    hv = v_max**2 - v * v
+    t.h[i] = hv
+    if err > 0.0:
+        lim = v_max - err
+        hv = lim * lim - v * v
+    t.psi0[i] = hv
+    t.psi1[i] = hv
+    for a in range(3):
+        t.gain[i, a] = 0.0
+    t.gain[i, axis] = -2.0 * v * v_gain
+    t.drift[i] = -2.0 * v * v_drift + g.k1 * hv + g.bias
+
+
+@numba.njit(**LEAF)
 def nan_max(a: float, b: float) -> float:
     """numpy.maximum of two floats (NaN propagates)."""
     if a != a or b != b:
@@ -206,5 +226,5 @@ def nan_min(a: float, b: float) -> float:
 __all__ = [
     "BATTERY", "COMMUNICATION", "CONSTRAINT_DTYPE", "EXCLUSION_ZONE", "GAIN_DTYPE", "N_CONSTRAINTS", "OMEGA_X", "PSI_X",
     "TABLE_DTYPE", "TEMPERATURE", "ZOH_CHECKS", "ZOH_ROWS", "angle_rate_error", "constraint_record", "group_of",
-    "measurement_errors", "nan_max", "nan_min", "second_order",
+    "measurement_errors", "nan_max", "nan_min", "second_order", "speed_limit_row",
 ]  # fmt: skip

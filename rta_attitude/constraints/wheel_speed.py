@@ -14,7 +14,7 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
-from rta_attitude.constraints.base import PSI_X
+from rta_attitude.constraints.base import PSI_X, speed_limit_row
 from rta_attitude.jit import LEAF
 
 NAMES = ("psi_x", "psi_y", "psi_z")
@@ -29,20 +29,8 @@ def h(ctx: np.void, x: NDArray[np.float64], c: np.void, axis: int) -> float:
 @numba.njit(**LEAF)
 def row(ctx: np.void, x: NDArray[np.float64], c: np.void, axis: int, t: np.void) -> None:
     """h and the CBF row of one wheel into table t."""
-    i = PSI_X + axis
-    g = c.gains[i]
-    pa = x[7 + axis]
-    hp = c.psi_max_rad_s**2 - pa * pa
-    t.h[i] = hp
-    if c.err_psi_rad_s > 0.0:  # measurement-robust: the measured speed keeps clear of the limit
-        p_lim = c.psi_max_rad_s - c.err_psi_rad_s
-        hp = p_lim * p_lim - pa * pa
-    t.psi0[i] = hp
-    t.psi1[i] = hp
-    for a in range(3):
-        t.gain[i, a] = 0.0
-    t.gain[i, axis] = -2.0 * pa
-    t.drift[i] = g.k1 * hp + g.bias
+    i = PSI_X + axis  # psi_dot = u: gain 1, no drift
+    speed_limit_row(t, i, axis, x[7 + axis], c.psi_max_rad_s, c.err_psi_rad_s, 1.0, 0.0, c.gains[i])
 
 
 @numba.njit(**LEAF)
