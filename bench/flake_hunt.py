@@ -17,6 +17,7 @@ from __future__ import annotations
 import argparse
 import multiprocessing as mp
 import os
+import random
 import subprocess
 import sys
 import tempfile
@@ -64,7 +65,20 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--files", nargs="*", default=None, help="test files (default: every file with dds tests)")
     parser.add_argument("-k", default=None, help="pytest -k expression, to hunt in fewer tests")
     parser.add_argument("--out", type=Path, default=None, help="keep each pass's JUnit XML and log here")
+    parser.add_argument("--domains", default=None, metavar="LO-HI",
+                        help="draw each pass's ROS_DOMAIN_ID from LO..HI (default: the conftest's 40..100); two hunts "
+                             "at once (each the other's load) need disjoint ranges")
     args = parser.parse_args(argv)
+    domains = None
+    if args.domains is not None:
+        try:
+            lo, hi = (int(v) for v in args.domains.split("-"))
+            if not 0 <= lo <= hi <= 101:
+                raise ValueError
+        except ValueError:
+            print(f"ERROR: --domains must be LO-HI within 0..101, got {args.domains!r}", file=sys.stderr)
+            return 1
+        domains = (lo, hi)
     if args.runs < 1 or args.burners < 0:
         print("ERROR: --runs must be >= 1 and --burners >= 0", file=sys.stderr)
         return 1
@@ -85,6 +99,8 @@ def main(argv: list[str] | None = None) -> int:
             if args.k:
                 cmd += ["-k", args.k]
             env = {k_: v for k_, v in os.environ.items() if k_ != "RTA_TEST_DOMAIN_ID"}
+            if domains is not None:
+                env["RTA_TEST_DOMAIN_ID"] = str(random.SystemRandom().randint(*domains))
             start = time.monotonic()
             with (out_dir / f"pass{k:02d}.log").open("w") as log:
                 code = subprocess.run(cmd, cwd=REPO, env=env, stdout=log, stderr=subprocess.STDOUT).returncode
