@@ -161,6 +161,9 @@ TOPICS: dict[str, TopicSpec] = {
 """Every topic of a run, by (relative) name."""
 
 INSPECTION_TOPICS: tuple[str, ...] = (ODOMETRY, TEMPERATURE, BATTERY, SUN_VECTOR)
+PER_STEP_ANSWERS: tuple[str, ...] = (TORQUE_DES, TORQUE_CMD, FILTER_STATUS)
+"""The chain's answers to each state: one message per state in a run without faults (the recorder
+waits for them at the end while their writers are there)."""
 TRUTH_TOPICS: tuple[str, ...] = (STATE_TRUE,)
 """Topics of a run with sensor errors only (`truth`): the true state beside the measured one."""
 
@@ -377,7 +380,8 @@ __all__ = [
     "CONSTRAINT_STATUS_PREFIX", "CONTROLLER", "DEFAULT_NAMESPACE",
     "DIAGNOSTICS", "DIAGNOSTICS_QOS", "EXECUTABLES", "EXPECTED_PREFIX", "FILTER",
     "FILTER_STATUS", "HILL_FRAME", "INPUT_COUNTERS", "INPUT_SOURCE_KEY", "INSPECTION_TOPICS", "KNOBS", "MODULES",
-    "NODE_NAMES", "NO_FALLBACK", "ODOMETRY", "PACKAGE", "PLANT", "PLANT_COUNTERS", "QP_KEYS", "QP_STATUS_NAME",
+    "NODE_NAMES", "NO_FALLBACK", "ODOMETRY", "PACKAGE", "PER_STEP_ANSWERS", "PLANT", "PLANT_COUNTERS", "QP_KEYS",
+    "QP_STATUS_NAME",
     "RECORDER", "RUN_DONE", "RUN_FAILED", "RUN_INTERRUPTED", "RUN_RUNNING", "RUN_STATUS",
     "RUN_STATUS_NAME", "STATE", "STATE_QOS", "STATE_TRUE", "TRUTH_TOPICS",
     "STATUS_HARDWARE_ID", "STATUS_QOS", "STREAM_QOS", "SUN_VECTOR",

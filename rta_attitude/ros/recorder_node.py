@@ -12,8 +12,13 @@ and deadline misses), which `rta-attitude analyze` reads.
 End: after the plant's final run_status (`done`, `failed: ...` or `interrupted: ...`) the recorder
 waits until every topic with a known final count (`expected:<topic>` in run_status) has it, and,
 for topics without one (real-time runs, runs with faults), until no message came for
-`drain_quiet_s`; a topic whose publisher has gone (a killed node) is not waited for beyond that
-quiet time; at most `drain_timeout_s` in all. Then it closes the bag and, with `exit_when_done`,
+`drain_quiet_s`; the chain's per-step answers (torque_des, torque_cmd, filter_status: one per state
+in a run without faults) are waited for while they are behind the state count and their writer is
+still there (a reliable sample lost under load is repaired only at the writer's next heartbeat,
+seconds later, and every later sample of that writer waits behind it: found by the flake hunt, the
+recorder closed 0.3 s after `done` with half of torque_des and torque_cmd still owed); a topic whose
+publisher has gone (a killed node) is not waited for beyond that quiet time; at most
+`drain_timeout_s` in all. Then it closes the bag and, with `exit_when_done`,
 exits.
 
 SIGINT/SIGTERM: the recorder does not close at once, which would lose the messages published just
@@ -77,6 +82,9 @@ class RecorderNode(RtaNode):
         self._drain: Timer | None = None
         self._terminal = False
         self.status_topic = self.resolve_topic_name(topics.RUN_STATUS)
+        self.state_topic = self.resolve_topic_name(topics.STATE)
+        self.per_step = [self.resolve_topic_name(t) for t in topics.PER_STEP_ANSWERS]
+        """The chain's answers to each state (one per state in a run without faults)."""
         self._status_type = interface.msg_class(topics.TOPICS[topics.RUN_STATUS].type_name)
         specs = {self.resolve_topic_name(spec.name): spec for spec in topics.recorded(self.rta, self.truth)}
         for name, spec in specs.items():
@@ -162,6 +170,7 @@ class RecorderNode(RtaNode):
         short = {t: (self.received.get(t, 0), n) for t, n in expected.items() if self.received.get(t, 0) < n}
         # a short topic whose publisher has left cannot deliver more (a killed node): no waiting for it
         waiting = [t for t in short if self.count_publishers(t) > 0]
+        waiting += self._behind(expected)
         unknown = any(t not in expected for t in self.received)
         settled = now - self._last_s >= self.knobs["drain_quiet_s"]
         if self.stopping and not self._terminal:
@@ -176,9 +185,20 @@ class RecorderNode(RtaNode):
         if short:
             self.get_logger().warning("closing with missing messages: " + ", ".join(
                 f"{t} {have}/{want}" for t, (have, want) in sorted(short.items())))
+        behind = self._behind(expected)
+        if behind:
+            self.get_logger().warning("closing with per-step topics behind the state count: " + ", ".join(
+                f"{t} {self.received[t]}/{self.received.get(self.state_topic, 0)}" for t in behind))
         self.close()
         if self.knobs["exit_when_done"] or self.stopping:
             self.finish()
+
+    def _behind(self, expected: dict[str, int]) -> list[str]:
+        """The chain's per-step topics without a known count that are behind the state count while a
+        writer of theirs is still matched (more can come)."""
+        n_states = self.received.get(self.state_topic, 0)
+        return [t for t in self.per_step if t not in expected and t in self.received
+                and self.received[t] < n_states and self.count_publishers(t) > 0]
 
     def metadata(self) -> dict[str, str]:
         """The `rta_attitude` metadata record: run facts as strings."""
