@@ -505,6 +505,22 @@ class Loop:
             time.sleep(0.1)
         return files | (launcher.fastdds_files([self.procs[track].pid]) if track else set())
 
+    def wait_count(self, topic: str, n: int, timeout_s: float = 60.0, track: str = "") -> set[str]:
+        """Wait until the bag holds n messages of `topic`; returns the Fast DDS files `track` used meanwhile."""
+        deadline = time.monotonic() + timeout_s
+        files: set[str] = set()
+        while True:
+            if track:
+                files |= launcher.fastdds_files([self.procs[track].pid])
+            try:
+                have = read_bag(self.bag, topics=[f"{NS}/{topic}"], decode=False).counts.get(f"{NS}/{topic}", 0)
+            except BagError:
+                have = 0
+            if have >= n:
+                return files
+            assert time.monotonic() < deadline and self.procs["plant"].poll() is None, self.log("plant")
+            time.sleep(0.1)
+
     def stop(self, name: str, sig: signal.Signals = signal.SIGINT, timeout_s: float = 20.0) -> int:
         proc = self.procs[name]
         if proc.poll() is None:
@@ -701,10 +717,13 @@ def _clean_shm(files: set[str]) -> None:
     dead participant's listening port (`fastrtps_port<N>`, shared by every writer to it)."""
     removed: set[str] = set()
     deadline = time.monotonic() + 10
-    while launcher.stale_shm(files) and time.monotonic() < deadline:
+    while set(launcher.stale_shm(files)) - removed and time.monotonic() < deadline:
         removed |= set(launcher.remove_stale_shm(files))
         time.sleep(0.2)
-    assert launcher.stale_shm(files) == [], sorted(files & _shm_now())
+    # a name removed and back again is another program's (the names are global, not per domain or per
+    # process: a second DDS session on the machine opens and closes the same ports); the dead process
+    # cannot make it again
+    assert sorted(set(launcher.stale_shm(files)) - removed) == [], sorted(files & _shm_now())
 
 
 @pytest.mark.slow
@@ -738,6 +757,9 @@ def test_filter_killed_in_real_time_the_plant_falls_back_every_step(loop_factory
     lp = loop_factory("stepping=realtime", "real_time_factor=10", "deadline_fallback=zero", "stop_timeout_s=1.0",
                       duration=100)
     files = lp.wait_states(20, track="filter") - lp.shm_before
+    # the filter answers from the first state it reads after its writers matched (under load that can
+    # be after state 20 in real time): kill it once its answers are in the bag, whenever that is
+    files |= lp.wait_count("torque_cmd", 1, track="filter") - lp.shm_before
     lp.procs["filter"].kill()
     assert lp.procs["filter"].wait(10) == -signal.SIGKILL
     assert lp.wait("plant", "recorder") == {"plant": 0, "recorder": 0}, lp.log("plant")
@@ -747,7 +769,7 @@ def test_filter_killed_in_real_time_the_plant_falls_back_every_step(loop_factory
     contents = read_bag(lp.bag, decode=False)
     assert not contents.truncated and contents.counts[f"{NS}/state"] == 101
     last = max(_stamps(lp.bag, "torque_cmd")) // S  # the dead filter's last answer
-    assert 20 <= last < 100  # killed mid-run (after 20 states, 8 s of wall time before the end)
+    assert last < 100  # killed mid-run
     assert run["deadline_misses"] >= 99 - last and run["fallback_zero"] == run["deadline_misses"]
     _clean_shm(files)
 

@@ -281,14 +281,18 @@ def stale_shm(ours: set[str]) -> list[str]:
 
 
 def remove_stale_shm(ours: set[str]) -> list[str]:
-    """Remove `stale_shm(ours)` (e.g. after a SIGKILL, which leaves Fast DDS files behind); returns them."""
-    stale = stale_shm(ours)
-    for name in stale:
+    """Remove `stale_shm(ours)` (e.g. after a SIGKILL, which leaves Fast DDS files behind); returns the
+    names that are gone now (a file that cannot be removed is not among them)."""
+    removed = []
+    for name in stale_shm(ours):
         try:
             (SHM_DIR / name).unlink()
-        except OSError:
+        except FileNotFoundError:
             pass
-    return stale
+        except OSError:
+            continue
+        removed.append(name)
+    return removed
 
 
 def _start(role: str, cmd: list[str], log_dir: Path | None, env: dict[str, str]) -> Child:
