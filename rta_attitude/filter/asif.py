@@ -29,6 +29,7 @@ from rta_attitude.constraints import ConstraintSet
 from rta_attitude.dynamics.state import STATE_SIZE
 from rta_attitude.errors import SolverError
 from rta_attitude.filter import outcome
+from rta_attitude.filter.backup import SUN_SAFE_VARIANT
 from rta_attitude.filter.pipeline import (
     RESULT_DTYPE,
     filter_many,
@@ -200,6 +201,11 @@ class AsifFilter:
         self._x1 = np.zeros((1, STATE_SIZE))
         self._u1 = np.zeros((1, 3))
         compile_kernels(cfg)
+
+    def reset(self) -> None:
+        """Forget the gatekeeper's committed plan (a new run starts; nothing else carries over)."""
+        self._ws[0]["gate"]["plan_steps"] = 0
+        self._ws[0]["gate"]["plan_law"] = SUN_SAFE_VARIANT
 
     def filter(self, x: Array, u_des: Array) -> FilterResult:
         """Filter one desired command.
