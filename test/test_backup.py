@@ -200,3 +200,16 @@ def test_recursive_feasibility_on_monte_carlo_runs(cfg: Config, states: Array) -
     covered = out.gate_steps[:, GATE_UNVERIFIED] == 0
     assert covered.sum() >= 6
     assert not np.any(out.violated_substeps[covered][:, hard])
+
+
+def test_filter_result_names_what_the_gate_did(cfg: Config, states: Array) -> None:
+    from rta_attitude.filter.asif import AsifFilter
+
+    on, off = AsifFilter(cfg), AsifFilter(config.load())
+    x = states[3]
+    assert off.filter(x, np.zeros(3)).gate == "off"
+    res = on.filter(x, np.zeros(3))
+    assert res.gate == "verified"
+    assert on._ws[0]["gate"]["plan_steps"] > 0
+    on.reset()
+    assert on._ws[0]["gate"]["plan_steps"] == 0

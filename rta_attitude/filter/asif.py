@@ -51,7 +51,8 @@ class FilterResult:
     Array fields follow `names` on their last axis (m) or are per axis of u (3): u, u_des, h, psi0,
     psi1, bc (barrier conditions at u, slack not included), slack, intervening (rows active at the
     solution), uncontrollable, box_active, lo, hi. Text fields: status ('pass', 'solved', 'fallback'),
-    fallback (the policy applied, 'non_finite_u_des', 'invalid_state' or ''), solver_status.
+    fallback (the policy applied, 'non_finite_u_des', 'invalid_state' or ''), solver_status, gate
+    (what the gatekeeper did: 'off', 'verified', 'backup', 'unverified').
     """
 
     def __init__(self, record: NDArray[np.void], policy: str) -> None:
@@ -103,6 +104,11 @@ class FilterResult:
             return self.policy if reason == outcome.POLICY_ACTED else outcome.FALLBACK_REASONS[reason]
 
         return self._text(text)
+
+    @property
+    def gate(self) -> str | NDArray[np.str_]:
+        """What the gatekeeper did (outcome.GATE_NAMES: 'off' without a backup law)."""
+        return self._text(lambda r: outcome.GATE_NAMES[int(r["gate"])])
 
     @property
     def solver_status(self) -> str | NDArray[np.str_]:

@@ -165,7 +165,9 @@ def sun_safe_error(x: Array, p: np.void, b: np.void, g: np.void) -> float:
     momentum along the sun), or with the MOMENTUM variant (g.law), the momentum mode
     (g.momentum_mode = 1): the attitude with H on the body diagonal d = sign(H_body) / sqrt(3) (each
     wheel takes |H| / sqrt(3)) turned about H to bring k_B nearest the sun (k_B . H / |H| = d_3: k_B in
-    the plane of H and r_S)."""
+    the plane of H and r_S). While H_body is more than SETTLED_ANGLE_RAD from d, dq_v := (h x d) / 2
+    (h = H_body / |H_body|) instead: the rate command then turns the body about an axis perpendicular
+    to H, which moves H_body straight towards d (first stage), then about H to the panel's roll."""
     cs, sn = sun_hill(x[12])
     T = g.target
     A = g.A
@@ -215,6 +217,14 @@ def sun_safe_error(x: Array, p: np.void, b: np.void, g: np.void) -> float:
             hx, hy, hz = Hh[0] / hn, Hh[1] / hn, Hh[2] / hn
             r3 = 1.0 / math.sqrt(3.0)
             d0, d1, d2 = math.copysign(r3, Hb0), math.copysign(r3, Hb1), math.copysign(r3, Hb2)
+            hb = math.sqrt(Hb0 * Hb0 + Hb1 * Hb1 + Hb2 * Hb2)
+            b0, b1, b2 = Hb0 / hb, Hb1 / hb, Hb2 / hb
+            c0, c1, c2 = b1 * d2 - b2 * d1, b2 * d0 - b0 * d2, b0 * d1 - b1 * d0
+            if c0 * c0 + c1 * c1 + c2 * c2 > b.settled_sin_half_angle**2 * 4.0:
+                # first stage: turn about an axis perpendicular to H only (w = -c (h x d) moves H_body
+                # straight towards d: dH_body/dt = H_body x w), so H_body does not wander on the way
+                g.dq[0], g.dq[1], g.dq[2] = 0.5 * c0, 0.5 * c1, 0.5 * c2
+                return math.sqrt(max(0.0, 1.0 - 0.25 * (c0 * c0 + c1 * c1 + c2 * c2)))
             sh = hx * cs + hy * sn  # the sun's part perpendicular to H
             ox, oy, oz = cs - sh * hx, sn - sh * hy, -sh * hz
             on = math.sqrt(ox * ox + oy * oy + oz * oz)
