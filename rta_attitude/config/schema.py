@@ -463,6 +463,12 @@ class Config:
         """A copy using another QP solver ('proxsuite' or 'active_set')."""
         return replace(self, filter=replace(self.filter, solver=solver))
 
+    def with_backup(self, law: str | None, horizon_s: float | None = None) -> Config:
+        """A copy with another gatekeeper backup law (BACKUP_LAWS) and horizon (None: keep the config's)."""
+        o = self.filter
+        return replace(self, filter=replace(o, backup_law=o.backup_law if law is None else law,
+                                            backup_horizon_s=o.backup_horizon_s if horizon_s is None else horizon_s))
+
     def with_simulator(self, simulator: str) -> Config:
         """A copy whose spacecraft is integrated by another simulator ('compiled' or 'basilisk').
 
