@@ -4,8 +4,6 @@ the default (no backup law) unchanged."""
 
 from __future__ import annotations
 
-import dataclasses
-
 import numba
 import numpy as np
 import pytest
@@ -33,9 +31,8 @@ from rta_attitude.viability.params import from_config
 Array = np.ndarray
 
 
-def with_backup(cfg: Config, law: str = "sun_safe", horizon_s: float = 120.0) -> Config:
-    return dataclasses.replace(cfg, filter=dataclasses.replace(cfg.filter, backup_law=law,
-                                                               backup_horizon_s=horizon_s))
+def with_backup(cfg: Config, law: str = "sun_safe", horizon_s: float | None = None) -> Config:
+    return cfg.with_backup(law, horizon_s)
 
 
 @pytest.fixture(scope="module")
@@ -180,7 +177,7 @@ def test_gate_never_applies_an_unverified_candidate(cfg: Config, states: Array) 
 
 
 def test_no_backup_law_leaves_the_gate_off(cfg: Config, states: Array) -> None:
-    f = filter_record(dataclasses.replace(cfg, filter=dataclasses.replace(cfg.filter, backup_law="none")))
+    f = filter_record(cfg.with_backup("none"))
     g = np.zeros(1, GATE_DTYPE)
     u = np.array([1.0, 2.0, 3.0])
     assert _gate(states[0], u, f, g) == GATE_OFF

@@ -312,7 +312,7 @@ class FilterOptions:
     `spacecraft.model`."""
     backup_law: str = "none"
     """The gatekeeper's backup law (BACKUP_LAWS); none: no gatekeeper."""
-    backup_horizon_s: float = 120.0
+    backup_horizon_s: float = 300.0
     """How far the gatekeeper simulates the backup law after the candidate's hold, s."""
 
     def __post_init__(self) -> None:

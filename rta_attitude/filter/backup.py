@@ -92,6 +92,7 @@ BACKUP_DTYPE = np.dtype([
     ("settled_rate_rad_s", np.float64),
     ("omega_max_rad_s", np.float64),
     ("psi_max_rad_s", np.float64),
+    ("momentum_variant_rad_s", np.float64),  # the MOMENTUM variant only where |J w - s D psi| / D exceeds this
 ])  # fmt: skip
 """The gatekeeper's parameters (a field of the filter's record)."""
 
@@ -134,6 +135,8 @@ def backup_record(cfg: Config) -> NDArray[np.void]:
     b["settled_sin_half_angle"] = math.sin(0.5 * SETTLED_ANGLE_RAD)
     b["settled_rate_rad_s"] = SETTLED_RATE_FRACTION * L.omega_max_rad_s
     b["omega_max_rad_s"], b["psi_max_rad_s"] = L.omega_max_rad_s, L.psi_max_rad_s
+    sc = cfg.spacecraft
+    b["momentum_variant_rad_s"] = L.psi_max_rad_s - float(np.max(sc.J)) * L.omega_max_rad_s / sc.wheel_inertia_kgm2
     return rec
 
 
@@ -340,15 +343,29 @@ def reset(g: np.void) -> None:
 
 @numba.njit(**LEAF)
 def _verify(x: Array, u: Array, candidate: bool, f: np.void, g: np.void) -> bool:
-    """Roll out from x with each variant of the backup law in turn, the committed plan's first: the
-    candidate u (candidate True) or the variant's own command at x (into u). On success the plan is
+    """Roll out from x with each variant of the backup law in turn, the committed plan's first (the
+    MOMENTUM variant only with a momentum |H| / D above psi_max - max J_a w_max / D: below it the
+    sun-safe attitude holds H and the panel charges there, where the momentum mode may drain the
+    battery into a dead end): the candidate u (candidate True) or the variant's own command at x
+    (into u). With a small momentum the rollout must reach the terminal set (SETTLED: invariant, so
+    the plan holds for good); with a large one, where the sun-safe attitude may not hold H, a horizon
+    safe to its end is accepted (HORIZON: the plan holds for the horizon only). On success the plan is
     committed (plan_law, plan_steps) and u holds the command to apply."""
     b = f.backup
+    p = f.plant
+    hh = 0.0
+    for a in range(3):
+        ha = (p.inertia_kgm2[a] * x[4 + a] - p.torque_sign * p.wheel_inertia_kgm2 * x[7 + a]) / p.wheel_inertia_kgm2
+        hh += ha * ha
+    large = math.sqrt(hh) > b.momentum_variant_rad_s
     for t in range(len(VARIANTS)):
         g.law = g.plan_law if t == 0 else 1 - g.plan_law
+        if g.law == MOMENTUM and not large:  # the sun-safe attitude holds a small momentum: charge there
+            continue
         if not candidate:
             sun_safe_command(x, f.plant, f.constraints, b, g, u)
-        if rollout(x, u, f, g, g.subs, False) != FAILED:
+        found = rollout(x, u, f, g, g.subs, False)
+        if found == SETTLED or (found == HORIZON and large):
             g.plan_law = g.law
             g.plan_steps = b.horizon_steps
             return True
@@ -366,13 +383,15 @@ def gate(x: Array, f: np.void, g: np.void, u: Array) -> int:
     if _verify(x, u, True, f, g):
         return GATE_VERIFIED
     if g.plan_steps > 0:  # the plan verified earlier: its next command is its backup law's, here
+        if _verify(x, g.u_backup, False, f, g):  # a fresh plan from here (either variant): extend
+            for a in range(3):
+                u[a] = g.u_backup[a]
+            return GATE_BACKUP
         g.law = g.plan_law
         sun_safe_command(x, f.plant, f.constraints, b, g, g.u_backup)
         g.plan_steps -= 1
         for a in range(3):
             u[a] = g.u_backup[a]
-        if g.plan_steps == 0:  # the plan's last verified sample: check the backup law afresh
-            _verify(x, g.u, False, f, g)  # (the command of the plan in force is applied all the same)
         return GATE_BACKUP
     if not _verify(x, g.u_backup, False, f, g):
         return GATE_UNVERIFIED
