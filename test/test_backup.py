@@ -102,7 +102,7 @@ def test_rollout_equals_the_plants_python_integrate(cfg: Config, states: Array) 
             u = np.array([1.0, -2.0, 0.5])
             _, traj = backup_rollout(x, u, f, variant)
             assert len(traj) >= S
-            ref = []
+            ref: list[Array] = []
             while len(ref) * S < len(traj):
                 if ref:
                     u = backup_command(x, f, variant)
