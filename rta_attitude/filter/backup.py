@@ -21,16 +21,17 @@ oracle's `sun_safe_ff` law (`viability.laws`, which tests use as the independent
 
 The check (`rollout`) of a candidate u0 at state x: hold u0 for one sample, then the backup law (its
 command at each sample, held), `integrator.substeps` RK4 steps per sample, for `backup_horizon_s`;
-every enabled, non-slacked constraint must have h >= 0 at every substep. The check passes if the
-horizon ends safe, or earlier once the state is in the terminal set (`settled`: near the sun-safe
-attitude with small rates and a wheel momentum the wheels can hold there), which the backup law keeps
-(docs/backup.md).
+every enabled, non-slacked constraint must have h >= 0 at every substep, until the state is in the
+terminal set (`settled`: near the sun-safe attitude with small rates and a wheel momentum the wheels
+can hold there), which the backup law keeps (docs/backup.md). `_verify` accepts a settled rollout,
+and, only with a large momentum (|H| / D > psi_max - max J_a w_max / D), one whose horizon ends safe;
+it tries the committed plan's variant of the law first (VARIANTS: sun-safe, momentum mode).
 
 The gate (`gate`), at each filter call with a backup law: the candidate (the ASIF's answer) passes
-the check -> apply it, commit its plan; else, if a committed plan remains -> apply the backup law (the
-plan's next command: verified at an earlier sample); else, if the backup law's own command passes
-the check -> apply it, commit; else apply the candidate unverified. The plan is the only memory of
-the filter (`GATE_DTYPE`, in the workspace).
+-> apply it, commit its plan; else, if the backup law's own command passes -> apply it, commit;
+else, if a committed plan remains -> apply its variant's command (the plan's next command: verified
+at an earlier sample); else apply the candidate unverified. The plan is the only memory of the
+filter (`GATE_DTYPE`, in the workspace).
 """
 
 from __future__ import annotations
