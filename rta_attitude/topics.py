@@ -256,12 +256,13 @@ QP_KEYS: tuple[str, ...] = (
     KEY_STATUS, "solver_status", "iterations", KEY_FALLBACK, KEY_SOLVE_TIME, KEY_PRESET,
     "u_des_x", "u_des_y", "u_des_z", "u_x", "u_y", "u_z", *(f"{KEY_BOX_ACTIVE}_{a}" for a in "xyz"),
     "calls", "fast_path", "solved", "fallbacks", "solver_failures", "backup_solves", "invalid_states",
-    INPUT_SOURCE_KEY, *INPUT_COUNTERS,
+    INPUT_SOURCE_KEY, *INPUT_COUNTERS, "gate",
 )  # fmt: skip
 """Keys of the `filter` entry: status ('pass', 'solved', 'fallback'), solver status (outcome.solve_text), iterations,
 fallback policy applied ('none' if none), solve time [s], preset, u_des and u [rad/s^2], box flags,
-the filter's running counters (core: calls .. invalid_states), the source of u_des and the node's
-input counters (INPUT_COUNTERS)."""
+the filter's running counters (core: calls .. invalid_states), the source of u_des, the node's
+input counters (INPUT_COUNTERS) and what the gatekeeper did (`filter.outcome.GATE_NAMES`: 'off'
+without a backup law)."""
 NO_FALLBACK = "none"
 KEY_SLACK, KEY_INTERVENING, KEY_SLACKED = "slack", "intervening", "slacked"
 CONSTRAINT_KEYS: tuple[str, ...] = (

@@ -270,7 +270,8 @@ def from_parameters(params: Mapping[str, Any], source: str = "<memory>") -> Conf
         eps_primal_inf=fi.number("eps_primal_inf"), eps_dual_inf=fi.number("eps_dual_inf"),
         check_tolerance=fi.number("check_tolerance"), pole_guard_rad=fi.number("pole_guard_rad"),
         soften_weight=fi.number("soften_weight"), backup_solver=fi.text("backup_solver"),
-        solver=fi.text("solver", "active_set"), model=fi.text("model", "gyrostat"))
+        solver=fi.text("solver", "active_set"), model=fi.text("model", "gyrostat"),
+        backup_law=fi.text("backup_law", "none"), backup_horizon_s=fi.number("backup_horizon_s", 300.0))
     fi.done()
     ct = root.section("controller")
     controller = ControllerGains(ct.number("kp"), ct.number("kd"))

@@ -30,6 +30,12 @@ FALLBACKS: tuple[str, ...] = ("pass_through", "hold", "soften", "raise")
 BACKUP_SOLVERS: tuple[str, ...] = ("quadprog", "none")
 SOLVERS: tuple[str, ...] = ("active_set", "proxsuite")
 CONTROLLERS: tuple[str, ...] = ("pd", "none")
+BACKUP_LAWS: tuple[str, ...] = ("none", "sun_safe")
+"""Backup laws of the gatekeeper (`filter.backup_law`): none (no gatekeeper: the ASIF's answer is
+applied); sun_safe (the filter applies its answer only if the answer then the sun-safe law are safe
+over `filter.backup_horizon_s`, else the sun-safe law of its committed plan: `filter.backup`)."""
+MAX_BACKUP_SUBSTEPS = 64
+"""integrator.substeps at most this with a backup law (the gatekeeper's scratch rows)."""
 PLANT_MODELS: tuple[str, ...] = ("gyrostat", "paper")
 """Models of the spacecraft, for the simulated plant (`spacecraft.model`) and for the filter's barriers
 (`filter.model`): gyrostat: the wheels' momentum in Euler's equations (-omega x (J omega - s D psi));
@@ -304,6 +310,10 @@ class FilterOptions:
     model: str = "gyrostat"
     """The filter's model of the spacecraft in its barriers (PLANT_MODELS); the simulated plant is
     `spacecraft.model`."""
+    backup_law: str = "none"
+    """The gatekeeper's backup law (BACKUP_LAWS); none: no gatekeeper."""
+    backup_horizon_s: float = 300.0
+    """How far the gatekeeper simulates the backup law after the candidate's hold, s."""
 
     def __post_init__(self) -> None:
         _choice("filter.model", self.model, PLANT_MODELS)
@@ -311,6 +321,8 @@ class FilterOptions:
         _choice("filter.preset", self.preset, PRESETS)
         _choice("filter.backup_solver", self.backup_solver, BACKUP_SOLVERS)
         _choice("filter.fallback", self.fallback, FALLBACKS)
+        _choice("filter.backup_law", self.backup_law, BACKUP_LAWS)
+        _positive("filter.backup_horizon_s", self.backup_horizon_s)
         _positive("filter.sample_time_s", self.sample_time_s)
         if not 0 <= self.zoh_margin < 1:
             raise ConfigError(f"filter.zoh_margin must be in [0, 1), got {self.zoh_margin!r}")
@@ -404,6 +416,9 @@ class Config:
                               f"with psi = -Omega), got {self.spacecraft.torque_sign!r}")
         if not (isinstance(self.substeps, int) and self.substeps >= 1):
             raise ConfigError(f"integrator.substeps must be an integer >= 1, got {self.substeps!r}")
+        if self.filter.backup_law != "none" and self.substeps > MAX_BACKUP_SUBSTEPS:
+            raise ConfigError(f"integrator.substeps must be <= {MAX_BACKUP_SUBSTEPS} with filter.backup_law "
+                              f"{self.filter.backup_law!r}, got {self.substeps!r}")
         for group in BARRIER_GROUPS:
             if group not in self.barriers:
                 raise ConfigError(f"constraints.{group} is missing")
@@ -447,6 +462,12 @@ class Config:
     def with_solver(self, solver: str) -> Config:
         """A copy using another QP solver ('proxsuite' or 'active_set')."""
         return replace(self, filter=replace(self.filter, solver=solver))
+
+    def with_backup(self, law: str | None, horizon_s: float | None = None) -> Config:
+        """A copy with another gatekeeper backup law (BACKUP_LAWS) and horizon (None: keep the config's)."""
+        o = self.filter
+        return replace(self, filter=replace(o, backup_law=o.backup_law if law is None else law,
+                                            backup_horizon_s=o.backup_horizon_s if horizon_s is None else horizon_s))
 
     def with_simulator(self, simulator: str) -> Config:
         """A copy whose spacecraft is integrated by another simulator ('compiled' or 'basilisk').

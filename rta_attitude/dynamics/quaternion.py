@@ -13,6 +13,8 @@ controller); `attitude_matrices` and `error_vectors` loop them over batches for 
 
 from __future__ import annotations
 
+import math
+
 import numba
 import numpy as np
 from numpy.typing import NDArray
@@ -66,6 +68,31 @@ def error_vector(q: Array, q_c: Array, out: Array) -> None:
 
 
 @numba.njit(**LEAF)
+def from_matrix(A: Array, out: Array) -> None:
+    """The unit quaternion (4,) with attitude_matrix(q) == A (a rotation matrix (3, 3)) into out, q4 >= 0
+    (Shepperd's method: the largest of q4^2, q1^2, q2^2, q3^2 is found from the diagonal first)."""
+    tr = A[0, 0] + A[1, 1] + A[2, 2]
+    i = 3
+    best = tr
+    for a in range(3):
+        if A[a, a] > best:
+            i, best = a, A[a, a]
+    if i == 3:
+        q4 = 0.5 * math.sqrt(1.0 + tr)
+        f = 0.25 / q4
+        out[0], out[1], out[2], out[3] = (A[1, 2] - A[2, 1]) * f, (A[2, 0] - A[0, 2]) * f, (A[0, 1] - A[1, 0]) * f, q4
+    else:
+        j, k = (i + 1) % 3, (i + 2) % 3
+        qi = 0.5 * math.sqrt(1.0 + 2.0 * A[i, i] - tr)
+        f = 0.25 / qi
+        out[i], out[j], out[k], out[3] = qi, (A[i, j] + A[j, i]) * f, (A[i, k] + A[k, i]) * f, (A[j, k] - A[k, j]) * f
+    n = math.sqrt(out[0] * out[0] + out[1] * out[1] + out[2] * out[2] + out[3] * out[3])
+    sign = 1.0 if out[3] >= 0.0 else -1.0
+    for a in range(4):
+        out[a] = sign * out[a] / n
+
+
+@numba.njit(**LEAF)
 def _attitude_matrices(Q: Array, out: Array) -> None:
     for k in range(Q.shape[0]):
         attitude_matrix(Q[k, 0], Q[k, 1], Q[k, 2], Q[k, 3], out[k])
@@ -102,4 +129,5 @@ def normalize(q: Array) -> Array:
     return q / np.linalg.norm(q, axis=-1, keepdims=True)
 
 
-__all__ = ["attitude_matrices", "attitude_matrix", "error_vector", "error_vectors", "normalize", "product"]
+__all__ = ["attitude_matrices", "attitude_matrix", "error_vector", "error_vectors", "from_matrix", "normalize",
+           "product"]

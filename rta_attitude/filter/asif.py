@@ -29,6 +29,7 @@ from rta_attitude.constraints import ConstraintSet
 from rta_attitude.dynamics.state import STATE_SIZE
 from rta_attitude.errors import SolverError
 from rta_attitude.filter import outcome
+from rta_attitude.filter.backup import SUN_SAFE_VARIANT
 from rta_attitude.filter.pipeline import (
     RESULT_DTYPE,
     filter_many,
@@ -50,7 +51,8 @@ class FilterResult:
     Array fields follow `names` on their last axis (m) or are per axis of u (3): u, u_des, h, psi0,
     psi1, bc (barrier conditions at u, slack not included), slack, intervening (rows active at the
     solution), uncontrollable, box_active, lo, hi. Text fields: status ('pass', 'solved', 'fallback'),
-    fallback (the policy applied, 'non_finite_u_des', 'invalid_state' or ''), solver_status.
+    fallback (the policy applied, 'non_finite_u_des', 'invalid_state' or ''), solver_status, gate
+    (what the gatekeeper did: 'off', 'verified', 'backup', 'unverified').
     """
 
     def __init__(self, record: NDArray[np.void], policy: str) -> None:
@@ -102,6 +104,11 @@ class FilterResult:
             return self.policy if reason == outcome.POLICY_ACTED else outcome.FALLBACK_REASONS[reason]
 
         return self._text(text)
+
+    @property
+    def gate(self) -> str | NDArray[np.str_]:
+        """What the gatekeeper did (outcome.GATE_NAMES: 'off' without a backup law)."""
+        return self._text(lambda r: outcome.GATE_NAMES[int(r["gate"])])
 
     @property
     def solver_status(self) -> str | NDArray[np.str_]:
@@ -200,6 +207,11 @@ class AsifFilter:
         self._x1 = np.zeros((1, STATE_SIZE))
         self._u1 = np.zeros((1, 3))
         compile_kernels(cfg)
+
+    def reset(self) -> None:
+        """Forget the gatekeeper's committed plan (a new run starts; nothing else carries over)."""
+        self._ws[0]["gate"]["plan_steps"] = 0
+        self._ws[0]["gate"]["plan_law"] = SUN_SAFE_VARIANT
 
     def filter(self, x: Array, u_des: Array) -> FilterResult:
         """Filter one desired command.

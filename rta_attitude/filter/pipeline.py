@@ -11,6 +11,9 @@ Carlo), with the QP solver as a pluggable step.
                when chosen); every answer is checked against the rows
     fallback   a failed QP: `pass_through` (u0), `hold` (u = 0 clipped to the box), `soften` (the QP
                again with every row slacked; u0 if that fails too) or `raise` (flagged; Python raises)
+    gate       with a backup law (`filter.backup_law`): the gatekeeper (`filter.backup`) applies u only
+               if u held for a sample, then the backup law, is safe over the horizon on the filter's
+               model; else the backup law of its committed plan (the workspace keeps the plan)
     finish     BC_i at the final u, which box bounds clipped u
 
 Parameters travel as one FILTER_DTYPE record (the filter's plant model, the constraints, the
@@ -33,9 +36,11 @@ from rta_attitude.constraints.rows import rows
 from rta_attitude.dynamics.spacecraft import PLANT_DTYPE, plant_record
 from rta_attitude.dynamics.state import STATE_SIZE
 from rta_attitude.filter import active_set, outcome, proxsuite_qp
+from rta_attitude.filter.backup import BACKUP_DTYPE, GATE_DTYPE, backup_record, gate
 from rta_attitude.filter.outcome import (
     ACTIVE_SET,
     FALLBACK,
+    GATE_OFF,
     HOLD,
     INVALID_STATE,
     NO_FALLBACK,
@@ -75,6 +80,7 @@ FILTER_DTYPE = np.dtype([
     ("eps_dual_inf", np.float64),
     ("max_iterations", np.int64),
     ("max_inner_iterations", np.int64),
+    ("backup", BACKUP_DTYPE),                # the gatekeeper (backup law NO_LAW: off)
 ])  # fmt: skip
 """Everything one filter call reads, by name."""
 
@@ -99,6 +105,7 @@ RESULT_DTYPE = np.dtype([
     ("soft_result", np.int8),                # the soften fallback's QP, NOT_SOLVED if none
     ("qp_failed", np.uint8),                 # the first QP failed (the policy acted)
     ("raise_error", np.uint8),               # policy `raise` and the QP failed: Python raises
+    ("gate", np.int8),                       # outcome.GATE_NAMES code: what the gatekeeper did
     ("iterations", np.int64),                # solver iterations of every solve of the call
     ("solve_time_s", np.float64),            # wall time of the whole call (set by the Python face)
 ])  # fmt: skip
@@ -110,6 +117,7 @@ WORKSPACE_DTYPE = np.dtype([
     ("x", np.float64, (STATE_SIZE,)),        # the state, quaternion normalised
     ("u_target", np.float64, (3,)),          # u_des with non-finite entries set to 0
     ("gnorm", np.float64, (M,)),             # |dBC/du| of each row
+    ("gate", GATE_DTYPE),                    # the gatekeeper's committed plan and scratch (memory!)
 ])  # fmt: skip
 
 
@@ -127,11 +135,12 @@ def filter_record(cfg: Config) -> NDArray[np.void]:
     f["max_active_set_iter"] = active_set.MAX_ACTIVE_SET_ITER
     f["eps_abs"], f["eps_primal_inf"], f["eps_dual_inf"] = o.eps_abs, o.eps_primal_inf, o.eps_dual_inf
     f["max_iterations"], f["max_inner_iterations"] = o.max_iterations, o.max_inner_iterations
+    f["backup"] = backup_record(cfg)[0]
     return rec
 
 
 def new_workspace() -> NDArray[np.void]:
-    """A workspace record array (1,)."""
+    """A workspace record array (1,): scratch, and the gatekeeper's plan (none yet)."""
     return np.zeros(1, WORKSPACE_DTYPE)
 
 
@@ -359,6 +368,7 @@ def filter_state(x: Array, u_des: Array, f: np.void, ws: np.void, r: np.void) ->
     r.solve_result = r.backup_result = r.soft_result = NOT_SOLVED
     r.qp_failed = r.raise_error = 0
     r.iterations = 0
+    r.gate = GATE_OFF
     valid, finite_des, need = prepare(x, u_des, f, ws, r)
     if not valid:
         # no barrier can be trusted: the wheels hold their speed (u = 0), keeping the body rates
@@ -372,6 +382,7 @@ def filter_state(x: Array, u_des: Array, f: np.void, ws: np.void, r: np.void) ->
         r.u[a] = min(max(ws.u_target[a], t.lo[a]), t.hi[a])
     if not need:
         r.status, r.fallback = PASS, NO_FALLBACK
+        r.gate = gate(ws.x, f, ws.gate, r.u)
         finish(ws, r)
         return
     C, lower, upper, z0, row_of, slack_var, scale = assemble(f, ws, False)
@@ -396,6 +407,7 @@ def filter_state(x: Array, u_des: Array, f: np.void, ws: np.void, r: np.void) ->
         extract(z, mult, row_of, slack_var, scale, ws, r)
     r.fallback = reason
     r.status = FALLBACK if reason != NO_FALLBACK else SOLVED
+    r.gate = gate(ws.x, f, ws.gate, r.u)
     finish(ws, r)
 
 

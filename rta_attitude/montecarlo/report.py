@@ -16,6 +16,7 @@ from rta_attitude.config.schema import CONSTRAINT_NAMES, Config
 from rta_attitude.constraints import ConstraintSet
 from rta_attitude.dynamics.state import STATE_NAMES
 from rta_attitude.files import atomic, output_dir, write_text
+from rta_attitude.filter.outcome import GATE_BACKUP, GATE_NAMES, GATE_UNVERIFIED
 from rta_attitude.montecarlo.classify import UNRECOVERABLE_RULES
 from rta_attitude.montecarlo.runner import BatchOutcome
 from rta_attitude.simulation.metrics import H_UNITS
@@ -120,6 +121,11 @@ def summary(result: MonteCarloResult) -> dict[str, Any]:
             "runs_with_qp_failure": int((o.qp_failures > 0).sum()),
             "fallback_policy": result.cfg.filter.fallback,
             "solver": result.cfg.filter.solver,
+            "backup_law": result.cfg.filter.backup_law,
+            "backup_horizon_s": result.cfg.filter.backup_horizon_s,
+            "gate_state_steps": {name: int(o.gate_steps[:, i].sum()) for i, name in enumerate(GATE_NAMES)},
+            "runs_with_backup": int((o.gate_steps[:, GATE_BACKUP] > 0).sum()),
+            "runs_with_unverified": int((o.gate_steps[:, GATE_UNVERIFIED] > 0).sum()),
         },
         "setup": {
             "runs": len(failed), "duration_s": result.duration_s, "seed": result.seed,
@@ -175,6 +181,11 @@ def format_table(s: dict[str, Any]) -> str:
     lines.append(f"filter: QP in {f['qp_share']:.1%} of state-steps, {f['qp_failures']} QP failures in "
                  f"{f['runs_with_qp_failure']} runs, {f['fallback_state_steps']} fallback steps "
                  f"({f['fallback_policy']}) in {f['runs_with_fallback']} runs; solver {f['solver']}")
+    if f["backup_law"] != "none":
+        g = f["gate_state_steps"]
+        lines.append(f"gatekeeper ({f['backup_law']}, {f['backup_horizon_s']:g} s): {g['verified']} verified, "
+                     f"{g['backup']} backup steps in {f['runs_with_backup']} runs, {g['unverified']} unverified "
+                     f"in {f['runs_with_unverified']} runs")
     return "\n".join(lines)
 
 
@@ -191,7 +202,7 @@ def write_outputs(result: MonteCarloResult, out: Path, plot: bool = True) -> dic
                             **{k: getattr(o, k) for k in ("violated_samples", "violated_substeps",
                                                           "first_violation_s", "min_h_samples", "qp_steps",
                                                           "fallback_steps", "qp_failures", "max_comm_slack",
-                                                          "x_final")})
+                                                          "gate_steps", "x_final")})
     failed = result.failed()
     failed_sub = result.failed(substeps=True)
     with atomic(paths["csv"]) as tmp, tmp.open("w", newline="") as fh:

@@ -40,7 +40,8 @@ from rta_attitude.dynamics.sensors import INSTRUMENT_DTYPE, measure
 from rta_attitude.dynamics.spacecraft import RK4_WORK_ROWS
 from rta_attitude.dynamics.state import STATE_SIZE
 from rta_attitude.errors import RtaError
-from rta_attitude.filter.outcome import FALLBACK, PASS
+from rta_attitude.filter.backup import reset
+from rta_attitude.filter.outcome import FALLBACK, GATE_NAMES, PASS
 from rta_attitude.filter.pipeline import RESULT_DTYPE, WORKSPACE_DTYPE
 from rta_attitude.jit import JIT, LEAF
 from rta_attitude.montecarlo import DEFAULT_CHUNK_RUNS
@@ -64,6 +65,8 @@ class BatchOutcome:
         qp_steps, fallback_steps, qp_failures: (N,) steps that needed the QP, that ended in the
             fallback, and whose first QP failed.
         max_comm_slack: (N,) largest |delta| of the slacked constraints (rad for communication).
+        gate_steps: (N, len(GATE_NAMES)) steps by what the gatekeeper did (all 'off' without a
+            backup law; `filter.outcome.GATE_NAMES`).
         x_final: (N, 19) state at the end.
         trajectory: (N, steps + 1, 19) states at the samples if recorded, else None.
     """
@@ -76,6 +79,7 @@ class BatchOutcome:
     fallback_steps: NDArray[np.int64]
     qp_failures: NDArray[np.int64]
     max_comm_slack: Array
+    gate_steps: NDArray[np.int64]
     x_final: Array
     trajectory: Array | None = None
 
@@ -95,8 +99,8 @@ def _mark(h: Array, t: float, sample: bool, k: int, viol_s: NDArray[np.bool_], v
 @numba.njit(**JIT)
 def run_batch(X0: Array, steps: int, loop: NDArray[np.void], viol_s: NDArray[np.bool_],
               viol_sub: NDArray[np.bool_], first: Array, min_h: Array, qp_steps: NDArray[np.int64],
-              fb_steps: NDArray[np.int64], qp_fail: NDArray[np.int64], max_slack: Array, x_final: Array,
-              traj: Array, record: bool, first_run: int) -> None:
+              fb_steps: NDArray[np.int64], qp_fail: NDArray[np.int64], max_slack: Array,
+              gate_steps: NDArray[np.int64], x_final: Array, traj: Array, record: bool, first_run: int) -> None:
     """Run every initial state X0 (N, 19) for `steps` samples with u_des = 0; outputs with a leading N
     (see BatchOutcome; traj (N, steps + 1, 19) is filled only if record). Run k of X0 has the sensors'
     noise sequence first_run + k (its index in the campaign)."""
@@ -126,6 +130,7 @@ def run_batch(X0: Array, steps: int, loop: NDArray[np.void], viol_s: NDArray[np.
         ins[0].started = 0
         for a in range(3):
             ins[0].u_end[a] = 0.0
+        reset(ws[0].gate)  # each run starts without a committed plan
         if record:
             traj[k, 0] = x
         for i in range(M):
@@ -146,6 +151,7 @@ def run_batch(X0: Array, steps: int, loop: NDArray[np.void], viol_s: NDArray[np.
             if status == FALLBACK:
                 fb_steps[k] += 1
             qp_fail[k] += r[0].qp_failed
+            gate_steps[k, r[0].gate] += 1
             for i in range(M):
                 if slacked[i] and abs(r[0].slack[i]) > max_slack[k]:
                     max_slack[k] = abs(r[0].slack[i])
@@ -165,7 +171,8 @@ def run_batch(X0: Array, steps: int, loop: NDArray[np.void], viol_s: NDArray[np.
 def _new_outcome(N: int, steps: int, record: bool) -> BatchOutcome:
     return BatchOutcome(np.zeros((N, M), dtype=bool), np.zeros((N, M), dtype=bool), np.full((N, M), np.nan),
                         np.full((N, M), np.inf), np.zeros(N, dtype=np.int64), np.zeros(N, dtype=np.int64),
-                        np.zeros(N, dtype=np.int64), np.zeros(N), np.empty((N, STATE_SIZE)),
+                        np.zeros(N, dtype=np.int64), np.zeros(N), np.zeros((N, len(GATE_NAMES)), dtype=np.int64),
+                        np.empty((N, STATE_SIZE)),
                         np.empty((N, steps + 1, STATE_SIZE)) if record else None)
 
 
@@ -193,7 +200,7 @@ def run_runs(cfg: Config, x0: Array, duration_s: float, record: bool = False,
         b = min(a + PROGRESS_RUNS, N)
         run_batch(x0[a:b], steps, loop, out.violated_samples[a:b], out.violated_substeps[a:b],
                   out.first_violation_s[a:b], out.min_h_samples[a:b], out.qp_steps[a:b], out.fallback_steps[a:b],
-                  out.qp_failures[a:b], out.max_comm_slack[a:b], out.x_final[a:b],
+                  out.qp_failures[a:b], out.max_comm_slack[a:b], out.gate_steps[a:b], out.x_final[a:b],
                   traj[a:b] if record else traj, record, first_run + a)
         if progress is not None:
             progress(b)
@@ -232,6 +239,7 @@ def run_runs_stepped(cfg: Config, x0: Array, duration_s: float, plant: Callable[
     is_sample[::S] = True
     for k in range(N):
         scenario = Scenario(name="montecarlo", description="", duration_s=steps * dt, x0=x0[k], controller="none")
+        filt.reset()
         with build(cfg, x0[k]) as p:
             run = run_stepped(cfg, scenario, steps, p, filt, stream=first_run + k)
         h = np.empty((steps * S + 1, M))
@@ -248,6 +256,7 @@ def run_runs_stepped(cfg: Config, x0: Array, duration_s: float, plant: Callable[
         out.qp_steps[k] = np.count_nonzero(status != PASS)
         out.fallback_steps[k] = np.count_nonzero(status == FALLBACK)
         out.qp_failures[k] = int(run.results["qp_failed"].sum())
+        out.gate_steps[k] = np.bincount(run.results["gate"], minlength=len(GATE_NAMES))
         if slacked.any():
             out.max_comm_slack[k] = float(np.fmax.reduce(np.abs(run.results["slack"][:, slacked]), axis=None,
                                                          initial=0.0))

@@ -1,0 +1,465 @@
+"""The gatekeeper: the filter applies its answer only while a verified way out exists (recursive
+feasibility), after Agrawal & Panagou 2023 ("gatekeeper") and the backup-CBF idea. Compiled; the
+plant's own derivative, saturation, torque interface and RK4 (`dynamics.spacecraft`) and the safety
+values (`constraints.rows.safety_values`) on the filter's model of the plant (`f.plant`).
+
+The backup law (`sun_safe_command`): towards the sun-safe attitude, rows of A in Hill
+
+    k_B = r_S (the +k_B panel on the sun),   j_B = (r_E - (r_E . r_S) r_S) / |...| (the antenna on the
+    Earth side; z_Hill x r_S at a Sun-Earth conjunction),   i_B = j_B x k_B (the sensor perpendicular
+    to the sun; the -j_B face sees neither the sun nor the Earth),
+
+a rate command w_ref = clip(-(kp/kd) dq_v, +-RATE_LIMIT_FRACTION w_max) (dq = q (x) q_c^-1 with
+dq4 >= 0, kp, kd the primary controller's gains) tracked by a first-order rate loop with the plant's
+drift cancelled:
+
+    u_a = clip(((w_ref_a - w_a) / RATE_TIME_CONSTANT_S - w_dot_drift_a) / (d w_dot_a / d u_a), +-U_a),
+
+w_dot_drift = `omega_drift` of the filter's model (Euler, the wheels' gyroscopic term -w x (-s D psi),
+gravity gradient if on): the gyroscopic feed-forward of w x H, H = J w - s D psi, of the viability
+oracle's `sun_safe_ff` law (`viability.laws`, which tests use as the independent twin).
+
+The check (`rollout`) of a candidate u0 at state x: hold u0 for one sample, then the backup law (its
+command at each sample, held), `integrator.substeps` RK4 steps per sample, for `backup_horizon_s`;
+every enabled, non-slacked constraint must have h >= 0 at every substep, until the state is in the
+terminal set (`settled`: near the sun-safe attitude with small rates and a wheel momentum the wheels
+can hold there), which the backup law keeps (docs/backup.md). `_verify` accepts a settled rollout,
+and, only with a large momentum (|H| / D > psi_max - max J_a w_max / D), one whose horizon ends safe;
+it tries the committed plan's variant of the law first (VARIANTS: sun-safe, momentum mode).
+
+The gate (`gate`), at each filter call with a backup law: the candidate (the ASIF's answer) passes
+-> apply it, commit its plan; else, if the backup law's own command passes -> apply it, commit;
+else, if a committed plan remains -> apply its variant's command (the plan's next command: verified
+at an earlier sample); else apply the candidate unverified. The plan is the only memory of the
+filter (`GATE_DTYPE`, in the workspace).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+from numpy.typing import NDArray
+
+from rta_attitude.config.schema import BACKUP_LAWS, MAX_BACKUP_SUBSTEPS, Config
+from rta_attitude.constraints.base import N_CONSTRAINTS
+from rta_attitude.constraints.geometry import CONTEXT_DTYPE
+from rta_attitude.constraints.rows import safety_values
+from rta_attitude.dynamics.quaternion import attitude_matrix, error_vector, from_matrix
+from rta_attitude.dynamics.spacecraft import (
+    EARTH_HILL,
+    RK4_WORK_ROWS,
+    omega_drift,
+    rk4_hold,
+    saturate,
+    sun_hill,
+    torque_round_trip,
+)
+from rta_attitude.dynamics.state import STATE_SIZE
+from rta_attitude.filter.outcome import GATE_BACKUP, GATE_OFF, GATE_UNVERIFIED, GATE_VERIFIED
+from rta_attitude.jit import LEAF
+
+Array = NDArray[np.float64]
+M = N_CONSTRAINTS
+
+NO_LAW, SUN_SAFE = (BACKUP_LAWS.index(n) for n in ("none", "sun_safe"))
+"""Codes of the backup laws (`filter.backup_law`)."""
+RATE_LIMIT_FRACTION = 0.7
+"""The backup law commands |w_ref_a| <= this fraction of w_max."""
+RATE_TIME_CONSTANT_S = 2.0
+"""Time constant of the backup law's rate loop, s."""
+SETTLED_ANGLE_RAD = math.radians(5.0)
+"""Terminal set: attitude error to the sun-safe attitude at most this, ..."""
+SETTLED_RATE_FRACTION = 0.1
+"""... every body rate at most this fraction of w_max, ..."""
+# ... and every wheel can hold its share of the momentum at rest there (`_wheel_load`).
+VARIANTS = ("sun_safe", "momentum")
+"""The backup law's variants: the sun-safe attitude (the momentum mode where the wheels could not hold
+the momentum there), the momentum mode always. The gatekeeper tries the committed plan's first."""
+SUN_SAFE_VARIANT, MOMENTUM = range(len(VARIANTS))
+FAILED, HORIZON, SETTLED = 0, 1, 2
+"""What a rollout found: a violation; the horizon safe; the terminal set reached, safe till then."""
+
+BACKUP_DTYPE = np.dtype([
+    ("law", np.int8),                    # BACKUP_LAWS code (NO_LAW: no gatekeeper)
+    ("horizon_steps", np.int64),         # samples of the backup law after the candidate's hold
+    ("substeps", np.int64),              # RK4 steps per sample (integrator.substeps)
+    ("kp", np.float64),                  # attitude gain of the rate command (controller.kp)
+    ("kd", np.float64),                  # rate gain (controller.kd): w_ref = -(kp / kd) dq_v
+    ("rate_limit_rad_s", np.float64),    # |w_ref_a| <= this
+    ("rate_time_constant_s", np.float64),
+    ("settled_sin_half_angle", np.float64),
+    ("settled_rate_rad_s", np.float64),
+    ("omega_max_rad_s", np.float64),
+    ("psi_max_rad_s", np.float64),
+    ("momentum_variant_rad_s", np.float64),  # the MOMENTUM variant only where |J w - s D psi| / D exceeds this
+])  # fmt: skip
+"""The gatekeeper's parameters (a field of the filter's record)."""
+
+GATE_DTYPE = np.dtype([
+    ("plan_steps", np.int64),            # samples the committed plan is still verified for (0: none)
+    ("checked", np.int64),               # substeps the last rollout checked
+    ("x", np.float64, (STATE_SIZE,)),    # the rollout's state at the samples
+    ("u", np.float64, (3,)),             # the command of the rollout's sample
+    ("us", np.float64, (3,)),            # the command across the torque interface, saturated
+    ("u_backup", np.float64, (3,)),      # the backup law's command at the filter's state
+    ("h", np.float64, (M,)),
+    ("subs", np.float64, (MAX_BACKUP_SUBSTEPS, STATE_SIZE)),
+    ("work", np.float64, (RK4_WORK_ROWS, STATE_SIZE)),
+    ("ctx", CONTEXT_DTYPE),
+    ("A", np.float64, (3, 3)),
+    ("target", np.float64, (3, 3)),      # the sun-safe attitude, rows i_B, j_B, k_B in Hill
+    ("Hh", np.float64, (3,)),            # the body's angular momentum J w - s D psi in Hill, N m s
+    ("load", np.float64),                # `_wheel_load` of the sun-safe target
+    ("momentum_mode", np.uint8),         # 1: the target is the momentum mode's
+    ("law", np.uint8),                   # the variant the rollout and the command use (VARIANTS)
+    ("plan_law", np.uint8),              # the variant of the committed plan
+    ("q_c", np.float64, (4,)),
+    ("dq", np.float64, (3,)),
+    ("wd", np.float64, (3,)),
+])  # fmt: skip
+"""The gatekeeper's memory (plan_steps) and scratch (one per filter workspace)."""
+
+
+def backup_record(cfg: Config) -> NDArray[np.void]:
+    """The BACKUP_DTYPE record (1,) of a configuration."""
+    rec = np.zeros(1, BACKUP_DTYPE)
+    b = rec[0]
+    o, L = cfg.filter, cfg.limits
+    b["law"] = BACKUP_LAWS.index(o.backup_law)
+    b["horizon_steps"] = max(1, round(o.backup_horizon_s / o.sample_time_s))
+    b["substeps"] = cfg.substeps
+    b["kp"], b["kd"] = cfg.controller.kp, cfg.controller.kd
+    b["rate_limit_rad_s"] = RATE_LIMIT_FRACTION * L.omega_max_rad_s
+    b["rate_time_constant_s"] = RATE_TIME_CONSTANT_S
+    b["settled_sin_half_angle"] = math.sin(0.5 * SETTLED_ANGLE_RAD)
+    b["settled_rate_rad_s"] = SETTLED_RATE_FRACTION * L.omega_max_rad_s
+    b["omega_max_rad_s"], b["psi_max_rad_s"] = L.omega_max_rad_s, L.psi_max_rad_s
+    sc = cfg.spacecraft
+    b["momentum_variant_rad_s"] = L.psi_max_rad_s - float(np.max(sc.J)) * L.omega_max_rad_s / sc.wheel_inertia_kgm2
+    return rec
+
+
+# ----------------------------------------------------------------------------- the backup law
+
+
+@numba.njit(**LEAF)
+def _wheel_load(T: Array, Hh: Array, p: np.void, b: np.void) -> float:
+    """The largest wheel speed the momentum Hh (Hill, 3) needs at rest in the attitude T (rows i_B, j_B,
+    k_B in Hill), plus J_a w_max / D (the rates the law may still command), minus psi_max: > 0 means the
+    wheels cannot hold it."""
+    worst = -np.inf
+    for a in range(3):
+        ha = abs(T[a, 0] * Hh[0] + T[a, 1] * Hh[1] + T[a, 2] * Hh[2])
+        v = (ha + p.inertia_kgm2[a] * b.omega_max_rad_s) / p.wheel_inertia_kgm2
+        worst = max(worst, v)
+    return worst - b.psi_max_rad_s
+
+
+@numba.njit(**LEAF)
+def sun_safe_error(x: Array, p: np.void, b: np.void, g: np.void) -> float:
+    """dq_v (3,) into g.dq of the state x (19,) towards the sun-safe attitude, sign fixed so that dq4 >= 0
+    (g.target, g.q_c, g.A, g.Hh filled); returns dq4.
+
+    The sun-safe attitude has k_B = r_S; its roll about r_S puts j_B on the Earth side, unless the
+    wheels could not hold the body's momentum H there at rest (`_wheel_load` > 0): then i_B, j_B lie
+    at 45 deg to H's part perpendicular to the sun (each wheel takes 1/sqrt(2) of it), the one of the
+    four such rolls with j_B nearest the Earth. If the wheels could not hold H there either (a large
+    momentum along the sun), or with the MOMENTUM variant (g.law), the momentum mode
+    (g.momentum_mode = 1): the attitude with H on the body diagonal d = sign(H_body) / sqrt(3) (each
+    wheel takes |H| / sqrt(3)) turned about H to bring k_B nearest the sun (k_B . H / |H| = d_3: k_B in
+    the plane of H and r_S). While H_body is more than SETTLED_ANGLE_RAD from d, dq_v := (h x d) / 2
+    (h = H_body / |H_body|) instead: the rate command then turns the body about an axis perpendicular
+    to H, which moves H_body straight towards d (first stage), then about H to the panel's roll."""
+    cs, sn = sun_hill(x[12])
+    T = g.target
+    A = g.A
+    attitude_matrix(x[0], x[1], x[2], x[3], A)
+    s, D = p.torque_sign, p.wheel_inertia_kgm2
+    Hb0 = p.inertia_kgm2[0] * x[4] - s * D * x[7]
+    Hb1 = p.inertia_kgm2[1] * x[5] - s * D * x[8]
+    Hb2 = p.inertia_kgm2[2] * x[6] - s * D * x[9]
+    for c in range(3):  # H in Hill: A^T H_body
+        g.Hh[c] = A[0, c] * Hb0 + A[1, c] * Hb1 + A[2, c] * Hb2
+    ex, ey, ez = EARTH_HILL
+    d = ex * cs + ey * sn
+    jx, jy, jz = ex - d * cs, ey - d * sn, ez
+    n = math.sqrt(jx * jx + jy * jy + jz * jz)
+    if n < 1e-6:  # conjunction: z_Hill x r_S
+        jx, jy, jz, n = -sn, cs, 0.0, 1.0
+    jx, jy, jz = jx / n, jy / n, jz / n
+    T[1, 0], T[1, 1], T[1, 2] = jx, jy, jz
+    T[2, 0], T[2, 1], T[2, 2] = cs, sn, 0.0
+    T[0, 0], T[0, 1], T[0, 2] = jy * 0.0 - jz * sn, jz * cs - jx * 0.0, jx * sn - jy * cs  # j x k
+    if _wheel_load(T, g.Hh, p, b) > 0.0:
+        Hh = g.Hh
+        hk = Hh[0] * cs + Hh[1] * sn
+        px, py, pz = Hh[0] - hk * cs, Hh[1] - hk * sn, Hh[2]
+        hp = math.sqrt(px * px + py * py + pz * pz)
+        if hp > 0.0:
+            px, py, pz = px / hp, py / hp, pz / hp
+            mx, my, mz = sn * pz, -cs * pz, cs * py - sn * px  # k x h
+            best = -np.inf
+            ux = uy = uz = 0.0
+            r = 1.0 / math.sqrt(2.0)
+            for sa, sb in ((1.0, 1.0), (1.0, -1.0), (-1.0, 1.0), (-1.0, -1.0)):
+                ix, iy, iz = r * (sa * px + sb * mx), r * (sa * py + sb * my), r * (sa * pz + sb * mz)
+                # j = k x i
+                cx, cy, cz = sn * iz, -cs * iz, cs * iy - sn * ix
+                e = cx * ex + cy * ey + cz * ez
+                if e > best:
+                    best, ux, uy, uz = e, ix, iy, iz
+            T[0, 0], T[0, 1], T[0, 2] = ux, uy, uz
+            T[1, 0], T[1, 1], T[1, 2] = sn * uz, -cs * uz, cs * uy - sn * ux
+    g.load = _wheel_load(T, g.Hh, p, b)
+    g.momentum_mode = 1 if (g.law == MOMENTUM or g.load > 0.0) else 0
+    if g.momentum_mode:  # H_body on the body diagonal d, the panel as near the sun as that allows
+        Hh = g.Hh
+        hn = math.sqrt(Hh[0] * Hh[0] + Hh[1] * Hh[1] + Hh[2] * Hh[2])
+        if hn > 0.0:
+            hx, hy, hz = Hh[0] / hn, Hh[1] / hn, Hh[2] / hn
+            r3 = 1.0 / math.sqrt(3.0)
+            d0, d1, d2 = math.copysign(r3, Hb0), math.copysign(r3, Hb1), math.copysign(r3, Hb2)
+            hb = math.sqrt(Hb0 * Hb0 + Hb1 * Hb1 + Hb2 * Hb2)
+            b0, b1, b2 = Hb0 / hb, Hb1 / hb, Hb2 / hb
+            c0, c1, c2 = b1 * d2 - b2 * d1, b2 * d0 - b0 * d2, b0 * d1 - b1 * d0
+            if c0 * c0 + c1 * c1 + c2 * c2 > b.settled_sin_half_angle**2 * 4.0:
+                # first stage: turn about an axis perpendicular to H only (w = -c (h x d) moves H_body
+                # straight towards d: dH_body/dt = H_body x w), so H_body does not wander on the way
+                g.dq[0], g.dq[1], g.dq[2] = 0.5 * c0, 0.5 * c1, 0.5 * c2
+                return math.sqrt(max(0.0, 1.0 - 0.25 * (c0 * c0 + c1 * c1 + c2 * c2)))
+            sh = hx * cs + hy * sn  # the sun's part perpendicular to H
+            ox, oy, oz = cs - sh * hx, sn - sh * hy, -sh * hz
+            on = math.sqrt(ox * ox + oy * oy + oz * oz)
+            if on < 1e-9:  # H along the sun: any perpendicular direction
+                ox, oy, oz, on = -hy, hx, 0.0, math.sqrt(hx * hx + hy * hy)
+                if on < 1e-9:
+                    ox, oy, oz, on = 1.0, 0.0, 0.0, 1.0
+            ox, oy, oz = ox / on, oy / on, oz / on
+            ck = math.sqrt(1.0 - d2 * d2)
+            kx, ky, kz = d2 * hx + ck * ox, d2 * hy + ck * oy, d2 * hz + ck * oz  # k . h = d2
+            vx, vy, vz = hx - d2 * kx, hy - d2 * ky, hz - d2 * kz  # = d0 i + d1 j, |v| = ck
+            vx, vy, vz = vx / ck, vy / ck, vz / ck
+            wx, wy, wz = ky * vz - kz * vy, kz * vx - kx * vz, kx * vy - ky * vx  # k x v
+            al, be = d0 / ck, -d1 / ck
+            ix, iy, iz = al * vx + be * wx, al * vy + be * wy, al * vz + be * wz
+            T[0, 0], T[0, 1], T[0, 2] = ix, iy, iz
+            T[1, 0], T[1, 1], T[1, 2] = ky * iz - kz * iy, kz * ix - kx * iz, kx * iy - ky * ix  # k x i
+            T[2, 0], T[2, 1], T[2, 2] = kx, ky, kz
+    from_matrix(T, g.q_c)
+    q, c = x, g.q_c
+    error_vector(q[0:4], c, g.dq)
+    dq4 = q[3] * c[3] + q[0] * c[0] + q[1] * c[1] + q[2] * c[2]
+    if dq4 < 0.0:
+        dq4 = -dq4
+        for a in range(3):
+            g.dq[a] = -g.dq[a]
+    return dq4
+
+
+@numba.njit(**LEAF)
+def sun_safe_command(x: Array, p: np.void, c: np.void, b: np.void, g: np.void, out: Array) -> None:
+    """The backup law's command (3,) at state x (19,) into out, rad/s^2, inside U; p the plant model
+    (PLANT_DTYPE), c the constraints (the box U), b the BACKUP_DTYPE record, g GATE_DTYPE scratch."""
+    sun_safe_error(x, p, b, g)
+    omega_drift(x, g.A, p, g.wd)
+    lim = b.rate_limit_rad_s
+    for a in range(3):
+        w_ref = -(b.kp / b.kd) * g.dq[a]
+        w_ref = -lim if w_ref < -lim else (lim if w_ref > lim else w_ref)
+        v = ((w_ref - x[4 + a]) / b.rate_time_constant_s - g.wd[a]) / p.control_gain[a]
+        m = c.u_max_rad_s2[a]
+        out[a] = -m if v < -m else (m if v > m else v)
+
+
+@numba.njit(**LEAF)
+def settled(x: Array, p: np.void, b: np.void, g: np.void) -> bool:
+    """x (19,) is in the backup law's terminal set: within SETTLED_ANGLE_RAD of the sun-safe attitude,
+    every body rate within SETTLED_RATE_FRACTION w_max, and the wheels can hold the momentum at rest
+    there (`_wheel_load` <= 0). Never in the momentum mode (the panel may not charge enough and the sun
+    moves on: its rollouts run the whole horizon)."""
+    sun_safe_error(x, p, b, g)
+    dq = g.dq
+    if math.sqrt(dq[0] * dq[0] + dq[1] * dq[1] + dq[2] * dq[2]) > b.settled_sin_half_angle:
+        return False
+    for a in range(3):
+        if abs(x[4 + a]) > b.settled_rate_rad_s:
+            return False
+    if g.momentum_mode:  # not a terminal set: the panel may not charge, the sun moves on
+        return False
+    return g.load <= 0.0
+
+
+# ----------------------------------------------------------------------------- the check
+
+
+@numba.njit(**LEAF)
+def rollout(x0: Array, u0: Array, f: np.void, g: np.void, traj: Array, record: bool) -> int:
+    """Check candidate u0 (3,) at state x0 (19,) on the filter's model: hold u0 (across the torque
+    interface, saturated, as the loop applies it) for one sample, then the backup law, each sample held
+    over `substeps` RK4 steps, for horizon_steps samples or until `settled`. Returns FAILED (an
+    enabled, non-slacked constraint has h < 0 (or NaN) at a substep), HORIZON or SETTLED. g.checked:
+    the substeps checked; with record, their states go to traj ((horizon_steps + 1) substeps, 19).
+    f: FILTER_DTYPE record; g: GATE_DTYPE scratch."""
+    p, c, b = f.plant, f.constraints, f.backup
+    S = b.substeps
+    dt = c.dt_s
+    subs = g.subs[:S]
+    x = g.x
+    for i in range(STATE_SIZE):
+        x[i] = x0[i]
+    for a in range(3):
+        g.u[a] = u0[a]
+    g.checked = 0
+    for k in range(b.horizon_steps + 1):
+        if k > 0:
+            if settled(x, p, b, g):
+                return SETTLED
+            sun_safe_command(x, p, c, b, g, g.u)
+        torque_round_trip(g.u, p, g.us)
+        saturate(g.us, p, g.us)
+        rk4_hold(x, g.us, dt, S, p, subs, g.work)
+        for j in range(S):
+            if record:
+                for i in range(STATE_SIZE):
+                    traj[g.checked, i] = subs[j, i]
+            g.checked += 1
+            safety_values(subs[j], p, c, g.ctx, g.h)
+            for i in range(M):
+                gi = c.gains[i]
+                if gi.enabled != 0 and gi.slack_weight == 0.0 and not g.h[i] >= 0.0:
+                    return FAILED
+        for i in range(STATE_SIZE):
+            x[i] = subs[S - 1, i]
+    return HORIZON
+
+
+@numba.njit(**LEAF)
+def reset(g: np.void) -> None:
+    """Forget the committed plan (a new run starts): the gate's only memory."""
+    g.plan_steps = 0
+    g.plan_law = SUN_SAFE_VARIANT
+
+
+@numba.njit(**LEAF)
+def _verify(x: Array, u: Array, candidate: bool, f: np.void, g: np.void) -> bool:
+    """Roll out from x with each variant of the backup law in turn, the committed plan's first (the
+    MOMENTUM variant only with a momentum |H| / D above psi_max - max J_a w_max / D: below it the
+    sun-safe attitude holds H and the panel charges there, where the momentum mode may drain the
+    battery into a dead end): the candidate u (candidate True) or the variant's own command at x
+    (into u). With a small momentum the rollout must reach the terminal set (SETTLED: invariant, so
+    the plan holds for good); with a large one, where the sun-safe attitude may not hold H, a horizon
+    safe to its end is accepted (HORIZON: the plan holds for the horizon only). On success the plan is
+    committed (plan_law, plan_steps) and u holds the command to apply."""
+    b = f.backup
+    p = f.plant
+    hh = 0.0
+    for a in range(3):
+        ha = (p.inertia_kgm2[a] * x[4 + a] - p.torque_sign * p.wheel_inertia_kgm2 * x[7 + a]) / p.wheel_inertia_kgm2
+        hh += ha * ha
+    large = math.sqrt(hh) > b.momentum_variant_rad_s
+    for t in range(len(VARIANTS)):
+        g.law = g.plan_law if t == 0 else 1 - g.plan_law
+        if g.law == MOMENTUM and not large:  # the sun-safe attitude holds a small momentum: charge there
+            continue
+        if not candidate:
+            sun_safe_command(x, f.plant, f.constraints, b, g, u)
+        found = rollout(x, u, f, g, g.subs, False)
+        if found == SETTLED or (found == HORIZON and large):
+            g.plan_law = g.law
+            g.plan_steps = b.horizon_steps
+            return True
+    return False
+
+
+@numba.njit(**LEAF)
+def gate(x: Array, f: np.void, g: np.void, u: Array) -> int:
+    """The gatekeeper at the (normalised) state x (19,) with the candidate u (3,) (the ASIF's answer,
+    replaced in place by the command to apply). Returns the GATE_NAMES code of what it did; g
+    (GATE_DTYPE) carries the committed plan from call to call."""
+    b = f.backup
+    if b.law == NO_LAW:
+        return GATE_OFF
+    if _verify(x, u, True, f, g):
+        return GATE_VERIFIED
+    if g.plan_steps > 0:  # the plan verified earlier: its next command is its backup law's, here
+        if _verify(x, g.u_backup, False, f, g):  # a fresh plan from here (either variant): extend
+            for a in range(3):
+                u[a] = g.u_backup[a]
+            return GATE_BACKUP
+        g.law = g.plan_law
+        sun_safe_command(x, f.plant, f.constraints, b, g, g.u_backup)
+        g.plan_steps -= 1
+        for a in range(3):
+            u[a] = g.u_backup[a]
+        return GATE_BACKUP
+    if not _verify(x, g.u_backup, False, f, g):
+        return GATE_UNVERIFIED
+    for a in range(3):
+        u[a] = g.u_backup[a]
+    return GATE_BACKUP
+
+
+# ----------------------------------------------------------------------------- Python faces
+
+
+@numba.njit(**LEAF)
+def _command(x: Array, fa: NDArray[np.void], ga: NDArray[np.void], out: Array) -> None:
+    f = fa[0]
+    sun_safe_command(x, f.plant, f.constraints, f.backup, ga[0], out)
+
+
+@numba.njit(**LEAF)
+def _rollout(x: Array, u0: Array, fa: NDArray[np.void], ga: NDArray[np.void], traj: Array) -> int:
+    return rollout(x, u0, fa[0], ga[0], traj, True)
+
+
+@numba.njit(**LEAF)
+def _settled(x: Array, fa: NDArray[np.void], ga: NDArray[np.void]) -> bool:
+    f = fa[0]
+    return settled(x, f.plant, f.backup, ga[0])
+
+
+def _scratch(variant: str) -> NDArray[np.void]:
+    if variant not in VARIANTS:
+        raise ValueError(f"unknown backup variant {variant!r}; known: {', '.join(VARIANTS)}")
+    g = np.zeros(1, GATE_DTYPE)
+    g[0]["law"] = VARIANTS.index(variant)
+    return g
+
+
+def backup_command(x: Array, f: NDArray[np.void], variant: str = "sun_safe") -> Array:
+    """The backup law's command (3,), rad/s^2, at state x (19,) with filter record f (1,) (FILTER_DTYPE),
+    variant one of VARIANTS."""
+    out = np.empty(3)
+    _command(np.ascontiguousarray(x, dtype=float), f, _scratch(variant), out)
+    return out
+
+
+def is_settled(x: Array, f: NDArray[np.void], variant: str = "sun_safe") -> bool:
+    """x (19,) is in the backup law's terminal set."""
+    return bool(_settled(np.ascontiguousarray(x, dtype=float), f, _scratch(variant)))
+
+
+def backup_rollout(x: Array, u0: Array, f: NDArray[np.void], variant: str = "sun_safe") -> tuple[str, Array]:
+    """`rollout` of candidate u0 (3,) at state x (19,) with filter record f (1,) and a variant of the
+    backup law (VARIANTS).
+
+    Returns:
+        (what it found: 'failed', 'horizon' or 'settled'; the substep states it checked (K, 19): the
+        samples' substeps in order, up to the violation if it failed).
+    """
+    b = f[0]["backup"]
+    traj = np.empty(((int(b["horizon_steps"]) + 1) * int(b["substeps"]), STATE_SIZE))
+    g = _scratch(variant)
+    found = _rollout(np.ascontiguousarray(x, dtype=float), np.ascontiguousarray(u0, dtype=float), f, g, traj)
+    return ("failed", "horizon", "settled")[found], traj[:int(g[0]["checked"])]
+
+
+__all__ = [
+    "BACKUP_DTYPE", "FAILED", "GATE_DTYPE", "HORIZON", "MOMENTUM", "NO_LAW", "RATE_LIMIT_FRACTION",
+    "RATE_TIME_CONSTANT_S", "SETTLED", "SETTLED_ANGLE_RAD", "SETTLED_RATE_FRACTION", "SUN_SAFE", "SUN_SAFE_VARIANT",
+    "VARIANTS", "backup_command", "backup_record", "backup_rollout", "gate", "is_settled", "reset", "rollout",
+    "settled", "sun_safe_command", "sun_safe_error",
+]  # fmt: skip

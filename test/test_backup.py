@@ -1,0 +1,212 @@
+"""The gatekeeper (`filter.backup`): the backup law against independent computations, the gate's rule
+(never an unverified candidate while a plan exists), recursive feasibility on Monte Carlo runs, and
+the default (no backup law) unchanged."""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+import pytest
+
+from rta_attitude import config
+from rta_attitude.config.schema import CONSTRAINT_NAMES, Config
+from rta_attitude.constraints import ConstraintSet
+from rta_attitude.dynamics.spacecraft import integrate, torque_to_wheel_accel, wheel_accel_to_torque
+from rta_attitude.errors import ConfigError
+from rta_attitude.filter.backup import (
+    GATE_DTYPE,
+    backup_command,
+    backup_rollout,
+    gate,
+    is_settled,
+    reset,
+)
+from rta_attitude.filter.outcome import GATE_BACKUP, GATE_NAMES, GATE_OFF, GATE_UNVERIFIED, GATE_VERIFIED
+from rta_attitude.filter.pipeline import filter_record
+from rta_attitude.montecarlo.runner import run_runs
+from rta_attitude.montecarlo.sampling import sample_initial_states
+from rta_attitude.viability.laws import law_command
+from rta_attitude.viability.params import from_config
+
+Array = np.ndarray
+
+
+def with_backup(cfg: Config, law: str = "sun_safe", horizon_s: float | None = None) -> Config:
+    return cfg.with_backup(law, horizon_s)
+
+
+@pytest.fixture(scope="module")
+def cfg() -> Config:
+    return with_backup(config.load())
+
+
+@pytest.fixture(scope="module")
+def states(cfg: Config) -> Array:
+    x0, _ = sample_initial_states(20, 1, cfg)
+    return x0
+
+
+def momentum_rad_s(x: Array, cfg: Config) -> Array:
+    """|J w - s D psi| / D of states (..., 19)."""
+    sc = cfg.spacecraft
+    H = sc.J * x[..., 4:7] - sc.torque_sign * sc.wheel_inertia_kgm2 * x[..., 7:10]
+    return np.linalg.norm(H, axis=-1) / sc.wheel_inertia_kgm2
+
+
+@numba.njit
+def _gate(x: Array, u: Array, fa: np.ndarray, ga: np.ndarray) -> int:
+    return gate(x, fa[0], ga[0], u)
+
+
+@numba.njit
+def _reset(ga: np.ndarray) -> None:
+    reset(ga[0])
+
+
+def test_config_choice_and_default() -> None:
+    cfg = config.load()
+    assert cfg.filter.backup_law == "none"
+    assert filter_record(cfg)[0]["backup"]["law"] == 0
+    with pytest.raises(ConfigError, match=r"filter\.backup_law"):
+        with_backup(cfg, "sideways")
+    with pytest.raises(ConfigError, match=r"filter\.backup_horizon_s"):
+        with_backup(cfg, "sun_safe", 0.0)
+
+
+def test_backup_law_equals_the_viability_oracles_sun_safe_ff(cfg: Config) -> None:
+    """Where the wheels can hold the momentum at the sun-safe attitude (no momentum roll), the compiled
+    law is the oracle's `sun_safe_ff` (numpy: Shepperd, cross products, w x H feed-forward)."""
+    f = filter_record(cfg)
+    m = from_config(cfg)
+    rng = np.random.default_rng(3)
+    x0, _ = sample_initial_states(40, 7, cfg)
+    x0[:, 7:10] *= 0.3  # wheel speeds within 0.3 psi_max
+    assert np.all(momentum_rad_s(x0, cfg) < 0.6 * cfg.limits.psi_max_rad_s)
+    for x in x0:
+        x[12] = rng.uniform(0.0, 2 * np.pi)
+        np.testing.assert_allclose(backup_command(x, f), law_command(x[:13], "sun_safe_ff", m), rtol=1e-9,
+                                   atol=1e-9)
+
+
+def test_rollout_equals_the_plants_python_integrate(cfg: Config, states: Array) -> None:
+    """The kernel's rollout (candidate hold, then the backup law) equals the plant's Python `integrate`
+    driven sample by sample with `backup_command`, to 1e-12."""
+    f = filter_record(cfg)
+    p = f["plant"]
+    D = cfg.spacecraft.wheel_inertia_kgm2
+    S = cfg.substeps
+    dt = cfg.filter.sample_time_s
+    for k in (3, 7, 16):
+        for variant in ("sun_safe", "momentum"):
+            x = states[k]
+            u = np.array([1.0, -2.0, 0.5])
+            _, traj = backup_rollout(x, u, f, variant)
+            assert len(traj) >= S
+            ref: list[Array] = []
+            while len(ref) * S < len(traj):
+                if ref:
+                    u = backup_command(x, f, variant)
+                u_rt = torque_to_wheel_accel(wheel_accel_to_torque(u, D), D)
+                x, subs = integrate(x, u_rt, dt, p, S)
+                ref.append(subs)
+            np.testing.assert_allclose(traj, np.concatenate(ref)[:len(traj)], rtol=0, atol=1e-12)
+
+
+def test_backup_law_brings_a_state_to_the_sun_safe_attitude(cfg: Config, states: Array) -> None:
+    f = filter_record(cfg)
+    x = states[3]
+    assert momentum_rad_s(x, cfg) < 300.0
+    assert not is_settled(x, f)
+    found, traj = backup_rollout(x, backup_command(x, f), f)
+    assert found == "settled"
+    end = traj[-1]
+    assert is_settled(end, f)
+    cs = ConstraintSet(cfg)
+    angles = cs.angles(end[None])
+    assert float(np.degrees(angles["panel_sun"][0])) < 5.0  # +k_B on the sun
+    assert abs(float(np.degrees(angles["sensor_sun"][0])) - 90.0) < 5.0  # the sensor perpendicular
+    assert np.all(np.abs(end[4:7]) <= 0.1 * cfg.limits.omega_max_rad_s)  # rates damped
+    h = cs.safety_values(traj)
+    hard = [i for i, n in enumerate(CONSTRAINT_NAMES) if n not in cfg.slacked_constraints]
+    assert np.all(h[:, hard] >= 0)
+
+
+def test_gate_never_applies_an_unverified_candidate(cfg: Config, states: Array) -> None:
+    """A candidate that leads to a violation within the horizon (full wheel acceleration about x from a
+    rate near w_max) is replaced by the committed plan's backup command; a good candidate is applied."""
+    f = filter_record(cfg)
+    g = np.zeros(1, GATE_DTYPE)
+    x = states[3].copy()
+    u_max = cfg.u_max_rad_s2
+    # a safe candidate (the backup law's own command) is verified and commits a plan
+    u = backup_command(x, f)
+    applied = u.copy()
+    assert GATE_NAMES[_gate(x, applied, f, g)] == "verified"
+    np.testing.assert_array_equal(applied, u)
+    assert g[0]["plan_steps"] == round(cfg.filter.backup_horizon_s / cfg.filter.sample_time_s)
+    # a bad candidate: the rate about x pushed past w_max within a sample
+    x[4] = 0.9 * cfg.limits.omega_max_rad_s
+    x[5] = x[6] = 0.0
+    bad = np.array([u_max[0], 0.0, 0.0]) * np.sign(cfg.spacecraft.torque_sign)
+    assert backup_rollout(x, bad, f)[0] == "failed"
+    applied = bad.copy()
+    code = _gate(x, applied, f, g)
+    assert code == GATE_BACKUP
+    np.testing.assert_array_equal(applied, backup_command(x, f))
+    # without a plan, a failing candidate is applied only if the backup law's own command fails too
+    _reset(g)
+    applied = bad.copy()
+    code = _gate(x, applied, f, g)
+    if code == GATE_BACKUP:
+        assert backup_rollout(x, applied, f)[0] != "failed"
+    else:
+        assert code == GATE_UNVERIFIED
+        np.testing.assert_array_equal(applied, bad)
+    # every command the gate calls verified passes an independent rollout
+    rng = np.random.default_rng(5)
+    for _ in range(20):
+        _reset(g)
+        y = states[rng.integers(len(states))]
+        cand = rng.uniform(-1.0, 1.0, 3) * u_max
+        applied = cand.copy()
+        code = _gate(y, applied, f, g)
+        assert code in (GATE_VERIFIED, GATE_BACKUP, GATE_UNVERIFIED)
+        if code == GATE_VERIFIED:
+            np.testing.assert_array_equal(applied, cand)
+            assert any(backup_rollout(y, cand, f, v)[0] != "failed" for v in ("sun_safe", "momentum"))
+
+
+def test_no_backup_law_leaves_the_gate_off(cfg: Config, states: Array) -> None:
+    f = filter_record(cfg.with_backup("none"))
+    g = np.zeros(1, GATE_DTYPE)
+    u = np.array([1.0, 2.0, 3.0])
+    assert _gate(states[0], u, f, g) == GATE_OFF
+    np.testing.assert_array_equal(u, [1.0, 2.0, 3.0])
+
+
+def test_recursive_feasibility_on_monte_carlo_runs(cfg: Config, states: Array) -> None:
+    """Runs (u_des = 0, the campaign's loop) that never met a step without a verified plan stay safe at
+    every RK4 substep; and the gate counts add up to the steps."""
+    duration_s = 300.0
+    x0 = states[:12]
+    out = run_runs(cfg, x0, duration_s)
+    steps = round(duration_s / cfg.filter.sample_time_s)
+    np.testing.assert_array_equal(out.gate_steps.sum(axis=1), steps)
+    assert np.all(out.gate_steps[:, GATE_OFF] == 0)
+    hard = np.array([n not in cfg.slacked_constraints for n in CONSTRAINT_NAMES])
+    covered = out.gate_steps[:, GATE_UNVERIFIED] == 0
+    assert covered.sum() >= 6
+    assert not np.any(out.violated_substeps[covered][:, hard])
+
+
+def test_filter_result_names_what_the_gate_did(cfg: Config, states: Array) -> None:
+    from rta_attitude.filter.asif import AsifFilter
+
+    on, off = AsifFilter(cfg), AsifFilter(config.load())
+    x = states[3]
+    assert off.filter(x, np.zeros(3)).gate == "off"
+    res = on.filter(x, np.zeros(3))
+    assert res.gate == "verified"
+    assert on._ws[0]["gate"]["plan_steps"] > 0
+    on.reset()
+    assert on._ws[0]["gate"]["plan_steps"] == 0
