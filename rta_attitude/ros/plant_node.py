@@ -53,6 +53,9 @@ WATCHDOG_PERIOD_S = 0.1
 """Longest period of the lockstep command watchdog (shorter for a short command_timeout_s) [s]."""
 LIMIT_RTOL = 1e-9
 """A command counts as beyond a limit when |u_i| > limit (1 + LIMIT_RTOL) (tau = D u and back rounds)."""
+FINAL_STATUS_ACK_S = 10.0
+"""Longest wait for the readers' acknowledgement of the final run_status before exiting [s] (at least
+stop_timeout_s; the wait ends as soon as every reader acknowledged)."""
 QUIET_KINDS = ("outside_u", "saturated")
 """Counted and logged once per episode, but do not republish run_status: without RTA they happen in
 fault-free runs (the paper's PD law exceeds U), and saturation is the actuator's normal behaviour."""
@@ -344,7 +347,10 @@ class PlantNode(RtaNode):
         self._diagnose(state)
         interrupted = state.startswith(topics.RUN_INTERRUPTED)
         if self.knobs["exit_when_done"] or interrupted:
-            self.flush(self.knobs["stop_timeout_s"])
+            # the final status is what the recorder closes on: under load a lost reliable sample is repaired
+            # only at the writer's next heartbeat (seconds), and a writer that has exited repairs nothing
+            # (found by the flake hunt: a bag ended with run_status `running`); it waits only if an ack is owed
+            self.flush(max(self.knobs["stop_timeout_s"], FINAL_STATUS_ACK_S))
         if state.startswith(topics.RUN_FAILED):
             self.fail(f"run failed at step {self.k}: {state[len(topics.RUN_FAILED) + 2:]}")
             return
