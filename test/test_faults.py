@@ -602,8 +602,12 @@ def test_filter_killed_and_restarted_the_plant_falls_back_and_the_loop_resumes(l
     zero = [convert.torque_from_msg(m.message)[0] // S for m in applied
             if not np.any(convert.torque_from_msg(m.message)[1])]
     assert len(zero) >= run["deadline_misses"]  # the zero fallback was applied at every miss of the outage
+    # every call of both filters is in the bag once; in stamp order the new filter's first calls may come
+    # out of order (found by the flake hunt): a state it read before the controller's torque_des for it
+    # matched is answered after desired_timeout_s, after the next states (and the plant drops it as late)
     calls = [r["calls"] for r in _status_records(lp.bag)]
-    assert calls == list(range(1, first["filter_status"] + 1)) + list(range(1, second["filter_status"] + 1))
+    assert calls[:first["filter_status"]] == list(range(1, first["filter_status"] + 1))
+    assert sorted(calls[first["filter_status"]:]) == list(range(1, second["filter_status"] + 1))
     _assert_commands_valid(lp.bag)
 
 
