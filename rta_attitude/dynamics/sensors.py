@@ -93,6 +93,16 @@ def new_instruments() -> NDArray[np.void]:
 
 
 @numba.njit(**LEAF)
+def reset_instruments(ins: np.void) -> None:
+    """Back to a fresh INSTRUMENT_DTYPE record (a new run): the bias is drawn again at the first
+    measurement, the lag starts from rest."""
+    ins.started = 0
+    for a in range(3):
+        ins.bias[a] = 0.0
+        ins.u_end[a] = 0.0
+
+
+@numba.njit(**LEAF)
 def _mix(z: np.uint64) -> np.uint64:
     """SplitMix64's finaliser (Steele, Lea, Flood 2014): a bijection of 64-bit words that avalanches."""
     z = (z ^ (z >> np.uint64(30))) * _M1
@@ -177,7 +187,6 @@ class Instruments:
     def __init__(self, cfg: Config, stream: int = 0) -> None:
         self.record = sensors_record(cfg, stream)
         self.state = new_instruments()
-        self.enabled = bool(cfg.sensors.enabled)
 
     def measure(self, x: Array, k: int) -> Array:
         """The measured state of sample k (19,) (advances the gyro bias: call once per sample)."""
@@ -206,4 +215,4 @@ def normals(seed: int, stream: int, n: int, channel: int = 0) -> Array:
 
 
 __all__ = ["INSTRUMENT_DTYPE", "SENSORS_DTYPE", "Instruments", "actuate", "measure", "new_instruments", "normal",
-           "normals", "sensors_record"]
+           "normals", "reset_instruments", "sensors_record"]

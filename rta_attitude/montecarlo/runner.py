@@ -36,7 +36,7 @@ from rta_attitude.constraints.base import N_CONSTRAINTS
 from rta_attitude.constraints.geometry import CONTEXT_DTYPE
 from rta_attitude.constraints.rows import safety_values
 from rta_attitude.dynamics.plant import Plant
-from rta_attitude.dynamics.sensors import INSTRUMENT_DTYPE, measure
+from rta_attitude.dynamics.sensors import INSTRUMENT_DTYPE, measure, reset_instruments
 from rta_attitude.dynamics.spacecraft import RK4_WORK_ROWS
 from rta_attitude.dynamics.state import STATE_SIZE
 from rta_attitude.errors import RtaError
@@ -127,9 +127,7 @@ def run_batch(X0: Array, steps: int, loop: NDArray[np.void], viol_s: NDArray[np.
     for k in range(X0.shape[0]):
         x = X0[k].copy()
         lp.sensors.stream = first_run + k
-        ins[0].started = 0
-        for a in range(3):
-            ins[0].u_end[a] = 0.0
+        reset_instruments(ins[0])
         reset(ws[0].gate)  # each run starts without a committed plan
         if record:
             traj[k, 0] = x

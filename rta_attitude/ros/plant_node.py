@@ -91,9 +91,9 @@ class PlantNode(RtaNode):
         self.pending: tuple[int, np.ndarray] | None = None
         self.latency_s: list[float] = []
         self.published: dict[str, int] = {}
-        self.pubs = {name: self.create_publisher(interface.msg_class(spec.type_name), spec.name, self.qos(name))
-                     for name, spec in topics.TOPICS.items()
-                     if spec in topics.published(topics.PLANT, True, self.truth)}  # fmt: skip
+        self.pubs = {spec.name: self.create_publisher(interface.msg_class(spec.type_name), spec.name,
+                                                      self.qos(spec.name))
+                     for spec in topics.published(topics.PLANT, True, self.truth)}  # fmt: skip
         self.diagnostics = DiagnosticsPublisher(self, "run")
         self.command_topic = topics.TORQUE_CMD
         self.subscribe(self.command_topic, self._on_command)

@@ -169,8 +169,8 @@ class RecorderNode(RtaNode):
         expected = self.expected or {}
         short = {t: (self.received.get(t, 0), n) for t, n in expected.items() if self.received.get(t, 0) < n}
         # a short topic whose publisher has left cannot deliver more (a killed node): no waiting for it
-        waiting = [t for t in short if self.count_publishers(t) > 0]
-        waiting += self._behind(expected)
+        behind = self._behind(expected)
+        waiting = [t for t in short if self.count_publishers(t) > 0] + behind
         unknown = any(t not in expected for t in self.received)
         settled = now - self._last_s >= self.knobs["drain_quiet_s"]
         if self.stopping and not self._terminal:
@@ -185,7 +185,6 @@ class RecorderNode(RtaNode):
         if short:
             self.get_logger().warning("closing with missing messages: " + ", ".join(
                 f"{t} {have}/{want}" for t, (have, want) in sorted(short.items())))
-        behind = self._behind(expected)
         if behind:
             self.get_logger().warning("closing with per-step topics behind the state count: " + ", ".join(
                 f"{t} {self.received[t]}/{self.received.get(self.state_topic, 0)}" for t in behind))
