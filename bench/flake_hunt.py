@@ -1,13 +1,16 @@
 """Flake hunt: run every DDS test file N times while CPU burners keep every core busy.
 
-    python bench/flake_hunt.py [--runs 20] [--burners N] [--files test/test_x.py ...] [-k EXPR] [--out DIR]
+    python bench/flake_hunt.py [--runs 20] [--burners N] [--workers N] [--files test/test_x.py ...] [-k EXPR]
+                               [--out DIR] [--domains LO-HI]
 
 A test that can fail by timing is a bug (in the test or in the product); this script looks for
 them where they hide: under load. Each pass is one `pytest -m dds` process over the DDS test files
 (every test marked `dds`: real rclpy over real Fast DDS, node processes, the launcher), with its own
 random ROS_DOMAIN_ID (the conftest picks one), while `--burners` processes (default: one per core)
-spin at full speed. Per-test outcomes are read from each pass's JUnit XML; the table at the end
-gives failures per test and the first line of the first failure. Exit status 1 if anything failed.
+spin at full speed. `--workers 2` runs each pass as the README's test command does (pytest-xdist,
+`-n 2 --dist loadfile`, each worker its own domain). Per-test outcomes are read from each pass's JUnit
+XML; the table at the end gives failures per test and the first line of the first failure. Exit status
+1 if anything failed.
 
 Not part of CI (it takes ~20 x the DDS suite; about an hour on a 2-core machine).
 """
@@ -68,6 +71,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--domains", default=None, metavar="LO-HI",
                         help="draw each pass's ROS_DOMAIN_ID from LO..HI (default: the conftest's 40..100); two hunts "
                              "at once (each the other's load) need disjoint ranges")
+    parser.add_argument("--workers", type=int, default=0,
+                        help="pytest-xdist workers per pass (-n N --dist loadfile, as the README's test command; "
+                             "default 0: one process)")
     args = parser.parse_args(argv)
     domains = None
     if args.domains is not None:
@@ -79,8 +85,11 @@ def main(argv: list[str] | None = None) -> int:
             print(f"ERROR: --domains must be LO-HI within 0..101, got {args.domains!r}", file=sys.stderr)
             return 1
         domains = (lo, hi)
-    if args.runs < 1 or args.burners < 0:
-        print("ERROR: --runs must be >= 1 and --burners >= 0", file=sys.stderr)
+    if args.runs < 1 or args.burners < 0 or args.workers < 0:
+        print("ERROR: --runs must be >= 1, --burners and --workers >= 0", file=sys.stderr)
+        return 1
+    if domains is not None and domains[1] - domains[0] + 1 < max(args.workers, 1):
+        print(f"ERROR: --domains {args.domains} has fewer domains than --workers {args.workers}", file=sys.stderr)
         return 1
     out_dir = args.out or Path(tempfile.mkdtemp(prefix="flake_hunt_"))
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -98,9 +107,13 @@ def main(argv: list[str] | None = None) -> int:
                    *files]
             if args.k:
                 cmd += ["-k", args.k]
+            if args.workers:
+                cmd += ["-n", str(args.workers), "--dist", "loadfile"]
             env = {k_: v for k_, v in os.environ.items() if k_ != "RTA_TEST_DOMAIN_ID"}
             if domains is not None:
-                env["RTA_TEST_DOMAIN_ID"] = str(random.SystemRandom().randint(*domains))
+                # the workers take base .. base + workers - 1 (test/conftest.py): all inside LO..HI
+                env["RTA_TEST_DOMAIN_ID"] = str(random.SystemRandom().randint(domains[0],
+                                                                              domains[1] - max(args.workers, 1) + 1))
             start = time.monotonic()
             with (out_dir / f"pass{k:02d}.log").open("w") as log:
                 code = subprocess.run(cmd, cwd=REPO, env=env, stdout=log, stderr=subprocess.STDOUT).returncode
@@ -128,7 +141,7 @@ def main(argv: list[str] | None = None) -> int:
         total_fail += len(fails)
         if fails or len(results) <= 60:
             print(f"{name:<{width}}  {len(fails):>4}  {len(runs):>4}  {fails[0] if fails else ''}")
-    print(f"\n{total_fail} failures in {args.runs} passes with {args.burners} burners, "
+    print(f"\n{total_fail} failures in {args.runs} passes with {args.burners} burners, {args.workers} workers, "
           f"{time.monotonic() - t0:.0f} s; logs and JUnit XML in {out_dir}")
     return 1 if total_fail else 0
 
