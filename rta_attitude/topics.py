@@ -256,7 +256,7 @@ QP_KEYS: tuple[str, ...] = (
     KEY_STATUS, "solver_status", "iterations", KEY_FALLBACK, KEY_SOLVE_TIME, KEY_PRESET,
     "u_des_x", "u_des_y", "u_des_z", "u_x", "u_y", "u_z", *(f"{KEY_BOX_ACTIVE}_{a}" for a in "xyz"),
     "calls", "fast_path", "solved", "fallbacks", "solver_failures", "backup_solves", "invalid_states",
-    INPUT_SOURCE_KEY, *INPUT_COUNTERS, "gate",
+    INPUT_SOURCE_KEY, *INPUT_COUNTERS, "gate", "gave_way",
 )  # fmt: skip
 """Keys of the `filter` entry: status ('pass', 'solved', 'fallback'), solver status (outcome.solve_text), iterations,
 fallback policy applied ('none' if none), solve time [s], preset, u_des and u [rad/s^2], box flags,

@@ -14,6 +14,7 @@ from helpers import random_states
 from rta_attitude import config
 from rta_attitude.errors import SolverError
 from rta_attitude.filter.asif import AsifFilter
+from rta_attitude.filter.pipeline import constraint_levels
 
 CFG = config.load()
 
@@ -190,7 +191,7 @@ def _infeasible_case():
     return x[k], u_des[k]
 
 
-@pytest.mark.parametrize("policy", ["pass_through", "hold", "soften", "raise"])
+@pytest.mark.parametrize("policy", ["pass_through", "hold", "soften", "raise", "prioritize"])
 def test_fallback_policies(policy):
     x, u_des = _infeasible_case()
     x, u_des = x.copy(), u_des.copy()
@@ -209,9 +210,13 @@ def test_fallback_policies(policy):
     elif policy == "hold":
         np.testing.assert_array_equal(res.u, np.clip(np.zeros(3), lo[0], hi[0]))
     else:
-        # least violation: the worst normalised hard-row violation is no larger than pass-through's
+        # least violation: the worst normalised hard-row violation is no larger than pass-through's (soften:
+        # of every hard row; prioritize: of the most important level's)
         norms = np.linalg.norm(tab.gain[0], axis=-1) + 1e-300
         hard = f.enabled & (norms > 1e-12)
+        if policy == "prioritize":
+            hard &= constraint_levels(CFG.filter.priorities) == 0
+            assert res.status == "fallback" and res.fallback == "prioritize" and res.gave_way != ""
         viol_soft = np.min(((tab.drift[0] + tab.gain[0] @ res.u) / norms)[hard])
         u_pass = np.clip(u_des, lo[0], hi[0])
         viol_pass = np.min(((tab.drift[0] + tab.gain[0] @ u_pass) / norms)[hard])

@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from rta_attitude.config.schema import BACKUP_LAWS, PLANT_MODELS, PRESETS, SIMULATORS, SOLVERS
+from rta_attitude.config.schema import BACKUP_LAWS, FALLBACKS, PLANT_MODELS, PRESETS, SIMULATORS, SOLVERS
 from rta_attitude.errors import ConfigError
 from rta_attitude.montecarlo import BACKENDS, DEFAULT_CHUNK_RUNS
 
@@ -25,6 +25,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="the filter's model of the plant (default: the config's filter.model)")
     parser.add_argument("--backup-law", choices=BACKUP_LAWS, default=None,
                         help="the gatekeeper's backup law (default: the config's filter.backup_law; docs/backup.md)")
+    parser.add_argument("--fallback", choices=FALLBACKS, default=None,
+                        help="what answers an infeasible QP (default: the config's filter.fallback)")
     parser.add_argument("--backup-horizon", type=float, default=None,
                         help="the gatekeeper's horizon, s (default: the config's filter.backup_horizon_s)")
     parser.add_argument("--workers", type=int, default=os.cpu_count() or 1,
@@ -81,6 +83,8 @@ def run(args: argparse.Namespace) -> int:
     if args.noise:
         cfg = cfg.with_noise()
     cfg = cfg.with_backup(args.backup_law, args.backup_horizon)
+    if args.fallback is not None:
+        cfg = cfg.with_fallback(args.fallback)
     output_dir(args.out)  # before hours of work, not after
     result = montecarlo(cfg, args.runs, args.duration, args.seed, args.workers, args.backend, args.scheduler,
                         args.chunk_runs, progress=not args.no_progress and sys.stderr.isatty(),

@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 
 from rta_attitude.config.schema import (
+    DEFAULT_PRIORITIES,
     Augmentation,
     BarrierGains,
     Config,
@@ -138,6 +139,16 @@ class _Section:
             n = f"{size} " if size is not None else ""
             raise ConfigError(f"{self.where}.{key} must be a list of {n}finite numbers, got {value!r}")
         return tuple(float(v) for v in value)
+
+    def levels(self, key: str, default: tuple[tuple[str, ...], ...]) -> tuple[tuple[str, ...], ...]:
+        """A list of strings, each one level of names separated by commas or spaces (a ROS string array)."""
+        value = self._get(key, default)
+        if value is default:
+            return default
+        if not (isinstance(value, list) and all(isinstance(v, str) for v in value)):
+            raise ConfigError(f"{self.where}.{key} must be a list of strings (one level each, names separated by "
+                              f"commas), got {value!r}")
+        return tuple(tuple(v.replace(",", " ").split()) for v in value)
 
     def section(self, key: str) -> _Section:
         return _Section(self._get(key, _REQUIRED), f"{self.where}.{key}")
@@ -271,7 +282,8 @@ def from_parameters(params: Mapping[str, Any], source: str = "<memory>") -> Conf
         check_tolerance=fi.number("check_tolerance"), pole_guard_rad=fi.number("pole_guard_rad"),
         soften_weight=fi.number("soften_weight"), backup_solver=fi.text("backup_solver"),
         solver=fi.text("solver", "active_set"), model=fi.text("model", "gyrostat"),
-        backup_law=fi.text("backup_law", "none"), backup_horizon_s=fi.number("backup_horizon_s", 300.0))
+        backup_law=fi.text("backup_law", "none"), backup_horizon_s=fi.number("backup_horizon_s", 300.0),
+        priorities=fi.levels("priorities", DEFAULT_PRIORITIES))
     fi.done()
     ct = root.section("controller")
     controller = ControllerGains(ct.number("kp"), ct.number("kd"))

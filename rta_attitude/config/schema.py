@@ -26,7 +26,12 @@ BARRIER_GROUPS: tuple[str, ...] = (
 """Keys of the `constraints:` section; `omega` and `psi` configure their three axes together."""
 
 PRESETS: tuple[str, ...] = ("robust", "paper")
-FALLBACKS: tuple[str, ...] = ("pass_through", "hold", "soften", "raise")
+FALLBACKS: tuple[str, ...] = ("pass_through", "hold", "soften", "raise", "prioritize")
+DEFAULT_PRIORITIES: tuple[tuple[str, ...], ...] = (
+    ("omega", "psi", "exclusion_zone"), ("temperature",), ("battery",), ("communication",),
+)  # fmt: skip
+"""`filter.priorities` by default: the levels of the `prioritize` fallback, most important first (body rate,
+wheel speed and the sun keep-out cone; then temperature, battery, communication)."""
 BACKUP_SOLVERS: tuple[str, ...] = ("quadprog", "none")
 SOLVERS: tuple[str, ...] = ("active_set", "proxsuite")
 CONTROLLERS: tuple[str, ...] = ("pd", "none")
@@ -296,7 +301,7 @@ class FilterOptions:
     preset: str = "robust"
     sample_time_s: float = 1.0
     zoh_margin: float = 0.02
-    fallback: str = "soften"
+    fallback: str = "prioritize"
     max_iterations: int = 50
     max_inner_iterations: int = 20
     eps_abs: float = 1e-9
@@ -314,6 +319,10 @@ class FilterOptions:
     """The gatekeeper's backup law (BACKUP_LAWS); none: no gatekeeper."""
     backup_horizon_s: float = 300.0
     """How far the gatekeeper simulates the backup law after the candidate's hold, s."""
+    priorities: tuple[tuple[str, ...], ...] = DEFAULT_PRIORITIES
+    """Levels of constraint groups (BARRIER_GROUPS), most important first: with `fallback: prioritize`, an
+    infeasible QP is answered by letting the least important level give way first, by as little as
+    possible (`filter.pipeline.prioritize`)."""
 
     def __post_init__(self) -> None:
         _choice("filter.model", self.model, PLANT_MODELS)
@@ -323,6 +332,15 @@ class FilterOptions:
         _choice("filter.fallback", self.fallback, FALLBACKS)
         _choice("filter.backup_law", self.backup_law, BACKUP_LAWS)
         _positive("filter.backup_horizon_s", self.backup_horizon_s)
+        named = [g for level in self.priorities for g in level]
+        for g in named:
+            _choice("filter.priorities", g, BARRIER_GROUPS)
+        missing = [g for g in BARRIER_GROUPS if g not in named]
+        twice = sorted({g for g in named if named.count(g) > 1})
+        if missing or twice or not all(self.priorities):
+            why = (f"missing {', '.join(missing)}" if missing else f"{', '.join(twice)} twice" if twice
+                   else "an empty level")
+            raise ConfigError(f"filter.priorities must name every constraint group once, in non-empty levels ({why})")
         _positive("filter.sample_time_s", self.sample_time_s)
         if not 0 <= self.zoh_margin < 1:
             raise ConfigError(f"filter.zoh_margin must be in [0, 1), got {self.zoh_margin!r}")

@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from rta_attitude.config.schema import CONSTRAINT_NAMES, Config
+from rta_attitude.config.schema import CONSTRAINT_NAMES, DEFAULT_PRIORITIES, Config
 from rta_attitude.constraints import ConstraintSet
 from rta_attitude.dynamics.state import STATE_SIZE
 from rta_attitude.errors import SolverError
@@ -55,9 +55,12 @@ class FilterResult:
     (what the gatekeeper did: 'off', 'verified', 'backup', 'unverified').
     """
 
-    def __init__(self, record: NDArray[np.void], policy: str) -> None:
+    def __init__(self, record: NDArray[np.void], policy: str,
+                 levels: tuple[tuple[str, ...], ...] = DEFAULT_PRIORITIES) -> None:
         self.record = record
         self.policy = policy
+        self.levels = levels
+        """`filter.priorities` (the names `gave_way` reports)."""
         self.names: tuple[str, ...] = CONSTRAINT_NAMES
 
     def _field(self, name: str) -> NDArray[np.generic]:
@@ -111,11 +114,17 @@ class FilterResult:
         return self._text(lambda r: outcome.GATE_NAMES[int(r["gate"])])
 
     @property
+    def gave_way(self) -> str | NDArray[np.str_]:
+        """The `prioritize` fallback: the most important level of `filter.priorities` that gave way, as its
+        groups joined by '+' ('' where none did)."""
+        return self._text(lambda r: "+".join(self.levels[int(r["gave_way"])]) if int(r["gave_way"]) >= 0 else "")
+
+    @property
     def solver_status(self) -> str | NDArray[np.str_]:
         def text(r: np.void) -> str:
             first = outcome.solve_text(int(r["solver"]), int(r["solve_result"]), int(r["backup_result"]))
             if int(r["soft_result"]) != outcome.NOT_SOLVED:
-                first += "+soften:" + outcome.solve_text(int(r["solver"]), int(r["soft_result"]))
+                first += f"+{self.policy}:" + outcome.solve_text(int(r["solver"]), int(r["soft_result"]))
             return first
 
         return self._text(text)
@@ -128,7 +137,7 @@ class FilterResult:
 
     def __getitem__(self, k: int) -> FilterResult:
         """Call k of a batch."""
-        return FilterResult(self.record[k], self.policy)
+        return FilterResult(self.record[k], self.policy, self.levels)
 
     def __len__(self) -> int:
         return len(self.record)
@@ -240,7 +249,7 @@ class AsifFilter:
         # a byte copy: numpy copies a record with array fields field by field, 10 times slower
         rec = np.frombuffer(bytearray(self._out.tobytes()), RESULT_DTYPE).reshape(())
         rec["solve_time_s"] = time.perf_counter() - t0
-        result = FilterResult(rec, self.options.fallback)
+        result = FilterResult(rec, self.options.fallback, self.options.priorities)
         self.counters.add_one(rec)
         if rec["raise_error"]:
             raise SolverError(f"ASIF QP failed ({result.solver_status})")
@@ -260,7 +269,7 @@ class AsifFilter:
                              f"{u_des.shape}")
         out = np.zeros(x.shape[0], RESULT_DTYPE)
         filter_many(x, u_des, self.record, self._ws, out)
-        result = FilterResult(out, self.options.fallback)
+        result = FilterResult(out, self.options.fallback, self.options.priorities)
         self.counters.add(out)
         if np.any(out["raise_error"]):
             k = int(np.flatnonzero(out["raise_error"])[0])

@@ -21,10 +21,12 @@ configured policy acted); the state was not usable (u = 0); the filter node's la
 output that was not finite or not inside U by u = 0 (never expected: the core guarantees it)."""
 NO_FALLBACK, NON_FINITE_U_DES, POLICY_ACTED, INVALID_STATE, OUTPUT_GUARD = range(len(FALLBACK_REASONS))
 
-PASS_THROUGH, HOLD, SOFTEN, RAISE = (FALLBACKS.index(n) for n in ("pass_through", "hold", "soften", "raise"))
+PASS_THROUGH, HOLD, SOFTEN, RAISE, PRIORITIZE = (
+    FALLBACKS.index(n) for n in ("pass_through", "hold", "soften", "raise", "prioritize"))
 """Codes of the fallback policies (`filter.fallback`): pass_through (u_des clipped to the box, the paper),
 hold (u = 0 clipped to the box), soften (the QP again with every row slacked: the least-violation
-command), raise (SolverError)."""
+command), raise (SolverError), prioritize (the levels of `filter.priorities` give way least important
+first, each by as little as possible)."""
 ACTIVE_SET, PROXSUITE = (SOLVERS.index(n) for n in ("active_set", "proxsuite"))
 """Codes of the QP solvers (`filter.solver`): the exact dual active-set method (compiled), proxsuite."""
 QUADPROG, NO_BACKUP = (BACKUP_SOLVERS.index(n) for n in ("quadprog", "none"))
@@ -59,7 +61,8 @@ def solve_text(solver: int, result: int, backup: int = NOT_SOLVED) -> str:
 __all__ = [
     "ACTIVE_SET", "FALLBACK", "FALLBACK_REASONS", "GATE_BACKUP", "GATE_NAMES", "GATE_OFF", "GATE_UNVERIFIED",
     "GATE_VERIFIED", "HOLD", "INVALID_STATE", "NON_FINITE_U_DES", "NOT_SOLVED",
-    "NO_BACKUP", "NO_FALLBACK", "OUTPUT_GUARD", "PASS", "PASS_THROUGH", "POLICY_ACTED", "PROXSUITE", "QUADPROG",
+    "NO_BACKUP", "NO_FALLBACK", "OUTPUT_GUARD", "PASS", "PASS_THROUGH", "POLICY_ACTED", "PRIORITIZE", "PROXSUITE",
+    "QUADPROG",
     "RAISE", "SOFTEN", "SOLVED", "SOLVE_CHECK_FAILED", "SOLVE_INFEASIBLE", "SOLVE_MAX_ITER", "SOLVE_OK",
     "SOLVE_RESULTS", "STATUS_NAMES", "solve_text",
 ]  # fmt: skip

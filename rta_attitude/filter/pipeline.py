@@ -10,7 +10,9 @@ Carlo), with the QP solver as a pluggable step.
                proxsuite (`proxsuite_qp`, Python, entered through numba's object mode: imported only
                when chosen); every answer is checked against the rows
     fallback   a failed QP: `pass_through` (u0), `hold` (u = 0 clipped to the box), `soften` (the QP
-               again with every row slacked; u0 if that fails too) or `raise` (flagged; Python raises)
+               again with every row slacked; u0 if that fails too), `raise` (flagged; Python raises)
+               or `prioritize` (`filter.priorities`: the least important level gives way first, each
+               level by as little as possible, one small QP per level and a last one for u)
     gate       with a backup law (`filter.backup_law`): the gatekeeper (`filter.backup`) applies u only
                if u held for a sample, then the backup law, is safe over the horizon on the filter's
                model; else the backup law of its committed plan (the workspace keeps the plan)
@@ -29,8 +31,15 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
-from rta_attitude.config.schema import Config
-from rta_attitude.constraints.base import CONSTRAINT_DTYPE, N_CONSTRAINTS, OMEGA_X, TABLE_DTYPE, constraint_record
+from rta_attitude.config.schema import BARRIER_GROUPS, CONSTRAINT_NAMES, Config
+from rta_attitude.constraints.base import (
+    CONSTRAINT_DTYPE,
+    N_CONSTRAINTS,
+    OMEGA_X,
+    TABLE_DTYPE,
+    ZOH_ROWS,
+    constraint_record,
+)
 from rta_attitude.constraints.geometry import CONTEXT_DTYPE
 from rta_attitude.constraints.rows import rows
 from rta_attitude.dynamics.spacecraft import PLANT_DTYPE, plant_record
@@ -48,6 +57,7 @@ from rta_attitude.filter.outcome import (
     NOT_SOLVED,
     PASS,
     POLICY_ACTED,
+    PRIORITIZE,
     RAISE,
     SOFTEN,
     SOLVE_CHECK_FAILED,
@@ -65,6 +75,13 @@ MIN_ROW_NORM = 1e-12
 """Rows whose gradient in u is smaller than this do not depend on u and are not sent to the QP."""
 ACTIVE_MULTIPLIER = 1e-9
 """A row whose multiplier exceeds this at the solution is active (it shapes u)."""
+OFF, HARD, SLACKED, DISTANCE = 0, 1, 2, 3
+"""How `assemble` takes a constraint's rows: left out; hard; with a slack (its configured weight, or
+soften_weight where it has none: cost p delta^2, delta in the row's own units); with a slack whose
+cost is soften_weight (delta / |dBC/du|)^2 (the relaxation measured as a distance in u, rad/s^2: rows of
+very different scales -- a rate row's gain ~1e-5, a wheel row's ~1e3 -- weigh alike)."""
+NO_LEVEL = -1
+"""`gave_way` of a call where no priority level gave way."""
 
 FILTER_DTYPE = np.dtype([
     ("plant", PLANT_DTYPE),                  # the filter's model of the spacecraft
@@ -81,6 +98,8 @@ FILTER_DTYPE = np.dtype([
     ("max_iterations", np.int64),
     ("max_inner_iterations", np.int64),
     ("backup", BACKUP_DTYPE),                # the gatekeeper (backup law NO_LAW: off)
+    ("level", np.int64, (M,)),               # priority level of each constraint (0: most important)
+    ("n_levels", np.int64),
 ])  # fmt: skip
 """Everything one filter call reads, by name."""
 
@@ -106,7 +125,9 @@ RESULT_DTYPE = np.dtype([
     ("qp_failed", np.uint8),                 # the first QP failed (the policy acted)
     ("raise_error", np.uint8),               # policy `raise` and the QP failed: Python raises
     ("gate", np.int8),                       # outcome.GATE_NAMES code: what the gatekeeper did
+    ("gave_way", np.int8),                   # prioritize: the most important level that gave way (NO_LEVEL)
     ("iterations", np.int64),                # solver iterations of every solve of the call
+    ("solves", np.int64),                    # QP solves of the call (a proxsuite solve and its re-solve: one)
     ("solve_time_s", np.float64),            # wall time of the whole call (set by the Python face)
 ])  # fmt: skip
 """What one filter call did, for one state (a batch: a leading axis)."""
@@ -136,7 +157,17 @@ def filter_record(cfg: Config) -> NDArray[np.void]:
     f["eps_abs"], f["eps_primal_inf"], f["eps_dual_inf"] = o.eps_abs, o.eps_primal_inf, o.eps_dual_inf
     f["max_iterations"], f["max_inner_iterations"] = o.max_iterations, o.max_inner_iterations
     f["backup"] = backup_record(cfg)[0]
+    f["level"] = constraint_levels(cfg.filter.priorities)
+    f["n_levels"] = len(cfg.filter.priorities)
     return rec
+
+
+def constraint_levels(priorities: tuple[tuple[str, ...], ...]) -> NDArray[np.int64]:
+    """The priority level (M,) of each constraint (CONSTRAINT_NAMES) from `filter.priorities` (levels of
+    BARRIER_GROUPS: omega and psi stand for their three axes)."""
+    level_of = {g: k for k, level in enumerate(priorities) for g in level}
+    return np.array([level_of[next(g for g in BARRIER_GROUPS if n == g or n.startswith(g + "_"))]
+                     for n in CONSTRAINT_NAMES], dtype=np.int64)
 
 
 def new_workspace() -> NDArray[np.void]:
@@ -225,15 +256,31 @@ def prepare(x_in: Array, u_des: Array, f: np.void, ws: np.void, r: np.void) -> t
     return True, finite_des, need
 
 
+@numba.njit(**LEAF)
+def row_modes(f: np.void, soften: bool, mode: NDArray[np.int8]) -> None:
+    """The modes (M,) of the filter's QP (soften False: slacked where a slack weight is configured, else
+    hard) or of the soften fallback's (every enabled constraint slacked)."""
+    g = f.constraints.gains
+    for i in range(M):
+        if not g[i].enabled:
+            mode[i] = OFF
+        elif soften or g[i].slack_weight > 0:
+            mode[i] = SLACKED
+        else:
+            mode[i] = HARD
+
+
 @numba.njit(**JIT)
-def assemble(f: np.void, ws: np.void, soften: bool
+def assemble(f: np.void, ws: np.void, mode: NDArray[np.int8], relax: Array
              ) -> tuple[Array, Array, Array, Array, NDArray[np.int64], NDArray[np.int64], Array]:
     """The QP of the prepared state: min 1/2 |z - z0|^2 s.t. lower <= C z <= upper, z = [u (3); s].
 
-    Rows of disabled constraints and rows that do not depend on u are left out; each slacked row
-    (slack weight > 0, or every row if soften) gets a variable s with delta = s / sqrt(p). Rows are
+    mode (M,): each constraint's rows OFF (left out, as are disabled constraints and rows that do not
+    depend on u), HARD, or SLACKED (a variable s with delta = s / sqrt(p), p its slack weight or
+    soften_weight). relax (M + ZOH_ROWS,): how far each constraint row (BC_i + relax_i >= 0) and each
+    coupled rate row (both sides, rad/s) is relaxed (the `prioritize` fallback; 0: not). Rows are
     normalised to unit norm; then the coupled rate rows of the table (two-sided, `angular_rate.zoh_rows`,
-    reported as their axis's rate constraint; slacked only if soften); the last three rows are the box.
+    reported as and taking the mode of their axis's rate constraint); the last three rows are the box.
 
     Returns (C (r+3, n), lower, upper (r+3,), z0 (n,), row_of (r,) constraint of each row,
     slack_var (m,) variable of each constraint's slack or -1, scale (n,) delta = scale * s).
@@ -243,13 +290,17 @@ def assemble(f: np.void, ws: np.void, soften: bool
     r = 0
     ns = 0
     for i in range(M):
-        if g[i].enabled and ws.gnorm[i] > MIN_ROW_NORM:
+        if g[i].enabled and mode[i] != OFF and ws.gnorm[i] > MIN_ROW_NORM:
             r += 1
-            if g[i].slack_weight > 0 or soften:
+            if mode[i] >= SLACKED:
                 ns += 1
-    nz = t.zoh_rows
-    if soften:
-        ns += nz
+    nz = 0
+    for q in range(t.zoh_rows):
+        mq = mode[OMEGA_X + t.zoh_axis[q]]
+        if mq != OFF:
+            nz += 1
+            if mq >= SLACKED:
+                ns += 1
     r += nz
     n = 3 + ns
     C = np.zeros((r + 3, n))
@@ -261,14 +312,17 @@ def assemble(f: np.void, ws: np.void, soften: bool
     k = 0
     v = 3
     for i in range(M):
-        if not (g[i].enabled and ws.gnorm[i] > MIN_ROW_NORM):
+        if not (g[i].enabled and mode[i] != OFF and ws.gnorm[i] > MIN_ROW_NORM):
             continue
         row_of[k] = i
         for a in range(3):
             C[k, a] = t.gain[i, a]
-        if g[i].slack_weight > 0 or soften:
-            p = g[i].slack_weight if g[i].slack_weight > 0 else f.soften_weight
-            scale[v] = 1.0 / math.sqrt(p)
+        if mode[i] >= SLACKED:
+            if mode[i] == DISTANCE:
+                scale[v] = ws.gnorm[i] / math.sqrt(f.soften_weight)
+            else:
+                p = g[i].slack_weight if g[i].slack_weight > 0 else f.soften_weight
+                scale[v] = 1.0 / math.sqrt(p)
             C[k, v] = scale[v]
             slack_var[i] = v
             v += 1
@@ -278,14 +332,19 @@ def assemble(f: np.void, ws: np.void, soften: bool
         norm = math.sqrt(ss)
         for j in range(n):
             C[k, j] = C[k, j] / norm
-        lower[k] = -t.drift[i] / norm
+        lower[k] = -t.drift[i] / norm if relax[i] <= 0.0 else (-t.drift[i] - relax[i]) / norm
         k += 1
-    for q in range(nz):
+    for q in range(t.zoh_rows):
+        mq = mode[OMEGA_X + t.zoh_axis[q]]
+        if mq == OFF:
+            continue
         row_of[k] = OMEGA_X + t.zoh_axis[q]
         for a in range(3):
             C[k, a] = t.zoh_gain[q, a]
-        if soften:
+        if mq >= SLACKED:
             scale[v] = 1.0 / math.sqrt(f.soften_weight)
+            if mq == DISTANCE:
+                scale[v] *= math.sqrt(t.zoh_gain[q, 0] ** 2 + t.zoh_gain[q, 1] ** 2 + t.zoh_gain[q, 2] ** 2)
             C[k, v] = scale[v]
             v += 1
         ss = 0.0
@@ -294,8 +353,9 @@ def assemble(f: np.void, ws: np.void, soften: bool
         norm = math.sqrt(ss)
         for j in range(n):
             C[k, j] = C[k, j] / norm
-        lower[k] = t.zoh_lo[q] / norm
-        upper[k] = t.zoh_hi[q] / norm
+        w = relax[M + q]
+        lower[k] = t.zoh_lo[q] / norm if w <= 0.0 else (t.zoh_lo[q] - w) / norm
+        upper[k] = t.zoh_hi[q] / norm if w <= 0.0 else (t.zoh_hi[q] + w) / norm
         k += 1
     for a in range(3):
         C[r + a, a] = 1.0
@@ -321,6 +381,7 @@ def solve(C: Array, lower: Array, upper: Array, z0: Array, f: np.void, r: np.voi
         with numba.objmode(code="int64", iters="int64", backup="int64"):
             code, iters, backup = proxsuite_qp.solve(C, lower, upper, z0, f, z, mult)
     r.iterations += iters
+    r.solves += 1
     if code == SOLVE_OK and not active_set.rows_hold(C, lower, upper, z, f.check_tolerance):
         code = SOLVE_CHECK_FAILED
     return z, mult, code, backup
@@ -354,6 +415,101 @@ def finish(ws: np.void, r: np.void) -> None:
         r.box_active[a] = 1 if ((u <= t.lo[a] and ut < t.lo[a]) or (u >= t.hi[a] and ut > t.hi[a])) else 0
 
 
+@numba.njit(**LEAF)
+def _violation(ws: np.void, u: Array, i: int) -> float:
+    """How far constraint row i misses at u: max(0, -BC_i(u))."""
+    t = ws.table
+    bc = t.drift[i] + t.gain[i, 0] * u[0] + t.gain[i, 1] * u[1] + t.gain[i, 2] * u[2]
+    return -bc if bc < 0.0 else 0.0
+
+
+@numba.njit(**LEAF)
+def _zoh_violation(ws: np.void, u: Array, q: int) -> float:
+    """How far coupled rate row q misses at u (either side), rad/s."""
+    t = ws.table
+    v = t.zoh_gain[q, 0] * u[0] + t.zoh_gain[q, 1] * u[1] + t.zoh_gain[q, 2] * u[2]
+    return max(0.0, t.zoh_lo[q] - v, v - t.zoh_hi[q])
+
+
+@numba.njit(**JIT)
+def prioritize(f: np.void, ws: np.void, r: np.void
+               ) -> tuple[bool, Array, Array, NDArray[np.int64], NDArray[np.int64], Array, Array]:
+    """The `prioritize` fallback, a lexicographic hierarchy solved exactly by a short sequence of QPs:
+    for each level of `filter.priorities` in turn, most important first, the least violation of its
+    rows, measured as distances in u (sum of (delta_i / |dBC_i/du|)^2: a QP with the level's rows slacked
+    as DISTANCE at soften_weight, against which |u - u_des|^2 weighs ~1e-8), the more important levels hard as
+    relaxed so far, the less important left out, the box hard) fixes how far each of its rows is
+    relaxed: the violation max(0, -BC_i) at that QP's u (a point where every more important row holds
+    as relaxed, so the next QP is feasible by construction); then the filter's own QP (slacks of the
+    configured slacked rows as usual) with every row relaxed by that much. Rows with a configured slack
+    weight take part in the last QP only (they never make it infeasible). r.gave_way: the most important
+    level relaxed (NO_LEVEL if none), r.slack: each relaxed row's relaxation, r.soft_result: the last QP.
+
+    Returns (ok, z, mult, row_of, slack_var, scale, relax) of the last QP (or of the last level's QP if
+    the last one failed: its u meets every row as relaxed)."""
+    g = f.constraints.gains
+    t = ws.table
+    mode = np.zeros(M, dtype=np.int8)
+    relax = np.zeros(M + ZOH_ROWS)
+    u = np.empty(3)
+    have = False
+    z = np.zeros(3)
+    mult = np.zeros(3)
+    row_of = np.zeros(0, dtype=np.int64)
+    slack_var = np.full(M, -1, dtype=np.int64)
+    scale = np.zeros(3)
+    for lev in range(f.n_levels):
+        rows_here = False
+        for i in range(M):
+            if not g[i].enabled or g[i].slack_weight > 0 or f.level[i] > lev:
+                mode[i] = OFF
+            elif f.level[i] == lev:
+                mode[i] = DISTANCE
+                rows_here = rows_here or ws.gnorm[i] > MIN_ROW_NORM
+            else:
+                mode[i] = HARD
+        for q in range(t.zoh_rows):
+            if f.level[OMEGA_X + t.zoh_axis[q]] == lev and g[OMEGA_X + t.zoh_axis[q]].enabled:
+                rows_here = True
+        if not rows_here:
+            continue
+        C, lower, upper, z0, ro, sv, sc = assemble(f, ws, mode, relax)
+        zl, ml, code, backup = solve(C, lower, upper, z0, f, r)
+        if not (code == SOLVE_OK or backup == SOLVE_OK):
+            break  # (never expected: the level's rows are slacked, the rest feasible as relaxed)
+        for a in range(3):
+            u[a] = min(max(zl[a], t.lo[a]), t.hi[a])
+        z, mult, row_of, slack_var, scale, have = zl, ml, ro, sv, sc, True
+        for i in range(M):
+            if mode[i] == DISTANCE and ws.gnorm[i] > MIN_ROW_NORM:
+                v = _violation(ws, u, i)
+                if v > 0.0:  # (+ the solver's tolerance, a distance in u as the rows are normalised)
+                    relax[i] = v + f.check_tolerance * ws.gnorm[i]
+        for q in range(t.zoh_rows):
+            if mode[OMEGA_X + t.zoh_axis[q]] == DISTANCE:
+                v = _zoh_violation(ws, u, q)
+                if v > 0.0:
+                    gq = math.sqrt(t.zoh_gain[q, 0] ** 2 + t.zoh_gain[q, 1] ** 2 + t.zoh_gain[q, 2] ** 2)
+                    relax[M + q] = v + f.check_tolerance * gq
+    r.gave_way = NO_LEVEL  # a row gave way if it misses by more than the solver's tolerance (as a distance)
+    tol2 = 2.0 * f.check_tolerance
+    for lev in range(f.n_levels):
+        for i in range(M):
+            if f.level[i] == lev and relax[i] > tol2 * ws.gnorm[i] and r.gave_way == NO_LEVEL:
+                r.gave_way = lev
+        for q in range(t.zoh_rows):
+            gq = math.sqrt(t.zoh_gain[q, 0] ** 2 + t.zoh_gain[q, 1] ** 2 + t.zoh_gain[q, 2] ** 2)
+            if f.level[OMEGA_X + t.zoh_axis[q]] == lev and relax[M + q] > tol2 * gq and r.gave_way == NO_LEVEL:
+                r.gave_way = lev
+    row_modes(f, False, mode)
+    C, lower, upper, z0, ro, sv, sc = assemble(f, ws, mode, relax)
+    zl, ml, code, backup = solve(C, lower, upper, z0, f, r)
+    r.soft_result = code if backup == NOT_SOLVED or code == SOLVE_OK else backup
+    if code == SOLVE_OK or backup == SOLVE_OK:
+        return True, zl, ml, ro, sv, sc, relax
+    return have, z, mult, row_of, slack_var, scale, relax
+
+
 # ----------------------------------------------------------------------------- the call
 
 
@@ -368,7 +524,9 @@ def filter_state(x: Array, u_des: Array, f: np.void, ws: np.void, r: np.void) ->
     r.solve_result = r.backup_result = r.soft_result = NOT_SOLVED
     r.qp_failed = r.raise_error = 0
     r.iterations = 0
+    r.solves = 0
     r.gate = GATE_OFF
+    r.gave_way = NO_LEVEL
     valid, finite_des, need = prepare(x, u_des, f, ws, r)
     if not valid:
         # no barrier can be trusted: the wheels hold their speed (u = 0), keeping the body rates
@@ -385,7 +543,10 @@ def filter_state(x: Array, u_des: Array, f: np.void, ws: np.void, r: np.void) ->
         r.gate = gate(ws.x, f, ws.gate, r.u)
         finish(ws, r)
         return
-    C, lower, upper, z0, row_of, slack_var, scale = assemble(f, ws, False)
+    mode = np.empty(M, dtype=np.int8)
+    row_modes(f, False, mode)
+    relax = np.zeros(M + ZOH_ROWS)
+    C, lower, upper, z0, row_of, slack_var, scale = assemble(f, ws, mode, relax)
     z, mult, code, backup = solve(C, lower, upper, z0, f, r)
     r.solve_result, r.backup_result = code, backup
     ok = code == SOLVE_OK or backup == SOLVE_OK
@@ -396,15 +557,25 @@ def filter_state(x: Array, u_des: Array, f: np.void, ws: np.void, r: np.void) ->
         if f.policy == RAISE:
             r.raise_error = 1
         elif f.policy == SOFTEN:
-            C, lower, upper, z0, row_of, slack_var, scale = assemble(f, ws, True)
+            row_modes(f, True, mode)
+            C, lower, upper, z0, row_of, slack_var, scale = assemble(f, ws, mode, relax)
             z, mult, soft, soft_backup = solve(C, lower, upper, z0, f, r)
             ok = soft == SOLVE_OK or soft_backup == SOLVE_OK
             r.soft_result = SOLVE_OK if ok else soft
+        elif f.policy == PRIORITIZE:
+            ok, z, mult, row_of, slack_var, scale, relax = prioritize(f, ws, r)
         if not ok and f.policy == HOLD:
             for a in range(3):
                 r.u[a] = min(max(0.0, t.lo[a]), t.hi[a])
     if ok:
         extract(z, mult, row_of, slack_var, scale, ws, r)
+        if f.policy == PRIORITIZE and r.qp_failed:
+            for i in range(M):  # how far each row gave way (a relaxed row has no slack variable)
+                if relax[i] > 0.0:
+                    r.slack[i] = relax[i]
+            for q in range(t.zoh_rows):
+                i = OMEGA_X + t.zoh_axis[q]
+                r.slack[i] = max(r.slack[i], relax[M + q])
     r.fallback = reason
     r.status = FALLBACK if reason != NO_FALLBACK else SOLVED
     r.gate = gate(ws.x, f, ws.gate, r.u)
@@ -419,6 +590,7 @@ def filter_many(X: Array, U_des: Array, f: NDArray[np.void], ws: NDArray[np.void
 
 
 __all__ = [
-    "ACTIVE_MULTIPLIER", "BIG", "FILTER_DTYPE", "MIN_ROW_NORM", "RESULT_DTYPE", "WORKSPACE_DTYPE", "assemble",
-    "extract", "filter_many", "filter_record", "filter_state", "finish", "new_workspace", "prepare", "solve",
+    "ACTIVE_MULTIPLIER", "BIG", "DISTANCE", "FILTER_DTYPE", "HARD", "MIN_ROW_NORM", "NO_LEVEL", "OFF", "RESULT_DTYPE",
+    "SLACKED", "WORKSPACE_DTYPE", "assemble", "constraint_levels", "extract", "filter_many", "filter_record",
+    "filter_state", "finish", "new_workspace", "prepare", "prioritize", "row_modes", "solve",
 ]  # fmt: skip

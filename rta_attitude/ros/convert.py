@@ -291,7 +291,7 @@ class FilterStatusBuilder:
             repr(float(r["solve_time_s"])), preset, *map(repr, u_des), *map(repr, u), *map(_bool, box),
             str(counters.calls), str(counters.fast_path), str(counters.solved), str(counters.fallbacks),
             str(counters.solver_failures), str(counters.backup_solves), str(counters.invalid_states), source,
-            *(str(inputs.get(k, 0)) for k in topics.INPUT_COUNTERS), str(res.gate),
+            *(str(inputs.get(k, 0)) for k in topics.INPUT_COUNTERS), str(res.gate), str(res.gave_way),
         ]  # fmt: skip
         for kv, text in zip(self.qp.values, texts, strict=True):
             kv.value = text

@@ -226,7 +226,7 @@ class FilterNode(RtaNode):
         record = res.record.copy()
         record["u"] = 0.0
         record["status"], record["fallback"] = outcome.FALLBACK, outcome.OUTPUT_GUARD
-        return FilterResult(record, res.policy)
+        return FilterResult(record, res.policy, res.levels)
 
     def close(self) -> None:
         super().close()

@@ -192,7 +192,7 @@ class ClosedLoop:
         R = run.results
         t = dt * np.arange(n + 1)
         h_min, h_arg = substep_minima(run.h[:-1], np.moveaxis(run.h_sub, 1, 0), t[:-1], dt)
-        res = FilterResult(R, cfg.filter.fallback)
+        res = FilterResult(R, cfg.filter.fallback, cfg.filter.priorities)
         if self.rta:
             status, fallback = res.status, res.fallback
             bc, slack, inter, box = res.bc, res.slack, res.intervening, res.box_active
