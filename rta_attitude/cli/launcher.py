@@ -16,7 +16,8 @@ ROS node. Sequence:
 4. stop the controller and filter with SIGINT (then SIGTERM; SIGKILL only as a last resort, which
    is reported as an error), check that no child survives and that no Fast DDS file the children
    used is left in /dev/shm (such files, when no live process maps them any more, are removed and
-   reported as an error);
+   reported as an error; a listening-port file, which writers of any DDS program share, is removed
+   and noted in the run facts (`shm_ports_removed`), not blamed on the run);
 5. summary from the recorded bag (`rta_attitude.recording.analysis`: states, commands and filter records as
    recorded; minima between samples by re-integrating each recorded step), printed with
    `metrics.format_summary` as `simulate` prints it, and written to `--out/summary.json` with a
@@ -404,8 +405,19 @@ def launch(p: Plan, log_dir: Path | None) -> tuple[list[str], dict[str, Any]]:
     facts["exit_codes"] = {c.name: c.proc.returncode for c in children}
     facts["signals"] = {c.name: c.signals for c in children if c.signals}
     stale = remove_stale_shm(ours)
-    if stale:
-        problems.append(f"Fast DDS files left in /dev/shm (removed): {', '.join(stale)}")
-    facts["shm_clean"] = not stale
+    # a port file (`fastrtps_port<N>`, its semaphore) is shared by every writer to that port, in any DDS
+    # program on the machine: one left unused may be another program's (a process killed elsewhere), so it
+    # is removed and noted, not blamed on the run; a participant's own segment (`fastrtps_<hex>`, unique)
+    # or data-sharing file left behind is the run's leak
+    leaked = [n for n in stale if not _is_port_file(n)]
+    if leaked:
+        problems.append(f"Fast DDS files left in /dev/shm (removed): {', '.join(leaked)}")
+    facts["shm_clean"] = not leaked
+    facts["shm_ports_removed"] = [n for n in stale if _is_port_file(n)]
     return problems, facts
+
+
+def _is_port_file(name: str) -> bool:
+    """A Fast DDS listening-port file or its companions (lock file, semaphore): shared between programs."""
+    return name.startswith(("fastrtps_port", "sem.fastrtps_port"))
 
