@@ -602,7 +602,10 @@ def test_filter_killed_and_restarted_the_plant_falls_back_and_the_loop_resumes(l
     zero = [convert.torque_from_msg(m.message)[0] // S for m in applied
             if not np.any(convert.torque_from_msg(m.message)[1])]
     assert len(zero) >= run["deadline_misses"]  # the zero fallback was applied at every miss of the outage
-    # every call of both filters is in the bag once; in stamp order the new filter's first calls may come
+    # every call of both filters is in the bag once (the new filter's first statuses wait in its publish
+    # gate until the recorder matched: the gate holds them serialized; it once held the message object,
+    # which the next call rewrote, and two records came out with the second call's values: found by CI);
+    # in stamp order the new filter's first calls may come
     # out of order (found by the flake hunt): a state it read before the controller's torque_des for it
     # matched is answered after desired_timeout_s, after the next states (and the plant drops it as late)
     calls = [r["calls"] for r in _status_records(lp.bag)]

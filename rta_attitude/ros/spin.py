@@ -49,6 +49,7 @@ from rclpy.event_handler import (
 from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.publisher import Publisher
+from rclpy.serialization import serialize_message
 from rclpy.signals import SignalHandlerOptions
 from rclpy.task import Future
 from rclpy.timer import Timer
@@ -278,7 +279,8 @@ class RtaNode(Node):
 
 
 class PublishGate:
-    """Publish through this: messages wait until the publisher matched `expected` subscriptions.
+    """Publish through this: messages wait (serialized, so later changes of the message object do not
+    reach them) until the publisher matched `expected` subscriptions.
 
     Once open the gate stays open (later publishes go straight through).
     """
@@ -304,7 +306,10 @@ class PublishGate:
             self.publisher.publish(msg)
             self.sent += 1
             return
-        self._queue.append(msg)
+        # held as bytes: publishers rewrite one message object per call (convert's builders), so a held
+        # reference would go out later with a later call's content (found: a restarted filter's first
+        # filter_status recorded twice with its second call's values, its first lost)
+        self._queue.append(msg if isinstance(msg, bytes) else serialize_message(msg))
         if self._timer is None:
             self._since = self.node.wall_now_s()
             self._timer = self.node.wall_timer(GATE_POLL_S, self._poll)
