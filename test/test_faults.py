@@ -625,6 +625,10 @@ def test_controller_killed_the_filter_keeps_the_spacecraft_safe_with_u_des_zero(
 
     lp = loop_factory("desired_timeout_s=0.2", "command_timeout_s=3.0", "stop_timeout_s=1.0", duration=STEPS_LONG)
     lp.wait_states(25)
+    # and 25 of the controller's torque_des in the bag: under load a reliable sample to the recorder can wait
+    # for the writer's next heartbeat (the later ones behind it), and a SIGKILLed writer repairs nothing
+    # (found by the flake hunt: a bag with 0 torque_des after the kill at state 25)
+    lp.wait_count("torque_des", 25)
     if sig == signal.SIGKILL:
         lp.procs["controller"].kill()
         assert lp.procs["controller"].wait(10) == -signal.SIGKILL
