@@ -741,7 +741,8 @@ def _clean_shm(files: set[str]) -> None:
 def test_plant_killed_its_readers_report_it_once_and_the_recorder_closes_when_told(loop_factory: Any) -> None:
     """SIGKILL of the plant: controller, filter and recorder learn it through `state`'s liveliness lease
     (one warning each), the filter drops what waited for the dead plant and sends it nothing more, and
-    the recorder, told to stop, closes a complete bag without waiting for the plant's final status."""
+    the recorder, told to stop, closes the bag cleanly without waiting for the plant's final status
+    (with every command the live filter sent; the dead plant's states in flight are lost with it)."""
     lp = loop_factory("stop_timeout_s=1.0", "liveliness_lease_s=1.0", duration=400)
     files = lp.wait_states(20, track="plant") - lp.shm_before
     plant = lp.procs["plant"]
@@ -756,7 +757,12 @@ def test_plant_killed_its_readers_report_it_once_and_the_recorder_closes_when_to
     contents = read_bag(lp.bag, decode=False)
     assert not contents.truncated and "rta_attitude" in contents.metadata  # closed cleanly
     states, commands = _stamps(lp.bag, "state"), _stamps(lp.bag, "torque_cmd")
-    assert len(states) >= 20 and len(commands) == len(set(commands)) and set(commands) <= set(states)
+    # the states in the bag are the plant's first ones, in order, without a gap; states the killed plant
+    # still had in flight to the recorder are lost with it (a reliable sample waiting for a repair that a
+    # SIGKILLed writer never sends: seen by CI, 52 states in the bag and 196 answered), so commands are
+    # checked against the step grid, not against the recorded states
+    assert len(states) >= 20 and states == [k * S for k in range(len(states))]
+    assert len(commands) == len(set(commands)) and all(c % S == 0 for c in commands)
     assert contents.counts[f"{NS}/torque_cmd"] == lp.published("filter")["torque_cmd"]  # nothing lost
     _clean_shm(files)
 
