@@ -344,7 +344,7 @@ def assemble(f: np.void, ws: np.void, mode: NDArray[np.int8], relax: Array
         if mq >= SLACKED:
             scale[v] = 1.0 / math.sqrt(f.soften_weight)
             if mq == DISTANCE:
-                scale[v] *= math.sqrt(t.zoh_gain[q, 0] ** 2 + t.zoh_gain[q, 1] ** 2 + t.zoh_gain[q, 2] ** 2)
+                scale[v] *= _zoh_norm(t, q)
             C[k, v] = scale[v]
             v += 1
         ss = 0.0
@@ -413,6 +413,12 @@ def finish(ws: np.void, r: np.void) -> None:
         r.lo[a], r.hi[a] = t.lo[a], t.hi[a]
         u, ut = r.u[a], ws.u_target[a]
         r.box_active[a] = 1 if ((u <= t.lo[a] and ut < t.lo[a]) or (u >= t.hi[a] and ut > t.hi[a])) else 0
+
+
+@numba.njit(**LEAF)
+def _zoh_norm(t: np.void, q: int) -> float:
+    """|d/du| of coupled rate row q of table t (its gain's norm)."""
+    return math.sqrt(t.zoh_gain[q, 0] ** 2 + t.zoh_gain[q, 1] ** 2 + t.zoh_gain[q, 2] ** 2)
 
 
 @numba.njit(**LEAF)
@@ -489,18 +495,17 @@ def prioritize(f: np.void, ws: np.void, r: np.void
             if mode[OMEGA_X + t.zoh_axis[q]] == DISTANCE:
                 v = _zoh_violation(ws, u, q)
                 if v > 0.0:
-                    gq = math.sqrt(t.zoh_gain[q, 0] ** 2 + t.zoh_gain[q, 1] ** 2 + t.zoh_gain[q, 2] ** 2)
-                    relax[M + q] = v + f.check_tolerance * gq
-    r.gave_way = NO_LEVEL  # a row gave way if it misses by more than the solver's tolerance (as a distance)
+                    relax[M + q] = v + f.check_tolerance * _zoh_norm(t, q)
+    # the most important level with a row that misses by more than the solver's tolerance (as a distance)
     tol2 = 2.0 * f.check_tolerance
-    for lev in range(f.n_levels):
-        for i in range(M):
-            if f.level[i] == lev and relax[i] > tol2 * ws.gnorm[i] and r.gave_way == NO_LEVEL:
-                r.gave_way = lev
-        for q in range(t.zoh_rows):
-            gq = math.sqrt(t.zoh_gain[q, 0] ** 2 + t.zoh_gain[q, 1] ** 2 + t.zoh_gain[q, 2] ** 2)
-            if f.level[OMEGA_X + t.zoh_axis[q]] == lev and relax[M + q] > tol2 * gq and r.gave_way == NO_LEVEL:
-                r.gave_way = lev
+    top = f.n_levels
+    for i in range(M):
+        if relax[i] > tol2 * ws.gnorm[i]:
+            top = min(top, f.level[i])
+    for q in range(t.zoh_rows):
+        if relax[M + q] > tol2 * _zoh_norm(t, q):
+            top = min(top, f.level[OMEGA_X + t.zoh_axis[q]])
+    r.gave_way = top if top < f.n_levels else NO_LEVEL
     row_modes(f, False, mode)
     C, lower, upper, z0, ro, sv, sc = assemble(f, ws, mode, relax)
     zl, ml, code, backup = solve(C, lower, upper, z0, f, r)
