@@ -31,7 +31,7 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
-from rta_attitude.config.schema import BARRIER_GROUPS, CONSTRAINT_NAMES, Config
+from rta_attitude.config.schema import CONSTRAINT_NAMES, Config
 from rta_attitude.constraints.base import (
     CONSTRAINT_DTYPE,
     N_CONSTRAINTS,
@@ -39,6 +39,7 @@ from rta_attitude.constraints.base import (
     TABLE_DTYPE,
     ZOH_ROWS,
     constraint_record,
+    group_of,
 )
 from rta_attitude.constraints.geometry import CONTEXT_DTYPE
 from rta_attitude.constraints.rows import rows
@@ -166,8 +167,7 @@ def constraint_levels(priorities: tuple[tuple[str, ...], ...]) -> NDArray[np.int
     """The priority level (M,) of each constraint (CONSTRAINT_NAMES) from `filter.priorities` (levels of
     BARRIER_GROUPS: omega and psi stand for their three axes)."""
     level_of = {g: k for k, level in enumerate(priorities) for g in level}
-    return np.array([level_of[next(g for g in BARRIER_GROUPS if n == g or n.startswith(g + "_"))]
-                     for n in CONSTRAINT_NAMES], dtype=np.int64)
+    return np.array([level_of[group_of(n)] for n in CONSTRAINT_NAMES], dtype=np.int64)
 
 
 def new_workspace() -> NDArray[np.void]:
