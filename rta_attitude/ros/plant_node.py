@@ -9,8 +9,9 @@ Stepping (`stepping` parameter):
   the plant also waits for the chain's answer to it, so every message count of the run is known
   and goes into the final `run_status`. No command within `command_timeout_s` (wall) is a deadline
   miss: the plant applies `deadline_fallback` for that step and goes on (a dead filter never stalls
-  the loop; the first command of the run may take `startup_timeout_s`, and if none ever comes the
-  run fails). In a run without faults the timeout never fires, so lockstep stays deterministic.
+  the loop; the first command of the run may take `startup_timeout_s`, up to four times that while a
+  writer of the command topic is alive, and if none comes the run fails). In a run without faults
+  the timeout never fires, so lockstep stays deterministic.
 - realtime: a steady wall-clock timer with period dt / real_time_factor. At tick k+1 the plant
   applies the command stamped t_k if it has arrived (zero-order hold over [t_k, t_k+1)), else it
   counts a deadline miss and applies `deadline_fallback`. The loop never waits.
@@ -50,6 +51,10 @@ from rta_attitude.ros.spin import RtaNode
 
 STARTUP_POLL_S = 0.005
 WATCHDOG_PERIOD_S = 0.1
+FIRST_COMMAND_EXTENSIONS = 3
+"""The first command may take startup_timeout_s, and that again this many times while a writer of the
+command topic is alive and matched (the chain discovers itself: on a loaded machine the first answer
+crosses three hops of endpoint discovery); a chain that hangs still ends the run, bounded."""
 """Longest period of the lockstep command watchdog (shorter for a short command_timeout_s) [s]."""
 LIMIT_RTOL = 1e-9
 """A command counts as beyond a limit when |u_i| > limit (1 + LIMIT_RTOL) (tau = D u and back rounds)."""
@@ -96,13 +101,15 @@ class PlantNode(RtaNode):
                      for spec in topics.published(topics.PLANT, True, self.truth)}  # fmt: skip
         self.diagnostics = DiagnosticsPublisher(self, "run")
         self.command_topic = topics.TORQUE_CMD
-        self.subscribe(self.command_topic, self._on_command)
+        self._command_sub = self.subscribe(self.command_topic, self._on_command)
         self._sent_s = 0.0
         self._progress_s = self.wall_now_s()
         self._ended = False
         self._running = False
         self._started_s = 0.0
         self.startup_extensions = 0
+        self.first_command_extensions = 0
+        """How often startup_timeout_s ran out without a first command while its writer was alive."""
         """How often startup_timeout_s ran out while a reader was alive but still starting (then: wait on)."""
         self._startup = self.wall_timer(STARTUP_POLL_S, self._check_ready)
         self.get_logger().info(f"scenario {self.scenario.name}: {self.steps} steps of {self.dt_s:g} s, "
@@ -271,14 +278,34 @@ class PlantNode(RtaNode):
             self.destroy_timer(self._ticker)
             self._end(topics.RUN_DONE)
 
+    def _command_writers(self) -> list[str]:
+        """The nodes that write the command topic, alive in the ROS graph and matched with our reader."""
+        if self._command_sub.get_publisher_count() == 0:
+            return []
+        return sorted({info.node_name for info in self.get_publishers_info_by_topic(
+            self._command_sub.topic_name)})
+
     def _check_stall(self) -> None:
         if self._ended:
             return
         waited = self.wall_now_s() - self._progress_s
-        if self.counts["commands"] == 0:  # the chain has not answered yet: it may still be starting
+        if self.counts["commands"] == 0:  # the chain has not answered yet: it may still be discovering
             if waited > self.knobs["startup_timeout_s"]:
+                writers = self._command_writers()
+                if writers and self.first_command_extensions < FIRST_COMMAND_EXTENSIONS:
+                    # a writer of the command topic is alive and matched: the chain is still discovering
+                    # itself (each of its nodes bounds that by its own startup_timeout_s); wait on, bounded
+                    self.first_command_extensions += 1
+                    self.get_logger().info(f"no {self.command_topic} yet after {waited:.0f} s; its writer "
+                                           f"{', '.join(writers)} is alive: waiting on "
+                                           f"({self.first_command_extensions} of {FIRST_COMMAND_EXTENSIONS})")
+                    self._progress_s = self.wall_now_s()
+                    return
+                total = self.knobs["startup_timeout_s"] * (1 + self.first_command_extensions)
                 self._end(topics.RUN_FAILED + f": no {self.command_topic} for t = {self.k * self.dt_s:g} s "
-                          f"within {self.knobs['startup_timeout_s']:g} s (startup_timeout_s)")
+                          f"within {total:g} s (startup_timeout_s"
+                          + (f" x {1 + self.first_command_extensions}, its writer alive)" if
+                             self.first_command_extensions else ", no writer alive)"))
             return
         timeout = self.knobs["command_timeout_s"]
         if waited <= timeout:
