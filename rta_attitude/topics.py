@@ -349,7 +349,7 @@ KNOBS: tuple[Knob, ...] = (
     Knob("real_time_factor", 1.0, (PLANT,), "realtime: sim seconds per wall second", positive=True),
     Knob("command_timeout_s", 5.0, (PLANT,),
          "lockstep: wall time to wait for the command of a step before a deadline miss (the first command "
-         "of the run may take startup_timeout_s) [s]", positive=True),
+         "of the run may take startup_timeout_s, up to 4 times that while its writer is alive) [s]", positive=True),
     Knob("deadline_fallback", "hold", (PLANT,),
          "no command for t_k in time (deadline miss): hold the last applied torque, or apply zero",
          ("hold", "zero")),
