@@ -1,5 +1,6 @@
-"""`rta-attitude analyze BAG [--compare BAG2]`: summary, verdict, figure and boresight sky map of a
-recorded run (`recording.analysis`, `recording.plots`, `recording.skymap`), optionally beside a second run."""
+"""`rta-attitude analyze BAG [--compare BAG2] [--animate]`: summary, verdict, figure and boresight sky map of a
+recorded run (`recording.analysis`, `recording.plots`, `recording.skymap`), optionally beside a second run,
+and an animation of its attitude scene (`recording.scene`)."""
 
 from __future__ import annotations
 
@@ -21,6 +22,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--config", type=Path, default=None,
                         help="parameter YAML of the run (default: $RTA_ATTITUDE_CONFIG or the package's)")
     parser.add_argument("--no-plot", action="store_true", help="skip the PNG figures (figure.png, skymap.png)")
+    parser.add_argument("--animate", nargs="?", const="scene.gif", default=None, metavar="FILE",
+                        help="also render the attitude scene in the Hill frame as an animation (FILE.gif, or .mp4 "
+                             "with ffmpeg; default scene.gif in --out; the first bag)")
+    parser.add_argument("--frames", type=int, default=200, help="frames of the animation, evenly over the run (200)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -37,6 +42,11 @@ def run(args: argparse.Namespace) -> int:
         write_timeseries,
     )
     from rta_attitude.simulation.metrics import format_summary
+
+    if args.animate is not None:  # a bad name fails before any work
+        from rta_attitude.recording.scene import check_animation
+
+        check_animation(Path(args.animate), args.frames)
 
     for p in [args.bag, *([args.compare] if args.compare is not None else [])]:
         resolve_bag_path(p)  # check inputs first
@@ -78,6 +88,11 @@ def run(args: argparse.Namespace) -> int:
             f" (from {' and '.join(r.path.name for _, r in runs)})"
         written.append(plot_runs(runs, cfg, out / "figure.png", title))
         written.append(plot_skymap(runs, cfg, out / "skymap.png", title))
+    if args.animate is not None:
+        from rta_attitude.recording.scene import animate_scene
+
+        written.append(animate_scene(run_a, cfg, out / args.animate, f"{run_a.scenario} ({run_a.path.name})",
+                                     frames=args.frames))
     print(f"wrote {', '.join(str(p) for p in written)} (bags read and analysed in {wall:.2f} s)")
     return 0
 
