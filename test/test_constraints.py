@@ -199,20 +199,23 @@ def test_batch_equals_single():
         np.testing.assert_array_equal(one.gain, tab.gain[k])
 
 
-def test_sampled_data_margin_only_in_the_robust_preset():
+def test_sampled_data_margin_only_in_the_robust_preset_and_by_the_filters_model():
     import dataclasses
 
     b = dict(CFG.barriers)
-    b["exclusion_zone"] = dataclasses.replace(b["exclusion_zone"], margin=2e-3)
+    b["exclusion_zone"] = dataclasses.replace(b["exclusion_zone"], margin=2e-3, margin_gyrostat=7e-3)
     cfg = dataclasses.replace(CFG, barriers=b)
     x = random_states(np.random.default_rng(2), 50, CFG)
-    robust = ConstraintSet(cfg.with_preset("robust")).evaluate(x)
-    paper = ConstraintSet(cfg.with_preset("paper")).evaluate(x)
-    np.testing.assert_array_equal(robust.h, paper.h)
-    np.testing.assert_allclose(paper.psi0[:, 0] - robust.psi0[:, 0], 2e-3, rtol=1e-9)
-    comm_margin = CFG.barriers["communication"].margin
-    np.testing.assert_allclose(paper.psi0[:, 1] - robust.psi0[:, 1], comm_margin, rtol=1e-9, atol=1e-15)
-    np.testing.assert_array_equal(robust.psi0[:, 2:], paper.psi0[:, 2:])
+    comm = CFG.barriers["communication"]
+    assert comm.margin_gyrostat == comm.margin  # not in the YAML: the paper model's
+    for model, ez_margin in (("paper", 2e-3), ("gyrostat", 7e-3)):
+        c = cfg.with_models(filter=model)
+        robust = ConstraintSet(c.with_preset("robust")).evaluate(x)
+        paper = ConstraintSet(c.with_preset("paper")).evaluate(x)
+        np.testing.assert_array_equal(robust.h, paper.h)
+        np.testing.assert_allclose(paper.psi0[:, 0] - robust.psi0[:, 0], ez_margin, rtol=1e-9)
+        np.testing.assert_allclose(paper.psi0[:, 1] - robust.psi0[:, 1], comm.margin, rtol=1e-9, atol=1e-15)
+        np.testing.assert_array_equal(robust.psi0[:, 2:], paper.psi0[:, 2:])
 
 
 def test_compiled_rows_equal_the_numpy_oracle(states):

@@ -210,7 +210,8 @@ def test_controller_killed_the_filter_keeps_the_spacecraft_safe_with_u_des_zero(
     from rta_attitude.recording.analysis import load_run
     from rta_attitude.recording.summary import summarize_run
 
-    lp = loop_factory("desired_timeout_s=0.2", "command_timeout_s=3.0", "stop_timeout_s=1.0", duration=STEPS_LONG)
+    steps = STEPS_LONG
+    lp = loop_factory("desired_timeout_s=0.2", "command_timeout_s=3.0", "stop_timeout_s=1.0", duration=steps)
     lp.wait_states(25)
     # and 25 of the controller's torque_des in the bag: under load a reliable sample to the recorder can wait
     # for the writer's next heartbeat (the later ones behind it), and a SIGKILLed writer repairs nothing
@@ -224,13 +225,13 @@ def test_controller_killed_the_filter_keeps_the_spacecraft_safe_with_u_des_zero(
     assert lp.wait("plant", "recorder") == {"plant": 0, "recorder": 0}, lp.log("plant")
     assert lp.stop("filter") == 0
     state, run = _final_run_status(lp.bag)
-    assert state == topics.RUN_DONE and run["step"] == STEPS_LONG
+    assert state == topics.RUN_DONE and run["step"] == steps
     recs = _status_records(lp.bag)
-    assert len(recs) == STEPS_LONG + 1  # the filter answered every state
+    assert len(recs) == steps + 1  # the filter answered every state
     missing = [i for i, r in enumerate(recs) if r[topics.INPUT_SOURCE_KEY] == "missing"]
     sent = (lp.published("controller")["torque_des"] if sig == signal.SIGTERM
             else read_bag(lp.bag, decode=False).counts[f"{NS}/torque_des"])
-    assert 25 <= sent < STEPS_LONG + 1 and set(range(sent, STEPS_LONG + 1)) <= set(missing)  # then u_des = 0
+    assert 25 <= sent < steps + 1 and set(range(sent, steps + 1)) <= set(missing)  # then u_des = 0
     assert recs[-1]["torque_des_missing"] == len(missing) and run["deadline_misses"] == 0
     assert all(recs[i]["u_des_x"] == recs[i]["u_des_y"] == recs[i]["u_des_z"] == 0.0 for i in missing)
     assert "torque_des_missing" in lp.log("filter")
@@ -295,9 +296,11 @@ def test_sigkill_of_the_recorder_leaves_a_bag_readable_to_its_last_chunk(loop_fa
     assert leaked == []
 
 
-STEPS_LONG = 400
-"""Lockstep runs in which a fault is injected mid-run: long enough (>= 0.4 s even at full speed) that the
-fault lands before the end."""
+STEPS_LONG = 2000
+"""Lockstep runs in which a fault is injected mid-run, after the bag shows some progress: long enough that
+the fault lands before the end even when the bag lags the loop by seconds (a reliable sample to the
+recorder that needs a repair waits for the writer's next heartbeat, up to Fast DDS's 3 s period, and the
+later ones wait behind it; the flake hunt saw a 400-step run end before its bag showed 25 torque_des)."""
 
 
 def _wait_until(cond: Any, timeout_s: float, what: str) -> None:
@@ -333,7 +336,7 @@ def test_plant_killed_its_readers_report_it_once_and_the_recorder_closes_when_to
     (one warning each), the filter drops what waited for the dead plant and sends it nothing more, and
     the recorder, told to stop, closes the bag cleanly without waiting for the plant's final status
     (with every command the live filter sent; the dead plant's states in flight are lost with it)."""
-    lp = loop_factory("stop_timeout_s=1.0", "liveliness_lease_s=1.0", duration=400)
+    lp = loop_factory("stop_timeout_s=1.0", "liveliness_lease_s=1.0", duration=STEPS_LONG)
     files = lp.wait_states(20, track="plant") - lp.shm_before
     plant = lp.procs["plant"]
     plant.kill()

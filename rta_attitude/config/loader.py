@@ -164,13 +164,15 @@ _REQUIRED = object()
 
 
 def _barrier(s: _Section, second_order: bool) -> BarrierGains:
+    margin = s.number("margin", 0.0) if second_order else 0.0
     gains = BarrierGains(
         enabled=s.flag("enabled", True),
         k1=s.number("k1"),
         k2=s.number("k2") if second_order else 0.0,
         bias=s.number("bias", 0.0),
         slack_weight=s.number("slack_weight", 0.0),
-        margin=s.number("margin", 0.0) if second_order else 0.0,
+        margin=margin,
+        margin_gyrostat=s.number("margin_gyrostat", margin) if second_order else 0.0,  # default: the paper's
     )
     return gains
 

@@ -268,7 +268,15 @@ class BarrierGains:
     """p > 0 makes the constraint soft, with cost p delta^2; 0 = hard."""
     margin: float = 0.0
     """Sampled-data allowance (units of h), `robust` preset only: the HOCBF keeps h >= margin, so
-    that the overshoot of a zero-order-hold step stays on the safe side of h = 0."""
+    that the overshoot of a zero-order-hold step stays on the safe side of h = 0 (the filter's model
+    `paper`)."""
+    margin_gyrostat: float = 0.0
+    """The same allowance when the filter's model is the gyrostat (`filter.model: gyrostat`), whose
+    gyroscopic torque changes during the hold (docs/decisions.md 2b)."""
+
+    def sampled_data_margin(self, model: str) -> float:
+        """The allowance for the filter's model ('paper' or 'gyrostat')."""
+        return self.margin_gyrostat if model == "gyrostat" else self.margin
 
     def check(self, where: str) -> None:
         """Raise ConfigError naming `where` if a gain is out of range."""
@@ -276,6 +284,7 @@ class BarrierGains:
         _nonneg(f"{where}.k2", self.k2)
         _nonneg(f"{where}.slack_weight", self.slack_weight)
         _nonneg(f"{where}.margin", self.margin)
+        _nonneg(f"{where}.margin_gyrostat", self.margin_gyrostat)
         if not math.isfinite(self.bias):
             raise ConfigError(f"{where}.bias must be finite, got {self.bias!r}")
 

@@ -112,7 +112,7 @@ def constraint_record(cfg: Config) -> NDArray[np.void]:
         gi = c["gains"][i]
         gi["enabled"], gi["k1"], gi["k2"], gi["bias"] = g.enabled, g.k1, g.k2, g.bias
         gi["slack_weight"] = g.slack_weight if g.enabled else 0.0
-        gi["margin"] = g.margin if robust else 0.0
+        gi["margin"] = g.sampled_data_margin(cfg.filter.model) if robust else 0.0
     c["exclusion_angle_rad"], c["comm_angle_rad"] = L.exclusion_angle_rad, L.comm_angle_rad
     c["temperature_max_K"], c["energy_min_J"] = L.temperature_max_K, L.energy_min_J
     c["omega_max_rad_s"], c["psi_max_rad_s"] = L.omega_max_rad_s, L.psi_max_rad_s

@@ -103,8 +103,10 @@ def run_batch(X0: Array, steps: int, loop: NDArray[np.void], viol_s: NDArray[np.
               gate_steps: NDArray[np.int64], x_final: Array, traj: Array, record: bool, first_run: int) -> None:
     """Run every initial state X0 (N, 19) for `steps` samples with u_des = 0; outputs with a leading N
     (see BatchOutcome; traj (N, steps + 1, 19) is filled only if record). Run k of X0 has the sensors'
-    noise sequence first_run + k (its index in the campaign)."""
+    noise sequence first_run + k (its index in the campaign); the caller's loop record is left as it was
+    (its sensors' stream restored at the end)."""
     lp = loop[0]
+    stream0 = lp.sensors.stream
     p, c = lp.plant, lp.filter.constraints
     S = lp.substeps
     dt = lp.dt_s
@@ -164,6 +166,7 @@ def run_batch(X0: Array, steps: int, loop: NDArray[np.void], viol_s: NDArray[np.
                 min_h[k, i] = h[i]
         _mark(h, steps * dt, True, k, viol_s, viol_sub, first)
         x_final[k] = x
+    lp.sensors.stream = stream0
 
 
 def _new_outcome(N: int, steps: int, record: bool) -> BatchOutcome:
