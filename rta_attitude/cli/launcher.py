@@ -409,15 +409,15 @@ def launch(p: Plan, log_dir: Path | None) -> tuple[list[str], dict[str, Any]]:
     # program on the machine: one left unused may be another program's (a process killed elsewhere), so it
     # is removed and noted, not blamed on the run; a participant's own segment (`fastrtps_<hex>`, unique)
     # or data-sharing file left behind is the run's leak
-    leaked = [n for n in stale if not _is_port_file(n)]
+    leaked = [n for n in stale if not is_port_file(n)]
     if leaked:
         problems.append(f"Fast DDS files left in /dev/shm (removed): {', '.join(leaked)}")
     facts["shm_clean"] = not leaked
-    facts["shm_ports_removed"] = [n for n in stale if _is_port_file(n)]
+    facts["shm_ports_removed"] = [n for n in stale if is_port_file(n)]
     return problems, facts
 
 
-def _is_port_file(name: str) -> bool:
+def is_port_file(name: str) -> bool:
     """A Fast DDS listening-port file or its companions (lock file, semaphore): shared between programs."""
     return name.startswith(("fastrtps_port", "sem.fastrtps_port"))
 

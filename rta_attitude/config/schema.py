@@ -28,10 +28,12 @@ BARRIER_GROUPS: tuple[str, ...] = (
 PRESETS: tuple[str, ...] = ("robust", "paper")
 FALLBACKS: tuple[str, ...] = ("pass_through", "hold", "soften", "raise", "prioritize")
 DEFAULT_PRIORITIES: tuple[tuple[str, ...], ...] = (
-    ("omega", "psi", "exclusion_zone"), ("temperature",), ("battery",), ("communication",),
+    ("omega", "psi", "exclusion_zone"), ("battery",), ("temperature",), ("communication",),
 )  # fmt: skip
 """`filter.priorities` by default: the levels of the `prioritize` fallback, most important first (body rate,
-wheel speed and the sun keep-out cone; then temperature, battery, communication)."""
+wheel speed and the sun keep-out cone; then battery, temperature, communication). Battery above
+temperature: the temperature relaxes by radiation once the hot face leaves the sun, and its augmented
+barrier keeps a reserve, while the battery integrates a constant load (docs/decisions.md, priorities)."""
 BACKUP_SOLVERS: tuple[str, ...] = ("quadprog", "none")
 SOLVERS: tuple[str, ...] = ("active_set", "proxsuite")
 CONTROLLERS: tuple[str, ...] = ("pd", "none")
