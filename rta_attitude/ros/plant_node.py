@@ -51,11 +51,11 @@ from rta_attitude.ros.spin import RtaNode
 
 STARTUP_POLL_S = 0.005
 WATCHDOG_PERIOD_S = 0.1
+"""Longest period of the lockstep command watchdog (shorter for a short command_timeout_s) [s]."""
 FIRST_COMMAND_EXTENSIONS = 3
 """The first command may take startup_timeout_s, and that again this many times while a writer of the
 command topic is alive and matched (the chain discovers itself: on a loaded machine the first answer
 crosses three hops of endpoint discovery); a chain that hangs still ends the run, bounded."""
-"""Longest period of the lockstep command watchdog (shorter for a short command_timeout_s) [s]."""
 LIMIT_RTOL = 1e-9
 """A command counts as beyond a limit when |u_i| > limit (1 + LIMIT_RTOL) (tau = D u and back rounds)."""
 FINAL_STATUS_ACK_S = 10.0
@@ -108,9 +108,9 @@ class PlantNode(RtaNode):
         self._running = False
         self._started_s = 0.0
         self.startup_extensions = 0
+        """How often startup_timeout_s ran out while a reader was alive but still starting (then: wait on)."""
         self.first_command_extensions = 0
         """How often startup_timeout_s ran out without a first command while its writer was alive."""
-        """How often startup_timeout_s ran out while a reader was alive but still starting (then: wait on)."""
         self._startup = self.wall_timer(STARTUP_POLL_S, self._check_ready)
         self.get_logger().info(f"scenario {self.scenario.name}: {self.steps} steps of {self.dt_s:g} s, "
                                f"{self.knobs['stepping']}, rta={'on' if self.rta else 'off'}; waiting for readers")
@@ -303,9 +303,8 @@ class PlantNode(RtaNode):
                     return
                 total = self.knobs["startup_timeout_s"] * (1 + self.first_command_extensions)
                 self._end(topics.RUN_FAILED + f": no {self.command_topic} for t = {self.k * self.dt_s:g} s "
-                          f"within {total:g} s (startup_timeout_s"
-                          + (f" x {1 + self.first_command_extensions}, its writer alive)" if
-                             self.first_command_extensions else ", no writer alive)"))
+                          f"within {total:g} s (startup_timeout_s x {1 + self.first_command_extensions}, "
+                          + ("its writer alive)" if writers else "no writer alive)"))
             return
         timeout = self.knobs["command_timeout_s"]
         if waited <= timeout:
