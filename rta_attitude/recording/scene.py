@@ -6,7 +6,8 @@ sun direction with the sensor keep-out cone (half-angle FOV/2 + beta), the Earth
 station, -x_H) with the antenna's cone (half-angle comm_fov/2), the exclusion-zone and communication
 angles and margins, and the steps the filter changed. Everything comes from the package's one
 definition of the geometry: `quaternion.attitude_matrices` (A(q), Hill -> body: row i is body axis i in
-Hill), `spacecraft.sun_hill`, `spacecraft.EARTH_HILL`, the constraints' `AXIS_BODY` and
+Hill), `spacecraft.sun_hill` and the cone rings through the sky map's helpers (`skymap.sun_frames`,
+`body_axis_in_hill`, `ring`), `spacecraft.EARTH_HILL`, the constraints' `AXIS_BODY` and
 `ConstraintSet.angles`.
 
 `animate_scene` draws it as a GIF (Pillow, which matplotlib ships with) or an MP4 (needs ffmpeg on the
@@ -16,7 +17,6 @@ by its margin: green (ok), orange (within `warn_rad` of its limit), red (violate
 
 from __future__ import annotations
 
-from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -27,12 +27,12 @@ from numpy.typing import NDArray
 from rta_attitude.config.schema import Config
 from rta_attitude.constraints import ConstraintSet, battery, communication, exclusion_zone
 from rta_attitude.dynamics import quaternion as quat
-from rta_attitude.dynamics.spacecraft import EARTH_HILL, sun_hill
+from rta_attitude.dynamics.spacecraft import EARTH_HILL
 from rta_attitude.dynamics.state import THETA_S, Q
 from rta_attitude.errors import RtaError
 from rta_attitude.files import atomic
 from rta_attitude.recording.plots import _pyplot
-from rta_attitude.recording.skymap import SkyRun, intervened_steps
+from rta_attitude.recording.skymap import SkyRun, body_axis_in_hill, intervened_steps, ring, sun_frames
 
 Array = NDArray[np.float64]
 
@@ -87,24 +87,17 @@ class Scene:
         return self.comm_rad - self.antenna_earth_rad
 
 
-def _axis_in_hill(A: Array, axis_body: Sequence[float]) -> Array:
-    """Body axis e in Hill, A(q)^T e, for attitude matrices (N, 3, 3): (N, 3)."""
-    return np.einsum("kij,i->kj", A, np.asarray(axis_body, dtype=float))
-
-
 def scene(run: SkyRun, cfg: Config) -> Scene:
     """The run's attitude scene (no matplotlib)."""
     t = np.asarray(run.t_s, dtype=float)
     x = np.asarray(run.x, dtype=float)
     A = quat.attitude_matrices(x[:, Q])
-    sun = np.zeros((len(t), 3))
-    for k, theta in enumerate(x[:, THETA_S]):
-        sun[k, 0], sun[k, 1] = sun_hill(float(theta))
+    sun = sun_frames(x[:, THETA_S])[:, 2]  # the map frames' pole: r_S
     inter = np.zeros(len(t), dtype=bool)
     inter[: len(run.u)] = intervened_steps(run)
     angles = ConstraintSet(cfg).angles(x)
-    return Scene(t_s=t, body_axes=A, sensor=_axis_in_hill(A, exclusion_zone.AXIS_BODY),
-                 antenna=_axis_in_hill(A, communication.AXIS_BODY), panel=_axis_in_hill(A, battery.AXIS_BODY),
+    return Scene(t_s=t, body_axes=A, sensor=body_axis_in_hill(A, exclusion_zone.AXIS_BODY),
+                 antenna=body_axis_in_hill(A, communication.AXIS_BODY), panel=body_axis_in_hill(A, battery.AXIS_BODY),
                  sun=sun, earth=np.array(EARTH_HILL, dtype=float), sensor_sun_rad=angles["sensor_sun"],
                  antenna_earth_rad=angles["antenna_earth"], keep_out_rad=cfg.limits.exclusion_angle_rad,
                  comm_rad=cfg.limits.comm_angle_rad, intervened=inter)
@@ -119,13 +112,7 @@ def margin_level(margin_rad: Array | float, warn_rad: float = WARN_RAD) -> NDArr
 def cone_lines(axis: Array, half_angle_rad: float, length: float = 1.0, lines: int = CONE_LINES) -> Array:
     """A cone about a unit direction as `lines` generator segments from the origin and its rim circle:
     (lines + 1, 2 or 65, 3); the segments' far ends lie at half_angle_rad from `axis`."""
-    c = np.asarray(axis, dtype=float)
-    helper = np.eye(3)[int(np.argmin(np.abs(c)))]
-    a = np.cross(c, helper)
-    a /= np.linalg.norm(a)
-    b = np.cross(c, a)
-    phi = np.linspace(0.0, 2.0 * np.pi, 65)[:, None]
-    rim = length * (np.cos(half_angle_rad) * c + np.sin(half_angle_rad) * (np.cos(phi) * a + np.sin(phi) * b))
+    rim = length * ring(axis, half_angle_rad, 65)
     picks = rim[np.linspace(0, 64, lines, endpoint=False).astype(int)]
     segments = [np.stack([np.zeros(3), p]) for p in picks]
     return np.array([*[np.pad(s, ((0, 63), (0, 0)), mode="edge") for s in segments], rim])

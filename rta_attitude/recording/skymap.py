@@ -141,17 +141,22 @@ def project(d_hill: ArrayLike, frames: ArrayLike) -> Array:
     return np.stack([X, Y], axis=-1)
 
 
-def small_circle(center_hill: ArrayLike, radius_rad: float, frame: ArrayLike, points: int = CIRCLE_POINTS) -> Array:
-    """Map coordinates (points, 2), deg, of the circle of angle radius_rad about a unit Hill direction,
-    in one map frame (3, 3); NaN rows where it jumps across the rim (an open curve for matplotlib)."""
-    c = np.asarray(center_hill, dtype=float)
+def ring(center: ArrayLike, radius_rad: float, points: int = CIRCLE_POINTS) -> Array:
+    """The unit directions (points, 3) at angle radius_rad about a unit direction `center`, once round
+    (first and last point equal)."""
+    c = np.asarray(center, dtype=float)
     helper = np.eye(3)[int(np.argmin(np.abs(c)))]
     a = np.cross(c, helper)
     a /= np.linalg.norm(a)
     b = np.cross(c, a)
     phi = np.linspace(0.0, 2.0 * np.pi, points)[:, None]
-    ring = np.cos(radius_rad) * c + np.sin(radius_rad) * (np.cos(phi) * a + np.sin(phi) * b)
-    xy = project(ring, frame)
+    return np.cos(radius_rad) * c + np.sin(radius_rad) * (np.cos(phi) * a + np.sin(phi) * b)
+
+
+def small_circle(center_hill: ArrayLike, radius_rad: float, frame: ArrayLike, points: int = CIRCLE_POINTS) -> Array:
+    """Map coordinates (points, 2), deg, of the circle of angle radius_rad about a unit Hill direction,
+    in one map frame (3, 3); NaN rows where it jumps across the rim (an open curve for matplotlib)."""
+    xy = project(ring(center_hill, radius_rad, points), frame)
     jump = np.hypot(*np.diff(xy, axis=0).T) > RIM_JUMP_DEG
     xy[1:][jump] = np.nan
     return xy
@@ -166,7 +171,7 @@ def intervened_steps(run: SkyRun) -> NDArray[np.bool_]:
     return np.asarray(np.any(np.abs(u - u_des) > INTERVENTION_TOLERANCE_RAD_S2, axis=1))
 
 
-def _body_axis_in_hill(A: Array, axis_body: tuple[float, float, float]) -> Array:
+def body_axis_in_hill(A: Array, axis_body: tuple[float, float, float]) -> Array:
     """A(q)^T e for attitude matrices (N, 3, 3) (Hill -> body): body axis e in Hill (N, 3)."""
     return np.einsum("kij,i->kj", A, np.asarray(axis_body))
 
@@ -190,8 +195,8 @@ def sky_track(run: SkyRun, cfg: Config) -> SkyTrack:
     snaps = np.unique(np.linspace(0, len(t) - 1, COMM_SNAPSHOTS).round().astype(int))
     return SkyTrack(
         t_s=t,
-        sensor=project(_body_axis_in_hill(A, exclusion_zone.AXIS_BODY), frames),
-        antenna=project(_body_axis_in_hill(A, communication.AXIS_BODY), frames),
+        sensor=project(body_axis_in_hill(A, exclusion_zone.AXIS_BODY), frames),
+        antenna=project(body_axis_in_hill(A, communication.AXIS_BODY), frames),
         earth=project(np.broadcast_to(earth, (len(t), 3)), frames),
         intervened=inter,
         keep_out=small_circle(frames[0, 2], L.exclusion_angle_rad, frames[0]),
@@ -282,5 +287,5 @@ def plot_skymap(runs: Sequence[tuple[str, SkyRun]], cfg: Config, path: str | Pat
     return _save(plt, fig, path)
 
 
-__all__ = ["SkyRun", "SkyTrack", "intervened_steps", "plot_skymap", "project", "sky_track", "small_circle",
-           "sun_frames"]
+__all__ = ["SkyRun", "SkyTrack", "body_axis_in_hill", "intervened_steps", "plot_skymap", "project", "ring",
+           "sky_track", "small_circle", "sun_frames"]

@@ -101,10 +101,7 @@ class Constraint(Protocol):
 def sampled_data_margin(cfg: Config, group: str) -> float:
     """The margin a relative-degree-2 constraint keeps in the `robust` preset (0 in `paper`): `margin` for
     the filter's model `paper`, `margin_gyrostat` for the gyrostat."""
-    if cfg.filter.preset != "robust":
-        return 0.0
-    g = cfg.barriers[group]
-    return g.margin_gyrostat if cfg.filter.model == "gyrostat" else g.margin
+    return cfg.barriers[group].sampled_data_margin(cfg.filter.model) if cfg.filter.preset == "robust" else 0.0
 
 
 def second_order_condition(
