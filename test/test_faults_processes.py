@@ -169,7 +169,9 @@ def _assert_commands_valid(bag: Path) -> None:
 
 @pytest.mark.slow
 def test_filter_killed_and_restarted_the_plant_falls_back_and_the_loop_resumes(loop_factory: Any) -> None:
-    lp = loop_factory("command_timeout_s=1.0", "deadline_fallback=zero", "stop_timeout_s=1.0", duration=STEPS_LONG)
+    # stop_timeout_s: a bound, not a wait: the first filter leaves as soon as its readers acknowledged
+    # everything (1 s was too short at load 7 for a recorder running behind: the flake hunt)
+    lp = loop_factory("command_timeout_s=1.0", "deadline_fallback=zero", "stop_timeout_s=30.0", duration=STEPS_LONG)
     lp.wait_states(25)
     assert lp.stop("filter", signal.SIGTERM) == 0  # a clean stop of a DDS participant, mid-run
     lp.start("filter", "2")
@@ -180,24 +182,28 @@ def test_filter_killed_and_restarted_the_plant_falls_back_and_the_loop_resumes(l
     assert run["deadline_misses"] > 0 and run["fallback_zero"] == run["deadline_misses"]
     contents = read_bag(lp.bag, decode=False)
     assert not contents.truncated and contents.counts[f"{NS}/state"] == STEPS_LONG + 1
-    # no data lost: every torque_cmd either filter published is in the bag, and the plant took them
     first, second = lp.published("filter"), lp.published("filter2")
-    assert contents.counts[f"{NS}/torque_cmd"] == first["torque_cmd"] + second["torque_cmd"]
-    assert contents.counts[f"{NS}/filter_status"] == first["filter_status"] + second["filter_status"]
     assert second["torque_cmd"] > 10  # the loop resumed through the new filter
+    # the first filter stopped cleanly: everything it published is in the bag. The restarted one: everything
+    # from the moment the recorder matched it; its gate opens when *it* has matched the recorder, and the
+    # recorder may match the new writer later (Fast DDS gives a volatile reader nothing written before the
+    # reader matched the writer: eProsima/Fast-DDS#2641), so its first answers may be missing from the bag
+    # (the flake hunt: 111 of 1,995 torque_cmd at load 7); what is there is a gap-free suffix
+    n1, n2 = first["filter_status"], second["filter_status"]
+    calls = [r["calls"] for r in _status_records(lp.bag)]
+    assert calls[:n1] == list(range(1, n1 + 1)), f"first filter: {n1} calls, bag {calls[:n1 + 3]}..."
+    later = sorted(calls[n1:])
+    assert later == list(range(n2 - len(later) + 1, n2 + 1)), f"restarted filter: {n2} calls, bag {later[:5]}..."
+    assert contents.counts[f"{NS}/filter_status"] == n1 + len(later) and len(later) > 10
+    assert first["torque_cmd"] + 10 < contents.counts[f"{NS}/torque_cmd"] <= first["torque_cmd"] + second["torque_cmd"]
     applied = read_bag(lp.bag, topics=[f"{NS}/torque_applied"]).messages
     zero = [convert.torque_from_msg(m.message)[0] // S for m in applied
             if not np.any(convert.torque_from_msg(m.message)[1])]
     assert len(zero) >= run["deadline_misses"]  # the zero fallback was applied at every miss of the outage
-    # every call of both filters is in the bag once (the new filter's first statuses wait in its publish
-    # gate until the recorder matched: the gate holds them serialized; it once held the message object,
-    # which the next call rewrote, and two records came out with the second call's values: found by CI);
-    # in stamp order the new filter's first calls may come
-    # out of order (found by the flake hunt): a state it read before the controller's torque_des for it
-    # matched is answered after desired_timeout_s, after the next states (and the plant drops it as late)
-    calls = [r["calls"] for r in _status_records(lp.bag)]
-    assert calls[:first["filter_status"]] == list(range(1, first["filter_status"] + 1))
-    assert sorted(calls[first["filter_status"]:]) == list(range(1, second["filter_status"] + 1))
+    # each call in the bag once, above (the publish gate holds messages serialized; it once held the message
+    # object, which the next call rewrote, and two records came out with the second call's values: found by
+    # CI); sorted, because the new filter's first calls may come out of stamp order (found by the flake hunt):
+    # a state it read before the controller's torque_des for it matched is answered after desired_timeout_s
     _assert_commands_valid(lp.bag)
 
 
@@ -229,9 +235,14 @@ def test_controller_killed_the_filter_keeps_the_spacecraft_safe_with_u_des_zero(
     recs = _status_records(lp.bag)
     assert len(recs) == steps + 1  # the filter answered every state
     missing = [i for i, r in enumerate(recs) if r[topics.INPUT_SOURCE_KEY] == "missing"]
-    sent = (lp.published("controller")["torque_des"] if sig == signal.SIGTERM
-            else read_bag(lp.bag, decode=False).counts[f"{NS}/torque_des"])
-    assert 25 <= sent < steps + 1 and set(range(sent, steps + 1)) <= set(missing)  # then u_des = 0
+    if sig == signal.SIGTERM:
+        sent = lp.published("controller")["torque_des"]  # its exit line: every one reached the filter
+    else:
+        # what a SIGKILLed writer had in flight reaches each reader or not, independently: the filter can
+        # have more of its last torque_des than the bag (the flake hunt: 447 in the bag, 518 at the filter)
+        sent = len(recs) - len(missing)
+        assert 25 <= read_bag(lp.bag, decode=False).counts[f"{NS}/torque_des"] <= steps
+    assert 25 <= sent < steps + 1 and missing == list(range(sent, steps + 1))  # then u_des = 0, nothing before
     assert recs[-1]["torque_des_missing"] == len(missing) and run["deadline_misses"] == 0
     assert all(recs[i]["u_des_x"] == recs[i]["u_des_y"] == recs[i]["u_des_z"] == 0.0 for i in missing)
     assert "torque_des_missing" in lp.log("filter")
