@@ -7,6 +7,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 import pytest
+from helpers import best_panel_cos
 
 from rta_attitude import config
 from rta_attitude.config.schema import CONSTRAINT_NAMES, Config
@@ -225,7 +226,6 @@ def test_the_tilted_target_puts_the_panel_as_near_the_sun_as_the_wheels_allow(cf
     rest with the rate margin (|T H|_a + J_a w_max <= D psi_max, checked here in numpy), and its panel is as
     near the sun as an optimiser (SLSQP from many starts over all rotations, the same wheel box) can put
     it: never nearer (sound), and at most 1.5 deg farther (past a narrow corridor, on its side of H)."""
-    from scipy.optimize import minimize
     from scipy.spatial.transform import Rotation
 
     f = filter_record(cfg)
@@ -254,18 +254,7 @@ def test_the_tilted_target_puts_the_panel_as_near_the_sun_as_the_wheels_allow(cf
         got = float(T[2] @ s)
         # past a narrow corridor the target keeps the panel on its side of H (k_B . H with the sign of H_3)
         side = np.linalg.norm(Hh) * np.cos(np.radians(35.0)) > cap[:2].min()
-        cons = [{"type": "ineq", "fun": lambda r, a=a, sg=sg, Hh=Hh: cap[a] - sg * Rotation.from_rotvec(r).apply(Hh)[a]}
-                for a in range(3) for sg in (1.0, -1.0)]
-        z = float(np.sign(hb[2]))
-        if side:
-            cons.append({"type": "ineq", "fun": lambda r, Hh=Hh, z=z: z * Rotation.from_rotvec(r).apply(Hh)[2]})
-        best = -2.0
-        for seed in rng.integers(1 << 31, size=16):
-            start = Rotation.random(random_state=seed).as_rotvec()
-            res = minimize(lambda r, s=s: -Rotation.from_rotvec(r).apply(s)[2], start, constraints=cons,
-                           method="SLSQP", options={"ftol": 1e-12, "maxiter": 500})
-            if min(con["fun"](res.x) for con in cons) > -1e-10:
-                best = max(best, -float(res.fun))
+        best = best_panel_cos(Hh, s, cap, rng, side=float(np.sign(hb[2])) if side else 0.0)
         assert got <= best + 1e-9
         # within 1.5 deg: the target splits H_perp at 45 deg with the smaller of the two wheels' rate margins
         assert np.degrees(np.arccos(np.clip(got, -1, 1)) - np.arccos(np.clip(best, -1, 1))) < 1.5

@@ -163,6 +163,33 @@ def _wheel_load(T: Array, Hh: Array, p: np.void, b: np.void) -> float:
 
 
 @numba.njit(**LEAF)
+def _sun_across(hx: float, hy: float, hz: float, cs: float, sn: float, sh: float) -> tuple[float, float, float]:
+    """The unit part of r_S = (cs, sn, 0) perpendicular to the unit vector h (sh = h . r_S); where r_S
+    lies along h, a direction perpendicular to h."""
+    ox, oy, oz = cs - sh * hx, sn - sh * hy, -sh * hz
+    on = math.sqrt(ox * ox + oy * oy + oz * oz)
+    if on < 1e-9:  # h along the sun: any perpendicular direction
+        ox, oy, oz, on = -hy, hx, 0.0, math.sqrt(hx * hx + hy * hy)
+        if on < 1e-9:
+            ox, oy, oz, on = 1.0, 0.0, 0.0, 1.0
+    return ox / on, oy / on, oz / on
+
+
+@numba.njit(**LEAF)
+def _h_first(b0: float, b1: float, b2: float, t0: float, t1: float, t2: float, b: np.void, g: np.void) -> float:
+    """First stage of a slew with a large momentum: while the unit body momentum (b0, b1, b2) is more
+    than SETTLED_ANGLE_RAD from its place at the target (t0, t1, t2), dq_v := (b x t) / 2 into g.dq and
+    returns dq4 (the rate command then turns the body about an axis perpendicular to H, which moves
+    H_body straight towards t: dH_body/dt = H_body x w, so it does not wander past a wheel's limit);
+    else returns -1 (the target's own attitude error applies)."""
+    c0, c1, c2 = b1 * t2 - b2 * t1, b2 * t0 - b0 * t2, b0 * t1 - b1 * t0
+    if c0 * c0 + c1 * c1 + c2 * c2 > b.settled_sin_half_angle**2 * 4.0:
+        g.dq[0], g.dq[1], g.dq[2] = 0.5 * c0, 0.5 * c1, 0.5 * c2
+        return math.sqrt(max(0.0, 1.0 - 0.25 * (c0 * c0 + c1 * c1 + c2 * c2)))
+    return -1.0
+
+
+@numba.njit(**LEAF)
 def _tilted_target(cs: float, sn: float, hb0: float, hb1: float, hb2: float, p: np.void, b: np.void,
                    g: np.void) -> bool:
     """Write into g.target the sun-safe attitude tilted off the sun just enough for the wheels to hold
@@ -203,13 +230,7 @@ def _tilted_target(cs: float, sn: float, hb0: float, hb1: float, hb2: float, p: 
         side = 1.0 if hb2 >= 0.0 else -1.0
     cb = side * min(max(side * ca, lo), cos_a)
     sb = math.sqrt(max(0.0, 1.0 - cb * cb))
-    ox, oy, oz = cs - ca * hx, sn - ca * hy, -ca * hz  # the sun's part perpendicular to H
-    on = math.sqrt(ox * ox + oy * oy + oz * oz)
-    if on < 1e-9:  # H along the sun: any perpendicular direction
-        ox, oy, oz, on = -hy, hx, 0.0, math.sqrt(hx * hx + hy * hy)
-        if on < 1e-9:
-            ox, oy, oz, on = 1.0, 0.0, 0.0, 1.0
-    ox, oy, oz = ox / on, oy / on, oz / on
+    ox, oy, oz = _sun_across(hx, hy, hz, cs, sn, ca)
     kx, ky, kz = cb * hx + sb * ox, cb * hy + sb * oy, cb * hz + sb * oz
     px, py, pz = (hx - cb * kx) / sb, (hy - cb * ky) / sb, (hz - cb * kz) / sb  # H's part perpendicular to k
     mx, my, mz = ky * pz - kz * py, kz * px - kx * pz, kx * py - ky * px  # k x p
@@ -312,20 +333,10 @@ def sun_safe_error(x: Array, p: np.void, b: np.void, g: np.void) -> float:
             d0, d1, d2 = math.copysign(r3, Hb0), math.copysign(r3, Hb1), math.copysign(r3, Hb2)
             hb = math.sqrt(Hb0 * Hb0 + Hb1 * Hb1 + Hb2 * Hb2)
             b0, b1, b2 = Hb0 / hb, Hb1 / hb, Hb2 / hb
-            c0, c1, c2 = b1 * d2 - b2 * d1, b2 * d0 - b0 * d2, b0 * d1 - b1 * d0
-            if c0 * c0 + c1 * c1 + c2 * c2 > b.settled_sin_half_angle**2 * 4.0:
-                # first stage: turn about an axis perpendicular to H only (w = -c (h x d) moves H_body
-                # straight towards d: dH_body/dt = H_body x w), so H_body does not wander on the way
-                g.dq[0], g.dq[1], g.dq[2] = 0.5 * c0, 0.5 * c1, 0.5 * c2
-                return math.sqrt(max(0.0, 1.0 - 0.25 * (c0 * c0 + c1 * c1 + c2 * c2)))
-            sh = hx * cs + hy * sn  # the sun's part perpendicular to H
-            ox, oy, oz = cs - sh * hx, sn - sh * hy, -sh * hz
-            on = math.sqrt(ox * ox + oy * oy + oz * oz)
-            if on < 1e-9:  # H along the sun: any perpendicular direction
-                ox, oy, oz, on = -hy, hx, 0.0, math.sqrt(hx * hx + hy * hy)
-                if on < 1e-9:
-                    ox, oy, oz, on = 1.0, 0.0, 0.0, 1.0
-            ox, oy, oz = ox / on, oy / on, oz / on
+            dq4 = _h_first(b0, b1, b2, d0, d1, d2, b, g)  # first stage: H_body straight to d
+            if dq4 >= 0.0:
+                return dq4
+            ox, oy, oz = _sun_across(hx, hy, hz, cs, sn, hx * cs + hy * sn)
             ck = math.sqrt(1.0 - d2 * d2)
             kx, ky, kz = d2 * hx + ck * ox, d2 * hy + ck * oy, d2 * hz + ck * oz  # k . h = d2
             vx, vy, vz = hx - d2 * kx, hy - d2 * ky, hz - d2 * kz  # = d0 i + d1 j, |v| = ck
@@ -342,11 +353,9 @@ def sun_safe_error(x: Array, p: np.void, b: np.void, g: np.void) -> float:
         t0 = (T[0, 0] * Hh[0] + T[0, 1] * Hh[1] + T[0, 2] * Hh[2]) / hb  # H_body at the target, unit
         t1 = (T[1, 0] * Hh[0] + T[1, 1] * Hh[1] + T[1, 2] * Hh[2]) / hb
         t2 = (T[2, 0] * Hh[0] + T[2, 1] * Hh[1] + T[2, 2] * Hh[2]) / hb
-        b0, b1, b2 = Hb0 / hb, Hb1 / hb, Hb2 / hb
-        c0, c1, c2 = b1 * t2 - b2 * t1, b2 * t0 - b0 * t2, b0 * t1 - b1 * t0
-        if c0 * c0 + c1 * c1 + c2 * c2 > b.settled_sin_half_angle**2 * 4.0:
-            g.dq[0], g.dq[1], g.dq[2] = 0.5 * c0, 0.5 * c1, 0.5 * c2
-            return math.sqrt(max(0.0, 1.0 - 0.25 * (c0 * c0 + c1 * c1 + c2 * c2)))
+        dq4 = _h_first(Hb0 / hb, Hb1 / hb, Hb2 / hb, t0, t1, t2, b, g)
+        if dq4 >= 0.0:
+            return dq4
     from_matrix(T, g.q_c)
     q, c = x, g.q_c
     error_vector(q[0:4], c, g.dq)
