@@ -48,3 +48,29 @@ def integrate(x: np.ndarray, u: np.ndarray, dt_s: float, cfg: Config) -> tuple[n
     from rta_attitude.dynamics.spacecraft import plant_record
 
     return step(x, u, dt_s, plant_record(cfg), cfg.substeps)
+
+
+def best_panel_cos(h: np.ndarray, s: np.ndarray, caps: np.ndarray, rng: np.random.Generator, starts: int = 16,
+                   side: float = 0.0) -> float:
+    """An optimiser's answer (SLSQP from `starts` random rotations) to: the largest (R s)_3, the panel
+    k_B's cosine to the sun s, over rotations R (from the frame of h and s to the body) with the body
+    momentum R h inside the wheels' box |(R h)_a| <= caps_a, and (R h)_3 of the sign of `side` if it is
+    not 0. -2 if no start ends feasible."""
+    from scipy.optimize import minimize
+    from scipy.spatial.transform import Rotation
+
+    def body(r: np.ndarray, v: np.ndarray) -> np.ndarray:
+        return Rotation.from_rotvec(r).apply(v)
+
+    cons = [{"type": "ineq", "fun": lambda r, a=a, sg=sg: caps[a] - sg * body(r, h)[a]}
+            for a in range(3) for sg in (1.0, -1.0)]
+    if side:
+        cons.append({"type": "ineq", "fun": lambda r: side * body(r, h)[2]})
+    best = -2.0
+    for seed in rng.integers(1 << 31, size=starts):
+        start = Rotation.random(random_state=seed).as_rotvec()
+        res = minimize(lambda r: -body(r, s)[2], start, constraints=cons, method="SLSQP",
+                       options={"ftol": 1e-12, "maxiter": 500})
+        if min(con["fun"](res.x) for con in cons) > -1e-10:
+            best = max(best, -float(res.fun))
+    return best

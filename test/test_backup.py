@@ -7,6 +7,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 import pytest
+from helpers import best_panel_cos
 
 from rta_attitude import config
 from rta_attitude.config.schema import CONSTRAINT_NAMES, Config
@@ -15,11 +16,13 @@ from rta_attitude.dynamics.spacecraft import integrate, torque_to_wheel_accel, w
 from rta_attitude.errors import ConfigError
 from rta_attitude.filter.backup import (
     GATE_DTYPE,
+    TILT_WHEEL_MARGIN,
     backup_command,
     backup_rollout,
     gate,
     is_settled,
     reset,
+    sun_safe_error,
 )
 from rta_attitude.filter.outcome import GATE_BACKUP, GATE_NAMES, GATE_OFF, GATE_UNVERIFIED, GATE_VERIFIED
 from rta_attitude.filter.pipeline import filter_record
@@ -210,3 +213,74 @@ def test_filter_result_names_what_the_gate_did(cfg: Config, states: Array) -> No
     assert on._ws[0]["gate"]["plan_steps"] > 0
     on.reset()
     assert on._ws[0]["gate"]["plan_steps"] == 0
+
+
+@numba.njit
+def _target(x: Array, fa: np.ndarray, ga: np.ndarray) -> None:
+    f = fa[0]
+    sun_safe_error(x, f.plant, f.backup, ga[0])
+
+
+def test_the_tilted_target_puts_the_panel_as_near_the_sun_as_the_wheels_allow(cfg: Config) -> None:
+    """Large momenta (|H|/D 600-830 rad/s) and the sun at any angle to H: the sun-safe target holds H at
+    rest with the rate margin (|T H|_a + J_a w_max <= D psi_max, checked here in numpy), and its panel is as
+    near the sun as an optimiser (SLSQP from many starts over all rotations, the same wheel box) can put
+    it: never nearer (sound), and at most 1.5 deg farther (past a narrow corridor, on its side of H)."""
+    from scipy.spatial.transform import Rotation
+
+    f = filter_record(cfg)
+    sc, L = cfg.spacecraft, cfg.limits
+    D = sc.wheel_inertia_kgm2
+    cap = (1.0 - TILT_WHEEL_MARGIN) * D * L.psi_max_rad_s - sc.J * L.omega_max_rad_s
+    rng = np.random.default_rng(11)
+    modes, checked = set(), 0
+    while checked < 8:
+        x = np.zeros(19)
+        x[0:4] = Rotation.random(random_state=rng.integers(1 << 31)).as_quat()  # scalar last, as the state
+        x[7:10] = rng.choice([-1.0, 1.0], 3) * rng.uniform(300.0, 576.0, 3)
+        x[12] = rng.uniform(0.0, 2.0 * np.pi)
+        hb = -sc.torque_sign * D * x[7:10]
+        if not 600.0 < np.linalg.norm(hb) / D < 830.0:
+            continue
+        g = np.zeros(1, GATE_DTYPE)
+        _target(x, f, g)
+        mode, T, Hh = int(g[0]["momentum_mode"]), g[0]["target"], g[0]["Hh"]
+        modes.add(mode)
+        if mode == 1:  # the momentum mode: H on the body diagonal
+            continue
+        s = np.array([np.cos(x[12]), np.sin(x[12]), 0.0])
+        assert np.all(np.abs(T @ Hh) <= cap + 1e-12)  # the wheels hold H there
+        np.testing.assert_allclose(T @ T.T, np.eye(3), atol=1e-12)
+        got = float(T[2] @ s)
+        # past a narrow corridor the target keeps the panel on its side of H (k_B . H with the sign of H_3)
+        side = np.linalg.norm(Hh) * np.cos(np.radians(35.0)) > cap[:2].min()
+        best = best_panel_cos(Hh, s, cap, rng, side=float(np.sign(hb[2])) if side else 0.0)
+        assert got <= best + 1e-9
+        # within 1.5 deg: the target splits H_perp at 45 deg with the smaller of the two wheels' rate margins
+        assert np.degrees(np.arccos(np.clip(got, -1, 1)) - np.arccos(np.clip(best, -1, 1))) < 1.5
+        checked += 1
+    assert 2 in modes  # the tilted target was exercised
+
+
+def test_a_large_momentum_moves_h_in_the_body_before_the_roll(cfg: Config) -> None:
+    """With a large momentum far from its place at the target, the backup law turns the body about an axis
+    perpendicular to H (the rate command is perpendicular to H_body), so H_body moves straight there and
+    the wheels are not carried past their limit on the way."""
+    f = filter_record(cfg)
+    sc = cfg.spacecraft
+    x0, _ = sample_initial_states(200, 1, cfg)
+    seen = 0
+    for x in x0:
+        hb = sc.J * x[4:7] - sc.torque_sign * sc.wheel_inertia_kgm2 * x[7:10]
+        if np.linalg.norm(hb) / sc.wheel_inertia_kgm2 < 600.0:
+            continue
+        g = np.zeros(1, GATE_DTYPE)
+        _target(x, f, g)
+        T, Hh, dq = g[0]["target"], g[0]["Hh"], g[0]["dq"]
+        ht = T @ Hh / np.linalg.norm(Hh)  # H in the body at the target
+        if g[0]["momentum_mode"] == 1 or np.arccos(np.clip(ht @ hb / np.linalg.norm(hb), -1, 1)) < np.radians(10):
+            continue
+        assert abs(dq @ hb) <= 1e-12 * np.linalg.norm(dq) * np.linalg.norm(hb)
+        np.testing.assert_allclose(dq, 0.5 * np.cross(hb / np.linalg.norm(hb), ht), atol=1e-12)
+        seen += 1
+    assert seen >= 5

@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import best_panel_cos
 
 from rta_attitude import config
 from rta_attitude.config.schema import CONSTRAINT_NAMES, Config
@@ -28,7 +29,7 @@ from rta_attitude.viability import find_witness
 from rta_attitude.viability.laws import LAWS, quat_from_matrix, simulate_law, sun_safe_matrix
 from rta_attitude.viability.params import default_enforce, from_config
 from rta_attitude.viability.result import NO_WITNESS, RECOVERABLE, UNRECOVERABLE, Result
-from rta_attitude.viability.rules import battery_rule, check_rules
+from rta_attitude.viability.rules import _distance_to_bands, battery_rule, check_rules, momentum_band, momentum_bands
 
 MODELS = ("paper", "gyrostat")
 
@@ -179,6 +180,65 @@ def test_the_temperature_rule_proves_a_hot_face_unrecoverable(cfg: Config) -> No
     assert all(h0[i] >= 0 for i, n in enumerate(CONSTRAINT_NAMES) if group_of(n) in default_enforce(cfg))
     res = find_witness(x0, 300.0, cfg, compile=False)
     assert (res.verdict, res.rule, res.u) == (UNRECOVERABLE, "temperature_heating", None)
+
+
+def momentum_state(cfg: Config, psi: float, E_J: float, theta: float = 1.0) -> np.ndarray:
+    """At rest, wheels at -psi each (H = -D psi along the body diagonal d), H pointed at the sun:
+    the panel is 54.7 deg from the sun, the sensor 54.7 deg, the hot face 125 deg."""
+    s, z = np.array([math.cos(theta), math.sin(theta), 0.0]), np.array([0.0, 0.0, 1.0])
+    d, d2 = np.ones(3) / math.sqrt(3.0), np.array([1.0, -1.0, 0.0]) / math.sqrt(2.0)
+    a = np.outer(d, s) + np.outer(d2, z) + np.outer(np.cross(d, d2), np.cross(s, z))  # Hill -> body: s -> d
+    return np.concatenate([quat_from_matrix(a), np.zeros(3), [-psi] * 3, [270.0, E_J, theta]])
+
+
+def test_the_momentum_bands_are_the_optimisers_best_panel_attitude(cfg: Config) -> None:
+    """`momentum_bands` against an optimiser (SLSQP from many starts over rotations): the largest
+    k_B . r_S over attitudes whose body momentum fits the wheels' box |H_i| <= c_i is cos(dist(alpha, F))
+    (sound: never above; tight: reached), alpha the angle between H and r_S."""
+    m = from_config(cfg)
+    c = m.J * m.omega_max_rad_s + m.wheel_inertia_kgm2 * m.psi_max_rad_s
+    rng = np.random.default_rng(3)
+    binding = 0
+    for case in range(8):  # even cases: large momentum, the sun near it (the band binds); odd: anything
+        big = rng.choice([-1.0, 1.0], 3) * rng.uniform(0.8, 1.0, 3)
+        psi = (big if case % 2 == 0 else rng.uniform(-1.0, 1.0, 3)) * 576.0
+        x0 = np.concatenate([[0.0, 0.0, 0.0, 1.0], np.zeros(3), psi, [270.0, 5000.0, 0.0]])
+        hb = -m.wheel_inertia_kgm2 * x0[7:10]
+        s = rng.normal(size=3) + (3.0 * hb / np.linalg.norm(hb) if case % 2 == 0 else 0.0)
+        s /= np.linalg.norm(s)
+        alpha = math.acos(float(np.clip(hb @ s / np.linalg.norm(hb), -1.0, 1.0)))
+        bound = math.cos(float(_distance_to_bands(np.array([alpha]), momentum_bands(hb, m))[0]))
+        best = best_panel_cos(hb, s, c, rng, starts=20)
+        assert best <= bound + 1e-9
+        assert best == pytest.approx(bound, abs=1e-7)
+        binding += bound < 1.0 - 1e-9
+    assert binding >= 3  # the band did bind
+
+
+def test_the_momentum_rule_proves_a_panel_the_wheels_cannot_turn_unrecoverable(cfg: Config) -> None:
+    """The wheels hold |H| = 970 D only with the panel >= 51.6 deg from H; H points at the sun and E is
+    just above E_min: the battery drains though the panel could turn to the sun at the rate bound."""
+    m = from_config(cfg)
+    x0 = momentum_state(cfg, 560.0, 1020.0)
+    h0 = project_h(cfg, x0, np.zeros((0, STATE_SIZE)))[0]
+    assert all(h0[i] >= 0 for i, n in enumerate(CONSTRAINT_NAMES) if group_of(n) in default_enforce(cfg))
+    assert battery_rule(x0, 300.0, m) == ""  # turning alone would save it
+    res = find_witness(x0, 300.0, cfg, compile=False)
+    assert (res.verdict, res.rule, res.u) == (UNRECOVERABLE, "momentum_battery", None)
+    # not contradicted: every warm-start law, on the project's plant, drains the battery below E_min
+    battery = CONSTRAINT_NAMES.index("battery")
+    for law in LAWS:
+        u, _, _ = simulate_law(x0, 100, m, law)
+        _, subs = project_run(cfg, x0, u)
+        assert project_h(cfg, x0, subs)[:, battery].min() < 0.0, law
+    # silent where the wheels can hold the momentum with the panel on the sun, or with more energy
+    assert check_rules(momentum_state(cfg, 300.0, 1020.0), 300.0, m, default_enforce(cfg)) is None
+    assert check_rules(momentum_state(cfg, 560.0, 1100.0), 300.0, m, default_enforce(cfg)) is None
+    assert battery_rule(x0, 300.0, replace(m, gyrostat=False), momentum=True) == ""  # the paper model: no band
+    # |H| past sqrt(c_1^2 + c_2^2): two disjoint bands, and the panel keeps to the one it starts in
+    hb = m.J * x0[4:7] - m.wheel_inertia_kgm2 * x0[7:10]
+    both, (_, kept) = momentum_bands(hb, m), momentum_band(x0, m, 0.0)
+    assert len(both) == 2 and kept == [both[0]] and both[0][0] < math.acos(1 / math.sqrt(3.0)) < both[0][1]
 
 
 def test_the_battery_rule_is_silent_with_reserve_and_then_a_witness_exists(cfg: Config) -> None:

@@ -74,6 +74,11 @@ SETTLED_ANGLE_RAD = math.radians(5.0)
 SETTLED_RATE_FRACTION = 0.1
 """... every body rate at most this fraction of w_max, ..."""
 # ... and every wheel can hold its share of the momentum at rest there (`_wheel_load`).
+TILT_WHEEL_MARGIN = 0.01
+"""The tilted sun-safe target keeps the panel-axis wheel this fraction of psi_max inside its limit."""
+CORRIDOR_HALF_WIDTH_RAD = math.radians(10.0)
+"""Where H_body could cross the i_B-j_B plane only through corridors narrower than this either side of
+the diagonal (a large momentum), the tilted target keeps the panel on its side of H."""
 VARIANTS = ("sun_safe", "momentum")
 """The backup law's variants: the sun-safe attitude (the momentum mode where the wheels could not hold
 the momentum there), the momentum mode always. The gatekeeper tries the committed plan's first."""
@@ -112,7 +117,7 @@ GATE_DTYPE = np.dtype([
     ("target", np.float64, (3, 3)),      # the sun-safe attitude, rows i_B, j_B, k_B in Hill
     ("Hh", np.float64, (3,)),            # the body's angular momentum J w - s D psi in Hill, N m s
     ("load", np.float64),                # `_wheel_load` of the sun-safe target
-    ("momentum_mode", np.uint8),         # 1: the target is the momentum mode's
+    ("momentum_mode", np.uint8),         # 1: the target is the momentum mode's; 2: the tilted sun-safe one
     ("law", np.uint8),                   # the variant the rollout and the command use (VARIANTS)
     ("plan_law", np.uint8),              # the variant of the committed plan
     ("q_c", np.float64, (4,)),
@@ -158,6 +163,99 @@ def _wheel_load(T: Array, Hh: Array, p: np.void, b: np.void) -> float:
 
 
 @numba.njit(**LEAF)
+def _sun_across(hx: float, hy: float, hz: float, cs: float, sn: float, sh: float) -> tuple[float, float, float]:
+    """The unit part of r_S = (cs, sn, 0) perpendicular to the unit vector h (sh = h . r_S); where r_S
+    lies along h, a direction perpendicular to h."""
+    ox, oy, oz = cs - sh * hx, sn - sh * hy, -sh * hz
+    on = math.sqrt(ox * ox + oy * oy + oz * oz)
+    if on < 1e-9:  # h along the sun: any perpendicular direction
+        ox, oy, oz, on = -hy, hx, 0.0, math.sqrt(hx * hx + hy * hy)
+        if on < 1e-9:
+            ox, oy, oz, on = 1.0, 0.0, 0.0, 1.0
+    return ox / on, oy / on, oz / on
+
+
+@numba.njit(**LEAF)
+def _h_first(b0: float, b1: float, b2: float, t0: float, t1: float, t2: float, b: np.void, g: np.void) -> float:
+    """First stage of a slew with a large momentum: while the unit body momentum (b0, b1, b2) is more
+    than SETTLED_ANGLE_RAD from its place at the target (t0, t1, t2), dq_v := (b x t) / 2 into g.dq and
+    returns dq4 (the rate command then turns the body about an axis perpendicular to H, which moves
+    H_body straight towards t: dH_body/dt = H_body x w, so it does not wander past a wheel's limit);
+    else returns -1 (the target's own attitude error applies)."""
+    c0, c1, c2 = b1 * t2 - b2 * t1, b2 * t0 - b0 * t2, b0 * t1 - b1 * t0
+    if c0 * c0 + c1 * c1 + c2 * c2 > b.settled_sin_half_angle**2 * 4.0:
+        g.dq[0], g.dq[1], g.dq[2] = 0.5 * c0, 0.5 * c1, 0.5 * c2
+        return math.sqrt(max(0.0, 1.0 - 0.25 * (c0 * c0 + c1 * c1 + c2 * c2)))
+    return -1.0
+
+
+@numba.njit(**LEAF)
+def _tilted_target(cs: float, sn: float, hb0: float, hb1: float, hb2: float, p: np.void, b: np.void,
+                   g: np.void) -> bool:
+    """Write into g.target the sun-safe attitude tilted off the sun just enough for the wheels to hold
+    the momentum g.Hh (Hill): the panel k_B as near r_S = (cs, sn, 0) as the wheels allow.
+
+    With the panel at angle beta from H the panel-axis wheel holds |H| cos beta: it can (at rest, with
+    the rate margin of `_wheel_load` and TILT_WHEEL_MARGIN) while |cos beta| <= cos a. i_B and j_B
+    share H's part perpendicular to k_B, |H| sin beta, in proportion to what their wheels can take
+    (c_1, c_2): they can while |cos beta| >= lo. k_B goes to the beta in that band nearest
+    alpha = angle(H, r_S), in the plane of H and r_S: the panel |alpha - beta| off the sun, and no
+    attitude the wheels can hold puts it nearer (viability.rules.momentum_bands; a test holds it
+    against an optimiser). Where H_body (hb0, hb1, hb2) could reach the other side of the i_B-j_B plane
+    only through a corridor narrower than CORRIDOR_HALF_WIDTH_RAD (the i_B and j_B wheels must then
+    hold all of |H|), k_B stays on its side of H (k_B . H keeps the sign of hb2). Of the four rolls:
+    first one that keeps the signs of (hb0, hb1) (H_body need not cross an axis plane on the way, where
+    one wheel would have to hold more), then one with the -j_B radiator off the sun (j_B . r_S >= 0),
+    then the antenna j_B nearest the Earth. Returns False (target untouched) where there is no
+    momentum to tilt from or the wheels cannot hold it at any beta."""
+    Hh = g.Hh
+    hn = math.sqrt(Hh[0] * Hh[0] + Hh[1] * Hh[1] + Hh[2] * Hh[2])
+    cap = (1.0 - TILT_WHEEL_MARGIN) * b.psi_max_rad_s * p.wheel_inertia_kgm2 - p.inertia_kgm2[2] * b.omega_max_rad_s
+    if not hn > cap > 0.0:
+        return False
+    hx, hy, hz = Hh[0] / hn, Hh[1] / hn, Hh[2] / hn
+    ca = hx * cs + hy * sn
+    cos_a = cap / hn
+    # |cos beta| <= cos_a for the panel-axis wheel; the i_B and j_B wheels take |H| sin(beta) / sqrt(2)
+    # each: |cos beta| >= lo
+    top = (1.0 - TILT_WHEEL_MARGIN) * b.psi_max_rad_s * p.wheel_inertia_kgm2
+    c1 = top - p.inertia_kgm2[0] * b.omega_max_rad_s
+    c2 = top - p.inertia_kgm2[1] * b.omega_max_rad_s
+    c12 = math.sqrt(c1 * c1 + c2 * c2)
+    lo = math.sqrt(max(0.0, 1.0 - (c12 / hn) ** 2))
+    if lo > cos_a:
+        return False
+    side = 1.0 if ca >= 0.0 else -1.0
+    if hn * math.cos(0.25 * math.pi - CORRIDOR_HALF_WIDTH_RAD) > min(c1, c2):  # a narrow corridor: keep the side
+        side = 1.0 if hb2 >= 0.0 else -1.0
+    cb = side * min(max(side * ca, lo), cos_a)
+    sb = math.sqrt(max(0.0, 1.0 - cb * cb))
+    ox, oy, oz = _sun_across(hx, hy, hz, cs, sn, ca)
+    kx, ky, kz = cb * hx + sb * ox, cb * hy + sb * oy, cb * hz + sb * oz
+    px, py, pz = (hx - cb * kx) / sb, (hy - cb * ky) / sb, (hz - cb * kz) / sb  # H's part perpendicular to k
+    mx, my, mz = ky * pz - kz * py, kz * px - kx * pz, kx * py - ky * px  # k x p
+    ex, ey, ez = EARTH_HILL
+    r1, r2 = c1 / c12, c2 / c12  # H_perp shared in proportion to what each wheel can take
+    best = -np.inf
+    ux = uy = uz = 0.0
+    for sa, sg in ((1.0, 1.0), (1.0, -1.0), (-1.0, 1.0), (-1.0, -1.0)):
+        ix, iy, iz = sa * r1 * px + sg * r2 * mx, sa * r1 * py + sg * r2 * my, sa * r1 * pz + sg * r2 * mz
+        jx, jy, jz = ky * iz - kz * iy, kz * ix - kx * iz, kx * iy - ky * ix  # j = k x i
+        score = jx * ex + jy * ey + jz * ez
+        if jx * cs + jy * sn < -1e-12:  # the radiator would see the sun
+            score -= 10.0
+        if sa * hb0 >= 0.0 and -sg * hb1 >= 0.0:  # H . i = sa r1 |H_perp|, H . j = -sg r2 |H_perp|
+            score += 20.0
+        if score > best:
+            best, ux, uy, uz = score, ix, iy, iz
+    T = g.target
+    T[0, 0], T[0, 1], T[0, 2] = ux, uy, uz
+    T[1, 0], T[1, 1], T[1, 2] = ky * uz - kz * uy, kz * ux - kx * uz, kx * uy - ky * ux
+    T[2, 0], T[2, 1], T[2, 2] = kx, ky, kz
+    return True
+
+
+@numba.njit(**LEAF)
 def sun_safe_error(x: Array, p: np.void, b: np.void, g: np.void) -> float:
     """dq_v (3,) into g.dq of the state x (19,) towards the sun-safe attitude, sign fixed so that dq4 >= 0
     (g.target, g.q_c, g.A, g.Hh filled); returns dq4.
@@ -166,12 +264,14 @@ def sun_safe_error(x: Array, p: np.void, b: np.void, g: np.void) -> float:
     wheels could not hold the body's momentum H there at rest (`_wheel_load` > 0): then i_B, j_B lie
     at 45 deg to H's part perpendicular to the sun (each wheel takes 1/sqrt(2) of it), the one of the
     four such rolls with j_B nearest the Earth. If the wheels could not hold H there either (a large
-    momentum along the sun), or with the MOMENTUM variant (g.law), the momentum mode
-    (g.momentum_mode = 1): the attitude with H on the body diagonal d = sign(H_body) / sqrt(3) (each
-    wheel takes |H| / sqrt(3)) turned about H to bring k_B nearest the sun (k_B . H / |H| = d_3: k_B in
-    the plane of H and r_S). While H_body is more than SETTLED_ANGLE_RAD from d, dq_v := (h x d) / 2
-    (h = H_body / |H_body|) instead: the rate command then turns the body about an axis perpendicular
-    to H, which moves H_body straight towards d (first stage), then about H to the panel's roll."""
+    momentum along the sun), the target tilted off the sun just enough for the panel-axis wheel
+    (`_tilted_target`, g.momentum_mode = 2); if the wheels could not hold H there either, or with the
+    MOMENTUM variant (g.law), the momentum mode (g.momentum_mode = 1): the attitude with H on the body
+    diagonal d = sign(H_body) / sqrt(3) (each wheel takes |H| / sqrt(3)) turned about H to bring k_B
+    nearest the sun (k_B . H / |H| = d_3: k_B in the plane of H and r_S). While H_body is more than
+    SETTLED_ANGLE_RAD from d, dq_v := (h x d) / 2 (h = H_body / |H_body|) instead: the rate command
+    then turns the body about an axis perpendicular to H, which moves H_body straight towards d (first
+    stage), then about H to the panel's roll."""
     cs, sn = sun_hill(x[12])
     T = g.target
     A = g.A
@@ -192,7 +292,11 @@ def sun_safe_error(x: Array, p: np.void, b: np.void, g: np.void) -> float:
     T[1, 0], T[1, 1], T[1, 2] = jx, jy, jz
     T[2, 0], T[2, 1], T[2, 2] = cs, sn, 0.0
     T[0, 0], T[0, 1], T[0, 2] = jy * 0.0 - jz * sn, jz * cs - jx * 0.0, jx * sn - jy * cs  # j x k
-    if _wheel_load(T, g.Hh, p, b) > 0.0:
+    # a large momentum (as `_verify`'s) is shared between the wheels even where one could hold it, and
+    # H_body goes to its place at the target first: a straight slew can carry H_body past a wheel's limit
+    large = math.sqrt(Hb0 * Hb0 + Hb1 * Hb1 + Hb2 * Hb2) > b.momentum_variant_rad_s * D
+    rolled = large or _wheel_load(T, g.Hh, p, b) > 0.0
+    if rolled:
         Hh = g.Hh
         hk = Hh[0] * cs + Hh[1] * sn
         px, py, pz = Hh[0] - hk * cs, Hh[1] - hk * sn, Hh[2]
@@ -208,13 +312,19 @@ def sun_safe_error(x: Array, p: np.void, b: np.void, g: np.void) -> float:
                 # j = k x i
                 cx, cy, cz = sn * iz, -cs * iz, cs * iy - sn * ix
                 e = cx * ex + cy * ey + cz * ez
+                if sa * Hb0 >= 0.0 and -sb * Hb1 >= 0.0:  # H stays in its quadrant of (i_B, j_B) on the way
+                    e += 20.0
                 if e > best:
                     best, ux, uy, uz = e, ix, iy, iz
             T[0, 0], T[0, 1], T[0, 2] = ux, uy, uz
             T[1, 0], T[1, 1], T[1, 2] = sn * uz, -cs * uz, cs * uy - sn * ux
     g.load = _wheel_load(T, g.Hh, p, b)
-    g.momentum_mode = 1 if (g.law == MOMENTUM or g.load > 0.0) else 0
-    if g.momentum_mode:  # H_body on the body diagonal d, the panel as near the sun as that allows
+    tilted = False
+    if (large or g.load > 0.0) and g.law != MOMENTUM and _tilted_target(cs, sn, Hb0, Hb1, Hb2, p, b, g):
+        tilted = True
+        g.load = _wheel_load(T, g.Hh, p, b)
+    g.momentum_mode = 1 if (g.law == MOMENTUM or g.load > 0.0) else (2 if tilted else 0)
+    if g.momentum_mode == 1:  # H_body on the body diagonal d, the panel as near the sun as that allows
         Hh = g.Hh
         hn = math.sqrt(Hh[0] * Hh[0] + Hh[1] * Hh[1] + Hh[2] * Hh[2])
         if hn > 0.0:
@@ -223,20 +333,10 @@ def sun_safe_error(x: Array, p: np.void, b: np.void, g: np.void) -> float:
             d0, d1, d2 = math.copysign(r3, Hb0), math.copysign(r3, Hb1), math.copysign(r3, Hb2)
             hb = math.sqrt(Hb0 * Hb0 + Hb1 * Hb1 + Hb2 * Hb2)
             b0, b1, b2 = Hb0 / hb, Hb1 / hb, Hb2 / hb
-            c0, c1, c2 = b1 * d2 - b2 * d1, b2 * d0 - b0 * d2, b0 * d1 - b1 * d0
-            if c0 * c0 + c1 * c1 + c2 * c2 > b.settled_sin_half_angle**2 * 4.0:
-                # first stage: turn about an axis perpendicular to H only (w = -c (h x d) moves H_body
-                # straight towards d: dH_body/dt = H_body x w), so H_body does not wander on the way
-                g.dq[0], g.dq[1], g.dq[2] = 0.5 * c0, 0.5 * c1, 0.5 * c2
-                return math.sqrt(max(0.0, 1.0 - 0.25 * (c0 * c0 + c1 * c1 + c2 * c2)))
-            sh = hx * cs + hy * sn  # the sun's part perpendicular to H
-            ox, oy, oz = cs - sh * hx, sn - sh * hy, -sh * hz
-            on = math.sqrt(ox * ox + oy * oy + oz * oz)
-            if on < 1e-9:  # H along the sun: any perpendicular direction
-                ox, oy, oz, on = -hy, hx, 0.0, math.sqrt(hx * hx + hy * hy)
-                if on < 1e-9:
-                    ox, oy, oz, on = 1.0, 0.0, 0.0, 1.0
-            ox, oy, oz = ox / on, oy / on, oz / on
+            dq4 = _h_first(b0, b1, b2, d0, d1, d2, b, g)  # first stage: H_body straight to d
+            if dq4 >= 0.0:
+                return dq4
+            ox, oy, oz = _sun_across(hx, hy, hz, cs, sn, hx * cs + hy * sn)
             ck = math.sqrt(1.0 - d2 * d2)
             kx, ky, kz = d2 * hx + ck * ox, d2 * hy + ck * oy, d2 * hz + ck * oz  # k . h = d2
             vx, vy, vz = hx - d2 * kx, hy - d2 * ky, hz - d2 * kz  # = d0 i + d1 j, |v| = ck
@@ -247,6 +347,15 @@ def sun_safe_error(x: Array, p: np.void, b: np.void, g: np.void) -> float:
             T[0, 0], T[0, 1], T[0, 2] = ix, iy, iz
             T[1, 0], T[1, 1], T[1, 2] = ky * iz - kz * iy, kz * ix - kx * iz, kx * iy - ky * ix  # k x i
             T[2, 0], T[2, 1], T[2, 2] = kx, ky, kz
+    elif rolled:  # a target that shares H between the wheels: H_body goes there first (as above)
+        hb = math.sqrt(Hb0 * Hb0 + Hb1 * Hb1 + Hb2 * Hb2)
+        Hh = g.Hh
+        t0 = (T[0, 0] * Hh[0] + T[0, 1] * Hh[1] + T[0, 2] * Hh[2]) / hb  # H_body at the target, unit
+        t1 = (T[1, 0] * Hh[0] + T[1, 1] * Hh[1] + T[1, 2] * Hh[2]) / hb
+        t2 = (T[2, 0] * Hh[0] + T[2, 1] * Hh[1] + T[2, 2] * Hh[2]) / hb
+        dq4 = _h_first(Hb0 / hb, Hb1 / hb, Hb2 / hb, t0, t1, t2, b, g)
+        if dq4 >= 0.0:
+            return dq4
     from_matrix(T, g.q_c)
     q, c = x, g.q_c
     error_vector(q[0:4], c, g.dq)
@@ -277,8 +386,8 @@ def sun_safe_command(x: Array, p: np.void, c: np.void, b: np.void, g: np.void, o
 def settled(x: Array, p: np.void, b: np.void, g: np.void) -> bool:
     """x (19,) is in the backup law's terminal set: within SETTLED_ANGLE_RAD of the sun-safe attitude,
     every body rate within SETTLED_RATE_FRACTION w_max, and the wheels can hold the momentum at rest
-    there (`_wheel_load` <= 0). Never in the momentum mode (the panel may not charge enough and the sun
-    moves on: its rollouts run the whole horizon)."""
+    there (`_wheel_load` <= 0). Never in the momentum mode or at the large-momentum target (the panel
+    may not charge enough and the sun moves on: their rollouts run the whole horizon)."""
     sun_safe_error(x, p, b, g)
     dq = g.dq
     if math.sqrt(dq[0] * dq[0] + dq[1] * dq[1] + dq[2] * dq[2]) > b.settled_sin_half_angle:

@@ -4,6 +4,9 @@ enforced constraints at every substep). IPOPT's failure never proves anything; o
 - `violated_at_x0`: an enforced h(x0) < 0 (the sample at t = 0 is already unsafe).
 - `battery_drain` (`battery_rule`): E must fall below E_min at a substep time <= horizon.
 - `temperature_heating` (`temperature_rule`): T must rise above T_max at a substep time <= horizon.
+- `momentum_battery` (`battery_rule` with `momentum=True`, gyrostat only): the same as
+  `battery_drain`, with the panel's angle to the sun also bounded below by where the wheels can hold
+  the spacecraft's total angular momentum (`momentum_band`): E must fall below E_min.
 
 The two physical rules bound how fast the panel (or the hot face) can turn away from (towards)
 the sun, which needs the rate constraint to be enforced (`rate_envelope`), and they are proved for
@@ -26,7 +29,7 @@ from rta_attitude.viability.params import OracleModel
 
 Array = NDArray[np.float64]
 
-RULES: tuple[str, ...] = ("violated_at_x0", "battery_drain", "temperature_heating")
+RULES: tuple[str, ...] = ("violated_at_x0", "battery_drain", "temperature_heating", "momentum_battery")
 RULE_DELTA_E_J = 0.1
 """Energy margin of the battery rule, J (RK4 vs exact ODE: measured < 1.4e-3 J over 2,000 s)."""
 RULE_DELTA_T_K = 1e-3
@@ -98,27 +101,93 @@ def _grid(horizon_s: float, m: OracleModel) -> Array:
     return h * np.arange(1, round(horizon_s / h) + 1, dtype=np.float64)
 
 
-def battery_rule(x0: Array, horizon_s: float, m: OracleModel) -> str:
+def momentum_bands(h_body: Array, m: OracleModel) -> list[tuple[float, float]]:
+    """The angles beta = angle(k_B, H) at which the wheels can hold the body momentum H (body frame,
+    N m s; only |H| matters) with the rates inside their limit, as intervals in [0, pi].
+
+    H = J w - D psi, so |w_i| <= w_max and |psi_i| <= psi_max give |H_i| <= c_i = J_i w_max + D psi_max:
+    |cos beta| = |H_3|/|H| <= c_3/|H| and sin beta = |(H_1, H_2)|/|H| <= sqrt(c_1^2 + c_2^2)/|H|, i.e.
+    beta in [a, pi - a] intersected with ([0, b] union [pi - b, pi]), a = acos(min(1, c_3/|H|)),
+    b = asin(min(1, sqrt(c_1^2 + c_2^2)/|H|)). Each value is reached (turn about k_B to share
+    (H_1, H_2) between the wheels)."""
+    h_norm = float(np.linalg.norm(h_body))
+    if h_norm == 0.0:
+        return [(0.0, math.pi)]
+    c = m.J * m.omega_max_rad_s + m.wheel_inertia_kgm2 * m.psi_max_rad_s
+    a = math.acos(min(1.0, float(c[2]) / h_norm))
+    b = math.asin(min(1.0, math.hypot(float(c[0]), float(c[1])) / h_norm))
+    if b >= math.pi / 2:
+        return [(a, math.pi - a)]
+    if a <= b:
+        return [(a, b), (math.pi - b, math.pi - a)]
+    return []  # no attitude holds this momentum (never at a state that meets the constraints)
+
+
+def momentum_band(x0: Array, m: OracleModel, delta: float) -> tuple[Array, list[tuple[float, float]]]:
+    """(H_hat, F): the unit total angular momentum in Hill, and the angles beta(t) = angle(k_B, H_hat)
+    the panel normal can have at any time on an admissible trajectory from x0, as intervals.
+
+    Gyrostat with the rules' assumptions (`rules_apply`): H = J w - D psi (body) has H_dot = -w x H
+    for every input, so H_I = A(q)^T H is fixed in Hill and |H| is constant. At x0 and at every
+    substep time beta is in `momentum_bands`; between substep times it moves by at most delta
+    (|k_B_dot| bounds |beta_dot|), so the bands widened by delta hold at every time. Where the
+    widened bands are disjoint (|H| past sqrt(c_1^2 + c_2^2): the wheels hold H only near a body
+    diagonal), beta(t), continuous, stays in the band it starts in, and only that one is returned.
+    """
+    hb = m.J * x0[4:7] - m.wheel_inertia_kgm2 * x0[7:10]
+    h_norm = float(np.linalg.norm(hb))
+    h_hat = attitude_matrix(x0[0:4]).T @ hb / max(h_norm, 1e-300)
+    bands = [(max(0.0, lo - delta), min(math.pi, hi + delta)) for lo, hi in momentum_bands(hb, m)]
+    if len(bands) == 2 and bands[0][1] < bands[1][0]:
+        beta0 = math.acos(max(-1.0, min(1.0, float(hb[2]) / h_norm)))
+        bands = [band for band in bands if band[0] <= beta0 <= band[1]]
+    return h_hat, bands
+
+
+def _distance_to_bands(alpha: Array, bands: list[tuple[float, float]]) -> Array:
+    """Distance of each angle in `alpha` to the union of `bands` (pi where there are none)."""
+    if not bands:
+        return np.full_like(alpha, math.pi)
+    return np.min([np.maximum(0.0, np.maximum(lo - alpha, alpha - hi)) for lo, hi in bands], axis=0)
+
+
+def battery_rule(x0: Array, horizon_s: float, m: OracleModel, momentum: bool = False) -> str:
     """A non-empty explanation if E < E_min at some substep time <= horizon for every admissible input.
 
     Proof. phi(t), the angle between the panel normal k_B and r_S, is a distance on the sphere, so
     |phi_dot| <= |k_dot| + |r_S_dot| = sqrt(w1^2 + w2^2) + n. With `rate_envelope`,
-    phi(t) >= phi_lb(t) = max(0, phi(0) - Phi(t) - n t) (`_turn_bound`). max(0, cos .) falls on [0, pi],
-    so E_dot <= P_peak max(0, cos phi_lb(t)) - P_out, non-decreasing in t: its right Riemann sum on the
-    substep grid bounds E(t_k) from above. If that bound is < E_min - delta_E at some t_k <= horizon,
+    phi(t) >= phi_lb(t) = max(0, phi(0) - Phi(t) - n t) (`_turn_bound`), non-increasing in t.
+    With `momentum` (gyrostat; the wheel-speed constraint enforced): beta(t) = angle(k_B, H_hat) lies in
+    the band F_delta of `momentum_band` (delta = sqrt(2) w_hi h) and alpha(t) = angle(H_hat, r_S(t)), so
+    by the triangle inequality on the sphere phi(t) >= |beta(t) - alpha(t)| >= dist(alpha(t), F_delta);
+    alpha moves by at most n h within a substep interval. On the interval (t_{k-1}, t_k],
+    phi >= g_k = max(phi_lb(t_k), dist(alpha(t_k), F_delta) - n h) and max(0, cos .) falls on [0, pi], so
+    E_dot <= P_peak max(0, cos g_k) - P_out there, and the sum of h times that over the intervals up to
+    t_k bounds E(t_k) from above. If that bound is < E_min - delta_E at some t_k <= horizon,
     E(t_k) < E_min for every admissible input.
     """
     t = _grid(horizon_s, m)
-    if len(t) == 0 or not rules_apply(m):
+    if len(t) == 0 or not rules_apply(m) or (momentum and not m.gyrostat):
         return ""
     w_hi, a = rate_envelope(x0, m)
     k_hill = attitude_matrix(x0[0:4]).T @ np.array([0.0, 0.0, 1.0])
     phi0 = _angle(k_hill, sun_hill(float(x0[12])))
     phi_lb = np.maximum(0.0, phi0 - _turn_bound(x0[4:7], a, w_hi, (0, 1), t) - m.mean_motion_rad_s * t)
     h = m.dt_s / m.substeps
-    e_ub = x0[11] + np.cumsum(h * (m.panel_peak_W * np.maximum(0.0, np.cos(phi_lb)) - m.load_W))
+    if momentum:
+        h_hat, bands = momentum_band(x0, m, math.sqrt(2.0) * w_hi * h)
+        theta = float(x0[12]) - m.mean_motion_rad_s * t  # theta_S_dot = -n
+        alpha = np.arccos(np.clip(h_hat[0] * np.cos(theta) + h_hat[1] * np.sin(theta), -1.0, 1.0))
+        phi_lb = np.maximum(phi_lb, _distance_to_bands(alpha, bands) - m.mean_motion_rad_s * h)
+    e_ub = x0[11] + np.cumsum(h * (m.panel_peak_W * np.maximum(0.0, np.cos(np.minimum(phi_lb, math.pi)))
+                                   - m.load_W))
     k = int(np.argmin(e_ub))
     if e_ub[k] < m.energy_min_J - RULE_DELTA_E_J:
+        if momentum:
+            h_over_d = float(np.linalg.norm(m.J * x0[4:7] - m.wheel_inertia_kgm2 * x0[7:10])) / m.wheel_inertia_kgm2
+            held = " or ".join(f"{math.degrees(lo):.1f}-{math.degrees(hi):.1f}" for lo, hi in bands) or "no"
+            return (f"the wheels hold |H|/D = {h_over_d:.0f} rad/s only with the panel {held} deg from H; "
+                    f"E <= {e_ub[k]:.1f} J < E_min at t = {t[k]:.1f} s")
         return (f"panel {math.degrees(phi0):.1f} deg from the sun; even turning at the rate bound, "
                 f"E <= {e_ub[k]:.1f} J < E_min at t = {t[k]:.1f} s")
     return ""
@@ -175,8 +244,12 @@ def check_rules(x0: Array, horizon_s: float, m: OracleModel, enforce: tuple[str,
         why = temperature_rule(x0, horizon_s, m)
         if why:
             return "temperature_heating", why
+    if "omega" in enforce and "battery" in enforce and "psi" in enforce:
+        why = battery_rule(x0, horizon_s, m, momentum=True)
+        if why:
+            return "momentum_battery", why
     return None
 
 
-__all__ = ["RULES", "RULE_DELTA_E_J", "RULE_DELTA_T_K", "battery_rule", "check_rules", "rate_envelope",
-           "rules_apply", "temperature_rule"]
+__all__ = ["RULES", "RULE_DELTA_E_J", "RULE_DELTA_T_K", "battery_rule", "check_rules", "momentum_band",
+           "momentum_bands", "rate_envelope", "rules_apply", "temperature_rule"]
