@@ -216,8 +216,8 @@ def _tilted_target(cs: float, sn: float, hb0: float, hb1: float, hb2: float, p: 
     hx, hy, hz = Hh[0] / hn, Hh[1] / hn, Hh[2] / hn
     ca = hx * cs + hy * sn
     cos_a = cap / hn
-    # |cos beta| <= cos_a for the panel-axis wheel; the i_B and j_B wheels take |H| sin(beta) / sqrt(2)
-    # each: |cos beta| >= lo
+    # |cos beta| <= cos_a for the panel-axis wheel; the i_B and j_B wheels share |H| sin(beta) in
+    # proportion to c_1, c_2: |cos beta| >= lo
     top = (1.0 - TILT_WHEEL_MARGIN) * b.psi_max_rad_s * p.wheel_inertia_kgm2
     c1 = top - p.inertia_kgm2[0] * b.omega_max_rad_s
     c2 = top - p.inertia_kgm2[1] * b.omega_max_rad_s
@@ -263,9 +263,11 @@ def sun_safe_error(x: Array, p: np.void, b: np.void, g: np.void) -> float:
     The sun-safe attitude has k_B = r_S; its roll about r_S puts j_B on the Earth side, unless the
     wheels could not hold the body's momentum H there at rest (`_wheel_load` > 0): then i_B, j_B lie
     at 45 deg to H's part perpendicular to the sun (each wheel takes 1/sqrt(2) of it), the one of the
-    four such rolls with j_B nearest the Earth. If the wheels could not hold H there either (a large
-    momentum along the sun), the target tilted off the sun just enough for the panel-axis wheel
-    (`_tilted_target`, g.momentum_mode = 2); if the wheels could not hold H there either, or with the
+    four such rolls with j_B nearest the Earth. With a large momentum (|H| / D above
+    b.momentum_variant_rad_s, as `_verify`'s), or where the wheels could not hold H there either, the
+    target the wheels can hold with the panel nearest the sun (`_tilted_target`, g.momentum_mode = 2),
+    and H_body goes straight to its place at that target first (`_h_first`, as below); if the wheels
+    could not hold H at any panel angle, or with the
     MOMENTUM variant (g.law), the momentum mode (g.momentum_mode = 1): the attitude with H on the body
     diagonal d = sign(H_body) / sqrt(3) (each wheel takes |H| / sqrt(3)) turned about H to bring k_B
     nearest the sun (k_B . H / |H| = d_3: k_B in the plane of H and r_S). While H_body is more than
