@@ -15,6 +15,7 @@ from rta_attitude.constraints import ConstraintSet
 from rta_attitude.dynamics.spacecraft import integrate, torque_to_wheel_accel, wheel_accel_to_torque
 from rta_attitude.errors import ConfigError
 from rta_attitude.filter.backup import (
+    CORRIDOR_HALF_WIDTH_RAD,
     GATE_DTYPE,
     TILT_WHEEL_MARGIN,
     backup_command,
@@ -253,7 +254,7 @@ def test_the_tilted_target_puts_the_panel_as_near_the_sun_as_the_wheels_allow(cf
         np.testing.assert_allclose(T @ T.T, np.eye(3), atol=1e-12)
         got = float(T[2] @ s)
         # past a narrow corridor the target keeps the panel on its side of H (k_B . H with the sign of H_3)
-        side = np.linalg.norm(Hh) * np.cos(np.radians(35.0)) > cap[:2].min()
+        side = np.linalg.norm(Hh) * np.cos(np.pi / 4 - CORRIDOR_HALF_WIDTH_RAD) > cap[:2].min()
         best = best_panel_cos(Hh, s, cap, rng, side=float(np.sign(hb[2])) if side else 0.0)
         assert got <= best + 1e-9
         # within 1.5 deg: the target splits H_perp at 45 deg with the smaller of the two wheels' rate margins

@@ -150,6 +150,17 @@ def backup_record(cfg: Config) -> NDArray[np.void]:
 
 
 @numba.njit(**LEAF)
+def _large_momentum(x: Array, p: np.void, b: np.void) -> bool:
+    """|J w - s D psi| / D of the state x (19,) above b.momentum_variant_rad_s (psi_max - max J_a w_max /
+    D): a momentum the sun-safe attitude may not hold at rest (the gate's and the backup law's test)."""
+    hh = 0.0
+    for a in range(3):
+        ha = (p.inertia_kgm2[a] * x[4 + a] - p.torque_sign * p.wheel_inertia_kgm2 * x[7 + a]) / p.wheel_inertia_kgm2
+        hh += ha * ha
+    return math.sqrt(hh) > b.momentum_variant_rad_s
+
+
+@numba.njit(**LEAF)
 def _wheel_load(T: Array, Hh: Array, p: np.void, b: np.void) -> float:
     """The largest wheel speed the momentum Hh (Hill, 3) needs at rest in the attitude T (rows i_B, j_B,
     k_B in Hill), plus J_a w_max / D (the rates the law may still command), minus psi_max: > 0 means the
@@ -210,7 +221,10 @@ def _tilted_target(cs: float, sn: float, hb0: float, hb1: float, hb2: float, p: 
     momentum to tilt from or the wheels cannot hold it at any beta."""
     Hh = g.Hh
     hn = math.sqrt(Hh[0] * Hh[0] + Hh[1] * Hh[1] + Hh[2] * Hh[2])
-    cap = (1.0 - TILT_WHEEL_MARGIN) * b.psi_max_rad_s * p.wheel_inertia_kgm2 - p.inertia_kgm2[2] * b.omega_max_rad_s
+    top = (1.0 - TILT_WHEEL_MARGIN) * b.psi_max_rad_s * p.wheel_inertia_kgm2  # what each wheel may hold
+    cap = top - p.inertia_kgm2[2] * b.omega_max_rad_s  # at rest, with the rates' share left over
+    c1 = top - p.inertia_kgm2[0] * b.omega_max_rad_s
+    c2 = top - p.inertia_kgm2[1] * b.omega_max_rad_s
     if not hn > cap > 0.0:
         return False
     hx, hy, hz = Hh[0] / hn, Hh[1] / hn, Hh[2] / hn
@@ -218,9 +232,6 @@ def _tilted_target(cs: float, sn: float, hb0: float, hb1: float, hb2: float, p: 
     cos_a = cap / hn
     # |cos beta| <= cos_a for the panel-axis wheel; the i_B and j_B wheels share |H| sin(beta) in
     # proportion to c_1, c_2: |cos beta| >= lo
-    top = (1.0 - TILT_WHEEL_MARGIN) * b.psi_max_rad_s * p.wheel_inertia_kgm2
-    c1 = top - p.inertia_kgm2[0] * b.omega_max_rad_s
-    c2 = top - p.inertia_kgm2[1] * b.omega_max_rad_s
     c12 = math.sqrt(c1 * c1 + c2 * c2)
     lo = math.sqrt(max(0.0, 1.0 - (c12 / hn) ** 2))
     if lo > cos_a:
@@ -296,7 +307,7 @@ def sun_safe_error(x: Array, p: np.void, b: np.void, g: np.void) -> float:
     T[0, 0], T[0, 1], T[0, 2] = jy * 0.0 - jz * sn, jz * cs - jx * 0.0, jx * sn - jy * cs  # j x k
     # a large momentum (as `_verify`'s) is shared between the wheels even where one could hold it, and
     # H_body goes to its place at the target first: a straight slew can carry H_body past a wheel's limit
-    large = math.sqrt(Hb0 * Hb0 + Hb1 * Hb1 + Hb2 * Hb2) > b.momentum_variant_rad_s * D
+    large = _large_momentum(x, p, b)
     rolled = large or _wheel_load(T, g.Hh, p, b) > 0.0
     if rolled:
         Hh = g.Hh
@@ -465,11 +476,7 @@ def _verify(x: Array, u: Array, candidate: bool, f: np.void, g: np.void) -> bool
     committed (plan_law, plan_steps) and u holds the command to apply."""
     b = f.backup
     p = f.plant
-    hh = 0.0
-    for a in range(3):
-        ha = (p.inertia_kgm2[a] * x[4 + a] - p.torque_sign * p.wheel_inertia_kgm2 * x[7 + a]) / p.wheel_inertia_kgm2
-        hh += ha * ha
-    large = math.sqrt(hh) > b.momentum_variant_rad_s
+    large = _large_momentum(x, p, b)
     for t in range(len(VARIANTS)):
         g.law = g.plan_law if t == 0 else 1 - g.plan_law
         if g.law == MOMENTUM and not large:  # the sun-safe attitude holds a small momentum: charge there

@@ -41,6 +41,11 @@ def rules_apply(m: OracleModel) -> bool:
     return m.frame_rate_rad_s == 0.0 and not m.gravity_gradient and (m.torque_sign == 1.0 or not m.gyrostat)
 
 
+def body_momentum(x0: Array, m: OracleModel) -> Array:
+    """H = J w - D psi (3,), body frame, N m s (torque sign +1, as `rules_apply` requires of the gyrostat)."""
+    return m.J * x0[4:7] - m.wheel_inertia_kgm2 * x0[7:10]
+
+
 def rate_envelope(x0: Array, m: OracleModel) -> tuple[float, Array]:
     """(w_hi, a): |w_i(t)| <= w_hi and |w_dot_i(t)| <= a_i for all t on every trajectory of the exact
     ODE that keeps |w_i| <= w_max at t = 0 and at every substep time (spacing h) with u in U.
@@ -60,7 +65,7 @@ def rate_envelope(x0: Array, m: OracleModel) -> tuple[float, Array]:
     w_max = m.omega_max_rad_s
     base = m.wheel_inertia_kgm2 * m.u_max / J
     spread = float(np.max(J) - np.min(J))
-    h_norm = float(np.linalg.norm(J * x0[4:7] - m.wheel_inertia_kgm2 * x0[7:10]))
+    h_norm = float(np.linalg.norm(body_momentum(x0, m)))
 
     def accel(w_inf: float) -> Array:
         if m.gyrostat:
@@ -134,7 +139,7 @@ def momentum_band(x0: Array, m: OracleModel, delta: float) -> tuple[Array, list[
     widened bands are disjoint (|H| past sqrt(c_1^2 + c_2^2): the wheels hold H only near a body
     diagonal), beta(t), continuous, stays in the band it starts in, and only that one is returned.
     """
-    hb = m.J * x0[4:7] - m.wheel_inertia_kgm2 * x0[7:10]
+    hb = body_momentum(x0, m)
     h_norm = float(np.linalg.norm(hb))
     h_hat = attitude_matrix(x0[0:4]).T @ hb / max(h_norm, 1e-300)
     bands = [(max(0.0, lo - delta), min(math.pi, hi + delta)) for lo, hi in momentum_bands(hb, m)]
@@ -184,7 +189,7 @@ def battery_rule(x0: Array, horizon_s: float, m: OracleModel, momentum: bool = F
     k = int(np.argmin(e_ub))
     if e_ub[k] < m.energy_min_J - RULE_DELTA_E_J:
         if momentum:
-            h_over_d = float(np.linalg.norm(m.J * x0[4:7] - m.wheel_inertia_kgm2 * x0[7:10])) / m.wheel_inertia_kgm2
+            h_over_d = float(np.linalg.norm(body_momentum(x0, m))) / m.wheel_inertia_kgm2
             held = " or ".join(f"{math.degrees(lo):.1f}-{math.degrees(hi):.1f}" for lo, hi in bands) or "no"
             return (f"the wheels hold |H|/D = {h_over_d:.0f} rad/s only with the panel {held} deg from H; "
                     f"E <= {e_ub[k]:.1f} J < E_min at t = {t[k]:.1f} s")
@@ -251,5 +256,5 @@ def check_rules(x0: Array, horizon_s: float, m: OracleModel, enforce: tuple[str,
     return None
 
 
-__all__ = ["RULES", "RULE_DELTA_E_J", "RULE_DELTA_T_K", "battery_rule", "check_rules", "momentum_band",
-           "momentum_bands", "rate_envelope", "rules_apply", "temperature_rule"]
+__all__ = ["RULES", "RULE_DELTA_E_J", "RULE_DELTA_T_K", "battery_rule", "body_momentum", "check_rules",
+           "momentum_band", "momentum_bands", "rate_envelope", "rules_apply", "temperature_rule"]
