@@ -24,7 +24,8 @@ from typing import Any
 # ----------------------------------------------------------------------------- nodes
 
 DEFAULT_NAMESPACE = "/rta"
-"""Namespace of every node unless remapped (`--ros-args -r __ns:=/other`)."""
+"""Namespace the launch file and `rta-attitude launch` give every node (`namespace:=`, `--namespace`). A node
+takes its namespace from ROS only (`-r __ns:=/sat1`, the launch `namespace`; `/` when none is given)."""
 PACKAGE = "rta_attitude"
 PLANT, CONTROLLER, FILTER, RECORDER = "plant", "controller", "filter", "recorder"
 NODE_NAMES: dict[str, str] = {
@@ -371,16 +372,39 @@ SYSTEM_PARAMETERS: tuple[str, ...] = ("use_sim_time", "start_type_description_se
 """Parameters rclpy declares itself (never part of the core config)."""
 
 
+CONFIG_SECTIONS: dict[str, tuple[str, ...]] = {
+    PLANT: ("spacecraft", "environment", "thermal", "power", "limits", "integrator", "plant", "sensors",
+            "filter.sample_time_s"),
+    CONTROLLER: ("controller", "spacecraft.wheel_inertia_kgm2", "limits.wheel_accel_max_rad_s2"),
+    FILTER: ("spacecraft", "environment", "thermal", "power", "limits", "constraints", "filter", "integrator",
+             "sensors"),
+    RECORDER: ("filter.preset", "filter.sample_time_s"),
+}  # fmt: skip
+"""The core parameters (sections, or single dotted names) each role uses and declares as ROS parameters,
+besides its own scenario's (`scenarios.<scenario>.*`). The node's configuration is still built from the
+whole parameter file and every override, so a parameter a role does not declare cannot make two nodes
+disagree; it is only not shown by `ros2 param list` there."""
+LIVE_PARAMETERS: dict[str, tuple[str, ...]] = {CONTROLLER: ("controller.kp", "controller.kd")}
+"""Core parameters a role lets `ros2 param set` change while it runs (validated by the core loader, logged);
+every other parameter is read at start-up and read_only."""
+
+
+def config_sections(role: str, scenario: str) -> tuple[str, ...]:
+    """The dotted prefixes of the core parameters `role` declares when it runs `scenario`."""
+    return (*CONFIG_SECTIONS[role], f"scenarios.{scenario.replace('-', '_')}")
+
+
 def knobs_for(role: str) -> tuple[Knob, ...]:
     """The knobs a role declares."""
     return tuple(k for k in KNOBS if role in k.roles)
 
 
 __all__ = [
-    "ATTITUDE_COMMAND", "BATTERY", "BODY_FRAME", "CLOCK", "COMMAND_QOS", "CONSTRAINT_KEYS",
+    "ATTITUDE_COMMAND", "BATTERY", "BODY_FRAME", "CLOCK", "COMMAND_QOS", "CONFIG_SECTIONS", "CONSTRAINT_KEYS",
     "CONSTRAINT_STATUS_PREFIX", "CONTROLLER", "DEFAULT_NAMESPACE",
     "DIAGNOSTICS", "DIAGNOSTICS_QOS", "EXECUTABLES", "EXPECTED_PREFIX", "FILTER",
-    "FILTER_STATUS", "HILL_FRAME", "INPUT_COUNTERS", "INPUT_SOURCE_KEY", "INSPECTION_TOPICS", "KNOBS", "MODULES",
+    "FILTER_STATUS", "HILL_FRAME", "INPUT_COUNTERS", "INPUT_SOURCE_KEY", "INSPECTION_TOPICS", "KNOBS",
+    "LIVE_PARAMETERS", "MODULES",
     "NODE_NAMES", "NO_FALLBACK", "ODOMETRY", "PACKAGE", "PER_STEP_ANSWERS", "PLANT", "PLANT_COUNTERS", "QP_KEYS",
     "QP_STATUS_NAME",
     "RECORDER", "RUN_DONE", "RUN_FAILED", "RUN_INTERRUPTED", "RUN_RUNNING", "RUN_STATUS",
@@ -388,5 +412,5 @@ __all__ = [
     "STATUS_HARDWARE_ID", "STATUS_QOS", "STREAM_QOS", "SUN_VECTOR",
     "SYSTEM_PARAMETERS",
     "TEMPERATURE", "TOPICS", "TORQUE_APPLIED", "TORQUE_CMD", "TORQUE_DES", "Knob", "QosSpec", "TopicSpec",
-    "expected_readers", "reader_roles", "knobs_for", "published", "recorded", "subscribed",
+    "config_sections", "expected_readers", "reader_roles", "knobs_for", "published", "recorded", "subscribed",
 ]  # fmt: skip

@@ -39,6 +39,12 @@ def _write(tmp_path, params):
     (lambda p: p["spacecraft"].__setitem__("inertia_kgm2", [1.0, 2.0]), r"inertia_kgm2 must be a list of 3"),
     (lambda p: p["integrator"].__setitem__("substeps", 2.5), r"integrator\.substeps must be an integer"),
     (lambda p: p.pop("limits"), r"parameters\.limits is missing"),
+    (lambda p: p["scenarios"]["paper_example"].__setitem__("epoch_utc", "2024-03-02T00:00:00+01:00"),
+     r"scenarios\.paper_example\.epoch_utc must be in UTC"),
+    (lambda p: p["scenarios"]["paper_example"].__setitem__("epoch_utc", "March 2nd"),
+     r"scenarios\.paper_example\.epoch_utc must be an ISO 8601 UTC date-time"),
+    (lambda p: p["scenarios"]["paper_example"].__setitem__("epoch_utc", "1969-12-31T23:59:59Z"),
+     r"epoch_utc must not be before 1970-01-01"),
 ])
 def test_config_errors_name_the_parameter(tmp_path, edit, message):
     params = _params()
@@ -46,6 +52,20 @@ def test_config_errors_name_the_parameter(tmp_path, edit, message):
     with pytest.raises(ConfigError, match=message) as exc:
         config.load(_write(tmp_path, params))
     assert "\n" not in str(exc.value)
+
+
+def test_scenario_epoch_is_its_utc_date_in_ros_time(tmp_path):
+    """t = 0 of a run is the scenario's epoch_utc in ROS time (ns since 1970-01-01Z), checked against the C
+    library's calendar (timegm); a scenario without one gets the fixed default."""
+    import calendar
+
+    cfg = config.load()
+    assert cfg.scenario("paper_example").epoch_ns == calendar.timegm((2024, 3, 2, 0, 0, 0)) * 10**9
+    assert cfg.scenario("passed_example").epoch_ns == cfg.scenario("paper_example").epoch_ns
+    params = _params()
+    params["scenarios"]["paper_example"]["epoch_utc"] = "2030-07-14T06:30:00.25Z"
+    moved = config.load(_write(tmp_path, params)).scenario("paper_example").epoch_ns
+    assert moved == calendar.timegm((2030, 7, 14, 6, 30, 0)) * 10**9 + 250_000_000
 
 
 def test_missing_file(tmp_path):

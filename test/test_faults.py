@@ -89,7 +89,7 @@ def filter_node() -> Any:
     below check what the nodes leave in /dev/shm)."""
     context = rclpy.Context()
     rclpy.init(context=context)
-    node = FilterNode(context=context, parameter_overrides=[Parameter("record", value=False)])
+    node = FilterNode(context=context, namespace=NS, parameter_overrides=[Parameter("record", value=False)])
     try:
         yield node
     finally:
@@ -375,7 +375,7 @@ def test_plant_waits_for_a_reader_that_is_alive_but_still_starting() -> None:
     context = rclpy.Context()
     rclpy.init(context=context)
     executor = make_executor("single", context=context)
-    plant = PlantNode(context=context, parameter_overrides=[Parameter(k, value=v) for k, v in {
+    plant = PlantNode(context=context, namespace=NS, parameter_overrides=[Parameter(k, value=v) for k, v in {
         "rta": False, "record": False, "startup_timeout_s": 0.5, "stop_timeout_s": 0.5}.items()])
     starting = rclpy.create_node(topics.NODE_NAMES[topics.CONTROLLER], namespace=NS, context=context)
     executor.add_node(plant)
@@ -405,7 +405,7 @@ def test_plant_waits_for_the_first_command_bounded(writer: bool) -> None:
     context = rclpy.Context()
     rclpy.init(context=context)
     executor = make_executor("single", context=context)
-    plant = PlantNode(context=context, parameter_overrides=[Parameter(k, value=v) for k, v in {
+    plant = PlantNode(context=context, namespace=NS, parameter_overrides=[Parameter(k, value=v) for k, v in {
         "rta": False, "record": False, "startup_timeout_s": 0.3, "stop_timeout_s": 0.5}.items()])
     stub = rclpy.create_node("silent_filter", namespace=NS, context=context)
     states: list[Any] = []
@@ -439,7 +439,7 @@ def test_plant_checks_commands_and_times_out_in_lockstep(tmp_path: Path) -> None
     context = rclpy.Context()
     rclpy.init(context=context)
     executor = make_executor("single", context=context)
-    plant = PlantNode(context=context, parameter_overrides=[Parameter(k, value=v) for k, v in {
+    plant = PlantNode(context=context, namespace=NS, parameter_overrides=[Parameter(k, value=v) for k, v in {
         "rta": False, "record": False, "command_timeout_s": 1.0, "deadline_fallback": "hold", "stop_timeout_s": 0.5,
         "hold_max_steps": 1, "scenarios.paper_example.duration_s": 4.0}.items()])
     stub = rclpy.create_node("filter_stub", namespace=NS, context=context)
@@ -455,16 +455,17 @@ def test_plant_checks_commands_and_times_out_in_lockstep(tmp_path: Path) -> None
     def spin_until(cond: Any, timeout_s: float = 60.0) -> None:
         _spin_until(executor, cond, timeout_s)
 
+    e = plant.epoch_ns  # the plant stamps step k with epoch + k dt
     try:
         spin_until(lambda: len(states) == 1 and pub.get_subscription_count() == 1)
         big = to_torque(np.array([2.0 * CFG.limits.wheel_accel_max_rad_s2, 0.0, 0.0]), CFG)
-        for msg in (_torque(0, [math.nan, 0.0, 0.0]), _torque(0, [0.0, 0.0, 0.0], "hill"), _torque(5 * S, big),
-                    _torque(0, big)):
+        for msg in (_torque(e, [math.nan, 0.0, 0.0]), _torque(e, [0.0, 0.0, 0.0], "hill"), _torque(e + 5 * S, big),
+                    _torque(e, big)):
             pub.publish(msg)
         spin_until(lambda: len(states) == 2)  # the saturated command was applied: step 1
-        pub.publish(_torque(0, big))  # duplicate of the applied one
+        pub.publish(_torque(e, big))  # duplicate of the applied one
         spin_until(lambda: len(states) == 4)  # two misses: hold once, then zero
-        pub.publish(_torque(1 * S, big))  # late
+        pub.publish(_torque(e + 1 * S, big))  # late
         spin_until(lambda: plant.finished.done())
     finally:
         executor.shutdown()

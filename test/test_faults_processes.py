@@ -327,7 +327,10 @@ def _wait_until(cond: Any, timeout_s: float, what: str) -> None:
 
 
 def _stamps(bag: Path, topic: str) -> list[int]:
-    return [convert.stamp_ns(m.message.header.stamp) for m in read_bag(bag, topics=[f"{NS}/{topic}"]).messages]
+    """Scenario times [ns] of a topic's messages (stamps are the scenario epoch + t)."""
+    epoch = CFG.scenario("paper_example").epoch_ns
+    return [convert.stamp_ns(m.message.header.stamp) - epoch
+            for m in read_bag(bag, topics=[f"{NS}/{topic}"]).messages]
 
 
 def _clean_shm(files: set[str]) -> None:

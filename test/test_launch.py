@@ -149,7 +149,7 @@ def test_recorder_finalizes_the_bag_on_sigterm(tmp_path: Path) -> None:
     assert node.returncode == 0, out
     assert "bag closed" in out and "Traceback" not in out
     contents = read_bag(bag)
-    assert not contents.truncated and contents.counts["/rta/state"] == 0
+    assert not contents.truncated and contents.counts["/state"] == 0  # no __ns given: the root namespace
     assert "rta_attitude" in contents.metadata and "rosbag2" in contents.metadata
 
 

@@ -70,7 +70,7 @@ def run_nodes(tmp_path: Path, *, rta: bool = True, roles: tuple[str, ...] = tupl
             knob_names = {k.name for k in topics.knobs_for(role)}
             overrides = [Parameter(k, value=v) for k, v in values.items()
                          if k in knob_names or "." in k]
-            nodes[role] = NODE_CLASSES[role](context=context, parameter_overrides=overrides)
+            nodes[role] = NODE_CLASSES[role](context=context, namespace=NS, parameter_overrides=overrides)
             executor.add_node(nodes[role])
         if probe_state:  # a silent stand-in for the controller: it reads state and never answers
             probe = rclpy.create_node("probe", namespace=NS, context=context)
@@ -137,7 +137,8 @@ def test_lockstep_run_over_dds_equals_in_process_run(rta: bool, tmp_path: Path, 
     assert x.shape == ref.x.shape
     assert np.max(np.abs(x - ref.x)) <= 1e-9
     stamps = [convert.state_from_msg(m.ros_msg)[0] for m in msgs[_topic(topics.STATE)]]
-    assert stamps == [convert.seconds_to_ns(t) for t in ref.t_s]
+    epoch = CFG.scenario("paper_example").epoch_ns  # t = 0 is the scenario epoch in ROS time
+    assert stamps == [epoch + convert.seconds_to_ns(t) for t in ref.t_s]
     assert all(m.log_time_ns == s for m, s in zip(msgs[_topic(topics.STATE)], stamps))
     u_des = to_wheel_accel(
         np.array([convert.torque_from_msg(m.ros_msg)[1] for m in msgs[_topic(topics.TORQUE_DES)]]), CFG)[:n]
@@ -332,7 +333,7 @@ def _node(role: str, overrides: dict[str, Any]) -> Any:
     context = rclpy.Context()
     rclpy.init(context=context)
     try:
-        node = NODE_CLASSES[role](context=context, parameter_overrides=[
+        node = NODE_CLASSES[role](context=context, namespace=NS, parameter_overrides=[
             Parameter(k, value=v) for k, v in overrides.items()])
         values = (node.cfg, dict(node.knobs), node.set_parameters([Parameter("filter.preset", value="robust")]))
         node.destroy_node()
@@ -350,6 +351,53 @@ def test_yaml_leaves_are_ros_parameters_and_overrides_reach_the_core() -> None:
     assert cfg.spacecraft == CFG.for_scenario(CFG.scenario("paper_example")).spacecraft and knobs["rta"] is True
     assert (cfg.spacecraft.model, cfg.filter.model) == ("paper", "paper")
     assert not refused[0].successful and "read-only" in refused[0].reason
+
+
+def test_each_node_declares_only_what_it_uses_and_the_controller_gains_change_live(tmp_path: Path) -> None:
+    """`ros2 param list` per node: its knobs, its own scenario and the core sections it uses; a parameter
+    it does not declare still reaches its configuration (one file, no disagreement between nodes). The
+    controller's gains change while it runs: validated by the core loader, and the next answer uses them
+    (checked against the PD law written out here: q = q_c, so u = a_max tanh(-kd omega))."""
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    try:
+        names, nodes = {}, {}
+        own = {topics.CONTROLLER: "paper_example", topics.FILTER: "passed_example", topics.RECORDER: "passed_example"}
+        for role, scenario in own.items():
+            extra = ([Parameter("bag_path", value=str(tmp_path / "unused.mcap"))] if role == topics.RECORDER
+                     else [Parameter("environment.albedo_factor", value=0.3)])
+            node = NODE_CLASSES[role](context=context, namespace=NS, parameter_overrides=[
+                Parameter("scenario", value=scenario), *extra])
+            names[role] = set(node.list_parameters([], 0).names)
+            nodes[role] = node
+        ctl = nodes[topics.CONTROLLER]
+        assert ctl.cfg.environment.albedo_factor == 0.3  # not declared there, still the node's configuration
+        x = np.zeros(19)
+        x[0:4], x[4:7] = ctl.scenario.command_at(0.0), (0.01, -0.02, 0.005)
+        ok = ctl.set_parameters([Parameter("controller.kd", value=2.5)])[0]
+        bad = ctl.set_parameters([Parameter("controller.kp", value=-0.3)])[0]
+        frozen = ctl.set_parameters([Parameter("spacecraft.wheel_inertia_kgm2", value=1e-4)])[0]
+        from rta_attitude.dynamics.controller import desired_command
+        u = desired_command(x, ctl.scenario.command_at(0.0), ctl.law)
+        for node in nodes.values():
+            node.close()
+            node.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=context)
+    ctl_names, filter_names, rec_names = names[topics.CONTROLLER], names[topics.FILTER], names[topics.RECORDER]
+    for role, declared in names.items():
+        other = "passed_example" if own[role] == "paper_example" else "paper_example"
+        assert not any(n.startswith(f"scenarios.{other}.") for n in declared), role
+        assert f"scenarios.{own[role]}.duration_s" in declared, role
+    assert {"controller.kp", "controller.kd", "spacecraft.wheel_inertia_kgm2"} <= ctl_names
+    assert not any(n.startswith(("constraints.", "filter.", "environment.", "thermal.")) for n in ctl_names)
+    assert {"constraints.battery.k1", "filter.preset", "environment.albedo_factor"} <= filter_names
+    assert not any(n.startswith("controller.") for n in filter_names) and "stepping" not in filter_names
+    assert not any(n.startswith(("constraints.", "spacecraft.")) for n in rec_names) and "bag_path" in rec_names
+    assert ok.successful and not bad.successful and "kp" in bad.reason
+    assert not frozen.successful and "read-only" in frozen.reason
+    a_max = CFG.limits.wheel_accel_max_rad_s2
+    np.testing.assert_allclose(u, -a_max * np.tanh(2.5 * x[4:7]), rtol=1e-14)
 
 
 @pytest.mark.parametrize(("overrides", "message"), [
@@ -399,7 +447,7 @@ def test_status_on_diagnostics_names_the_node_and_means_its_level() -> None:
     try:
         for role in (topics.FILTER, topics.CONTROLLER, topics.PLANT):
             knob_names = {k.name for k in topics.knobs_for(role)}
-            nodes[role] = NODE_CLASSES[role](context=context, parameter_overrides=[
+            nodes[role] = NODE_CLASSES[role](context=context, namespace=NS, parameter_overrides=[
                 Parameter(k, value=v) for k, v in common.items() if k in knob_names or "." in k])
             executor.add_node(nodes[role])
         probe = rclpy.create_node("diagnostics_probe", context=context)
@@ -453,6 +501,6 @@ def test_parameters_describe_themselves_and_are_read_only() -> None:
     assert rtf.floating_point_range[0].from_value == 0.0 and rtf.type == ParameterType.PARAMETER_DOUBLE
     assert "lockstep" in stepping.additional_constraints and "realtime" in stepping.additional_constraints
     assert described["inspection_every"].integer_range[0].from_value == 1
-    assert "config/rta_attitude.yaml" in described["filter.preset"].description
+    assert "config/rta_attitude.yaml" in described["spacecraft.model"].description
     with pytest.raises(ConfigError, match=r"^parameter real_time_factor must be"):
         _node(topics.PLANT, {"real_time_factor": -2.0})

@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 
 from rta_attitude.config.schema import (
+    DEFAULT_EPOCH_UTC,
     DEFAULT_PRIORITIES,
     Augmentation,
     BarrierGains,
@@ -213,6 +214,7 @@ def _scenario(name: str, s: _Section) -> Scenario:
         schedule_q=tuple((float(a), float(b), float(c), float(d)) for a, b, c, d in qs),
         slack_weights=slack,
         model=s.text("model") if "model" in s.data else None,
+        epoch_utc=s.text("epoch_utc", DEFAULT_EPOCH_UTC),
     )
     s.done()
     return scenario

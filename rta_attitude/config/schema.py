@@ -5,6 +5,7 @@ Built by `rta_attitude.config.load` from the YAML file; nothing else converts un
 
 from __future__ import annotations
 
+import datetime as _dt
 import importlib.util
 import math
 from dataclasses import dataclass, field, replace
@@ -62,6 +63,32 @@ def _positive(where: str, value: float) -> None:
 def _nonneg(where: str, value: float) -> None:
     if not (math.isfinite(value) and value >= 0):
         raise ConfigError(f"{where} must be >= 0, got {value!r}")
+
+
+DEFAULT_EPOCH_UTC = "2024-03-02T00:00:00Z"
+"""The scenarios' default epoch: t = 0 of a run is this UTC date in its ROS time stamps (/clock, headers, bag
+times); a fixed date (the first day of the IEEE Aerospace Conference 2024, where the paper appeared) so that
+runs are reproducible bit for bit."""
+_UNIX_EPOCH = _dt.datetime(1970, 1, 1, tzinfo=_dt.UTC)
+
+
+def epoch_ns(where: str, text: str) -> int:
+    """Nanoseconds since 1970-01-01T00:00:00Z of an ISO 8601 UTC time ('2024-03-02T00:00:00Z'), exact to the
+    microsecond.
+
+    Raises:
+        ConfigError: not an ISO 8601 date-time, not UTC, or before 1970.
+    """
+    try:
+        when = _dt.datetime.fromisoformat(text)
+    except (TypeError, ValueError):
+        raise ConfigError(f"{where} must be an ISO 8601 UTC date-time such as {DEFAULT_EPOCH_UTC}, "
+                          f"got {text!r}") from None
+    if when.utcoffset() != _dt.timedelta(0):
+        raise ConfigError(f"{where} must be in UTC (end it with Z or +00:00), got {text!r}")
+    if when < _UNIX_EPOCH:
+        raise ConfigError(f"{where} must not be before 1970-01-01 (ROS time starts there), got {text!r}")
+    return (when - _UNIX_EPOCH) // _dt.timedelta(microseconds=1) * 1000
 
 
 def _choice(where: str, value: str, allowed: tuple[str, ...]) -> None:
@@ -395,9 +422,12 @@ class Scenario:
     model: str | None = None
     """If given (PLANT_MODELS), the model of both the plant and the filter in this scenario (the paper's
     figures: `paper`)."""
+    epoch_utc: str = DEFAULT_EPOCH_UTC
+    """UTC date of t = 0: ROS time stamps (/clock, headers, bag times) are epoch + t."""
 
     def __post_init__(self) -> None:
         where = f"scenarios.{self.name}"
+        epoch_ns(f"{where}.epoch_utc", self.epoch_utc)
         if self.model is not None:
             _choice(f"{where}.model", self.model, PLANT_MODELS)
         _positive(f"{where}.duration_s", self.duration_s)
@@ -410,6 +440,11 @@ class Scenario:
             for name, w in self.slack_weights:
                 _choice(f"{where}.slack_weights", name, CONSTRAINT_NAMES[:4])
                 _nonneg(f"{where}.slack_weights.{name}", w)
+
+    @property
+    def epoch_ns(self) -> int:
+        """t = 0 in ROS time [ns since 1970-01-01T00:00:00Z] (`epoch_utc`)."""
+        return epoch_ns(f"scenarios.{self.name}.epoch_utc", self.epoch_utc)
 
     def command_at(self, t_s: float) -> NDArray[np.float64]:
         """The commanded quaternion q_c (4,) in force at time t_s (s)."""

@@ -343,6 +343,20 @@ def _run_info(contents: bagio.BagContents, rec: _Records) -> dict[str, Any]:
     return info
 
 
+def _epoch_ns(info: Mapping[str, Any], cfg: Config, scenario: str, first_ns: int) -> int:
+    """ROS time of the run's t = 0: the recorder's `epoch_ns`; for a bag without it (`ros2 bag record`, or
+    recorded before scenarios had an epoch), the scenario's epoch from `cfg` if the stamps are not earlier,
+    else 0 (stamps in scenario time)."""
+    recorded = info.get("epoch_ns")
+    if isinstance(recorded, int) and not isinstance(recorded, bool):
+        return recorded
+    try:
+        epoch = cfg.scenario(scenario).epoch_ns
+    except ConfigError:
+        epoch = cfg.scenario(next(iter(cfg.scenarios))).epoch_ns if cfg.scenarios else 0
+    return epoch if first_ns >= epoch else 0
+
+
 def _pair_steps(rec: _Records, path: Path, max_steps: int | None) -> tuple[list[int], list[int]]:
     """(sample stamps t_0..t_N, command stamp of each step k < N).
 
@@ -451,7 +465,8 @@ def load_run(
 
     t_ns = np.array(stamps, dtype=np.int64)  # sorted, distinct
     dt_steps = np.diff(t_ns) / NS_PER_S  # (N,)
-    t_s = t_ns / NS_PER_S
+    epoch = _epoch_ns(info, run_cfg, scen_name, stamps[0])
+    t_s = (t_ns - epoch) / NS_PER_S
     x = np.array([rec.states[s] for s in stamps])
     y = None
     if rec.true_states:  # sensor errors: safety is judged on the truth; the filter read `state`

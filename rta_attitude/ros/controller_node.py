@@ -15,6 +15,10 @@ time by more than `max_state_age_s` is dropped (not answered); a state whose val
 answered with zero torque, so the filter is not left waiting (it sees the same bad state and answers
 with its invalid-state fallback); a quaternion off by less is renormalised. An attitude_command that
 is not a unit quaternion within `quaternion_tolerance` is rejected.
+
+Live parameters: `controller.kp` and `controller.kd` may be changed while the node runs (`ros2 param set`);
+the core loader validates the new value (finite, >= 0), the node logs it and answers the next
+state with the new gains. (A run whose gains change is no longer the one `simulate` reproduces.)
 """
 
 from __future__ import annotations
@@ -57,12 +61,16 @@ class ControllerNode(RtaNode):
     def on_clock_jump(self) -> None:
         self.order.reset()
 
+    def on_live_parameters(self, changes: dict[str, Any]) -> None:
+        """New gains (`ros2 param set <ns>/pd_controller controller.kp 0.3`): the next state is answered with them."""
+        self.law = controller_record(self.cfg, pd=self.scenario.controller == "pd")
+
     def reference(self, t_ns: int) -> np.ndarray:
         """q_c (4,) in force at t: the latest operator command stamped <= t, else the schedule."""
         i = bisect.bisect_right([s for s, _ in self.overrides], t_ns)
         if i > 0:
             return self.overrides[i - 1][1]
-        return self.scenario.command_at(t_ns / convert.NS_PER_S)
+        return self.scenario.command_at(self.sim_s(t_ns))
 
     def _on_command(self, msg: Any) -> None:
         try:
@@ -72,7 +80,7 @@ class ControllerNode(RtaNode):
             return
         self.faults.clear("attitude_command_rejected")
         bisect.insort(self.overrides, (t_ns, q), key=lambda item: item[0])
-        self.get_logger().info(f"attitude command {np.round(q, 4).tolist()} from t = {t_ns / convert.NS_PER_S:g} s")
+        self.get_logger().info(f"attitude command {np.round(q, 4).tolist()} from t = {self.sim_s(t_ns):g} s")
 
     def _on_state(self, msg: Any) -> None:
         if self.stopping:

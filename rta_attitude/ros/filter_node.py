@@ -127,9 +127,9 @@ class FilterNode(RtaNode):
         if not order and t_ns <= self.answered_ns:
             order = "late"  # its state was answered without it (timeout) or is long gone
         if order:
-            self.faults.fault(f"torque_des_{order}", f"stamp {t_ns / convert.NS_PER_S:g} s, newest taken "
-                              f"{(self.desired_order.newest_ns or 0) / convert.NS_PER_S:g} s, answered "
-                              f"{max(self.answered_ns, 0) / convert.NS_PER_S:g} s; dropped")
+            self.faults.fault(f"torque_des_{order}", f"stamp t = {self.sim_s(t_ns):g} s, newest taken "
+                              f"{self.sim_s(self.desired_order.newest_ns or self.epoch_ns):g} s, answered "
+                              f"{self.sim_s(max(self.answered_ns, self.epoch_ns)):g} s; dropped")
             return
         self.desired_order.take(t_ns)
         self.heard_controller = True
@@ -188,7 +188,7 @@ class FilterNode(RtaNode):
                 self.counts["unpaired_dropped"] += 1
                 continue
             why = "the controller's publisher is gone" if gone else f"none within {timeout:g} s"
-            self.faults.fault("torque_des_missing", f"no torque_des for t = {t_ns / convert.NS_PER_S:g} s ({why}); "
+            self.faults.fault("torque_des_missing", f"no torque_des for t = {self.sim_s(t_ns):g} s ({why}); "
                               "filtering u_des = 0")
             self._filter(t_ns, x, np.zeros(3), SOURCE_MISSING)
 
@@ -210,9 +210,9 @@ class FilterNode(RtaNode):
         level, text = filter_level(str(res.status), str(res.fallback), bool((res.record["slack"] > 0.0).any()))
         c = self.filter.counters
         self.diagnostics.update(level, text, {"preset": self.cfg.filter.preset, "calls": c.calls, "solved": c.solved,
-                                              "fallbacks": c.fallbacks, "t_s": t_ns / convert.NS_PER_S}, t_ns)
+                                              "fallbacks": c.fallbacks, "t_s": self.sim_s(t_ns)}, t_ns)
         if res.fallback and res.fallback not in ("non_finite_u_des", "invalid_state"):
-            self.faults.fault("qp_fallback", f"t = {t_ns / convert.NS_PER_S:g} s: QP {res.solver_status}, "
+            self.faults.fault("qp_fallback", f"t = {self.sim_s(t_ns):g} s: QP {res.solver_status}, "
                               f"fallback {res.fallback}")
         else:
             self.faults.clear("qp_fallback")

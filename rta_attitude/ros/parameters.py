@@ -1,18 +1,19 @@
 """Node parameters: the core YAML's leaves as ROS parameters, plus the node-only knobs.
 
-One source: every leaf under `ros__parameters` of the parameter file is a declared parameter,
-named by its dotted path (`filter.preset`, `scenarios.paper_example.duration_s`). The node
+One source: every leaf under `ros__parameters` of the parameter file is a parameter, named by its
+dotted path (`filter.preset`, `scenarios.paper_example.duration_s`). The node
 
-1. declares its knobs (topics.KNOBS) and `config_file`;
-2. declares every leaf of `config_file` (default: the installed rta_attitude.yaml) with the file's
-   value as default; values from `--params-file` / `-p` override them as usual in ROS, and keys
-   that only appear in overrides are declared from them too
-   (`automatically_declare_parameters_from_overrides`);
-3. rebuilds the nested mapping and validates it with `config.from_parameters`, the loader the CLI
-   uses, so a wrong type or an unknown key fails the same way everywhere (ConfigError, one line).
+1. declares its knobs (topics.KNOBS, each role its own) and `config_file`;
+2. reads `config_file` (default: the installed rta_attitude.yaml), lays every override it was given
+   (`--params-file`, `-p`) over it, and validates the result with `config.from_parameters`, the loader
+   the CLI uses, so a wrong type or an unknown key fails the same way everywhere (ConfigError, one line);
+3. declares, of those core parameters, only the ones it uses (topics.config_sections: its sections and
+   its own scenario), so `ros2 param list` shows what matters to that node.
 
 Parameters are read once: each is declared read_only with a description (`ros2 param describe`), knobs
-with their choices and range; a later `ros2 param set` is refused.
+with their choices and range; a later `ros2 param set` is refused, except for the role's live
+parameters (topics.LIVE_PARAMETERS: the controller's gains), which are validated with the whole
+configuration and logged.
 `flatten` and `nest` are ROS-free (the launcher uses them); `load` imports rclpy.
 """
 
@@ -21,13 +22,13 @@ from __future__ import annotations
 import array
 import math
 import sys
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from typing import TYPE_CHECKING, Any
 
-from rta_attitude import config
+from rta_attitude import config, topics
 from rta_attitude.config.schema import Config
 from rta_attitude.errors import ConfigError
-from rta_attitude.topics import SYSTEM_PARAMETERS, Knob
+from rta_attitude.topics import KNOBS, SYSTEM_PARAMETERS, Knob
 
 if TYPE_CHECKING:
     from rclpy.node import Node
@@ -93,16 +94,17 @@ def descriptor(name: str, knob: Knob | None = None) -> Any:
     return d
 
 
-def _declare(node: Node, name: str, value: Any, knob: Knob | None = None) -> None:
+def _declare(node: Node, name: str, value: Any, knob: Knob | None = None, writable: bool = False) -> None:
     from rclpy.exceptions import InvalidParameterValueException
 
-    if node.has_parameter(name):  # declared from an override (no descriptor yet): declare it again, described
-        if node.describe_parameter(name).read_only:
-            return
-        value = node.get_parameter(name).value
-        node.undeclare_parameter(name)
+    if node.has_parameter(name):
+        return
+    d = descriptor(name, knob)
+    if writable:
+        d.read_only = False
+        d.description += "; may be changed while the node runs (ros2 param set), validated and logged"
     try:
-        node.declare_parameter(name, value, descriptor(name, knob))
+        node.declare_parameter(name, value, d)
     except InvalidParameterValueException:
         assert knob is not None  # only knobs have ranges
         given = getattr(node, "_parameter_overrides", {}).get(name)  # rclpy keeps the overrides there
@@ -138,12 +140,26 @@ def _knob_value(node: Node, knob: Knob) -> Any:
     return check_knob(knob, node.get_parameter(knob.name).value)
 
 
-def load(node: Node, knobs: Sequence[Knob]) -> tuple[Config, dict[str, Any]]:
+def _in_sections(name: str, sections: Sequence[str]) -> bool:
+    return any(name == s or name.startswith(s + ".") for s in sections)
+
+
+def load(node: Node, role: str,
+         on_live: Callable[[Config, dict[str, Any]], None] | None = None) -> tuple[Config, dict[str, Any]]:
     """Declare and read a node's parameters.
 
+    The configuration is built from the whole parameter file (`config_file`) and every override the node
+    was given (`--params-file`, `-p`), validated by the core loader; of the core parameters only the
+    role's (topics.config_sections) are declared, each read_only unless it is one of the role's
+    topics.LIVE_PARAMETERS.
+
     Args:
-        node: created with `automatically_declare_parameters_from_overrides=True`.
-        knobs: the node-only parameters it takes (topics.knobs_for(role)).
+        node: created with `automatically_declare_parameters_from_overrides=False`.
+        role: topics.PLANT, CONTROLLER, FILTER or RECORDER: its knobs (topics.knobs_for), sections and
+            live parameters.
+        on_live: what the node does with an accepted live change (`ros2 param set` of a live parameter):
+            called with the new Config and {name: value} after the value was validated with the whole
+            configuration (a bad one is refused with the loader's one-line reason) and logged.
 
     Returns:
         (validated Config, {knob name: value}).
@@ -151,28 +167,46 @@ def load(node: Node, knobs: Sequence[Knob]) -> tuple[Config, dict[str, Any]]:
     Raises:
         ConfigError: missing or invalid parameter file, a wrong value, or an unknown key.
     """
+    knobs = topics.knobs_for(role)
+    live = topics.LIVE_PARAMETERS.get(role, ())
     for knob in knobs:
         _declare(node, knob.name, knob.default, knob)
     values = {k.name: _knob_value(node, k) for k in knobs}
     file_params, path = config.read_parameters(values.get("config_file") or None)
-    for name, value in flatten(file_params):
-        _declare(node, name, value)
-    skip = {k.name for k in knobs} | set(SYSTEM_PARAMETERS)
-    declared = [n for n in node.list_parameters([], 0).names if n not in skip and not n.startswith("qos_overrides.")]
-    flat = {p.name: _plain(p.value) for p in node.get_parameters(declared)}
-    cfg = config.from_parameters(nest(flat), source=str(path))
-    names = set(flat) | {k.name for k in knobs}
+    every_knob = {k.name for k in KNOBS}
+    overrides = {name: _plain(p.value) for name, p in getattr(node, "_parameter_overrides", {}).items()
+                 if name not in every_knob and name not in SYSTEM_PARAMETERS and not name.startswith("qos_overrides.")}
+    flat = dict(flatten(file_params))
+    flat.update(overrides)
+    cfg = config.from_parameters(nest(flat), source=str(path))  # an unknown key or a bad value fails here
+    sections = topics.config_sections(role, values["scenario"])
+    shown = [n for n in flat if _in_sections(n, sections)]
+    for name in shown:
+        _declare(node, name, flat[name], writable=name in live)
+    frozen = set(shown) - set(live) | {k.name for k in knobs}
 
     from rcl_interfaces.msg import SetParametersResult
 
-    def refuse(params: list[Parameter]) -> SetParametersResult:
-        frozen = [p.name for p in params if p.name in names]
-        if frozen:
+    def on_set(params: list[Parameter]) -> SetParametersResult:
+        refused = [p.name for p in params if p.name in frozen]
+        if refused:
             return SetParametersResult(successful=False,
-                                       reason=f"{frozen[0]} is read at startup only; restart the node to change it")
+                                       reason=f"{refused[0]} is read at startup only; restart the node to change it")
+        changes = {p.name: _plain(p.value) for p in params if p.name in live}
+        if not changes:
+            return SetParametersResult(successful=True)
+        candidate = {**flat, **changes}
+        try:
+            new_cfg = config.from_parameters(nest(candidate), source=str(path))
+        except ConfigError as exc:
+            return SetParametersResult(successful=False, reason=str(exc))
+        flat.update(changes)
+        node.get_logger().info("parameters changed at run time: " + ", ".join(f"{k}={v!r}" for k, v in changes.items()))
+        if on_live is not None:
+            on_live(new_cfg, changes)
         return SetParametersResult(successful=True)
 
-    node.add_on_set_parameters_callback(refuse)
+    node.add_on_set_parameters_callback(on_set)
     return cfg, values
 
 

@@ -166,7 +166,7 @@ class PlantNode(RtaNode):
 
     # ------------------------------------------------------------------ stepping
     def _t_ns(self, k: int) -> int:
-        return convert.seconds_to_ns(k * self.dt_s)
+        return self.epoch_ns + convert.seconds_to_ns(k * self.dt_s)
 
     def _publish(self, topic: str, msg: Any) -> None:
         self.pubs[topic].publish(msg)
@@ -224,12 +224,12 @@ class PlantNode(RtaNode):
                 kind = "duplicate"
             else:
                 kind = "late" if t_ns < expected else "future"
-            self.faults.fault(kind, f"{self.command_topic} stamped {t_ns / convert.NS_PER_S:g} s at step "
-                              f"t = {expected / convert.NS_PER_S:g} s; dropped")
+            self.faults.fault(kind, f"{self.command_topic} stamped t = {self.sim_s(t_ns):g} s at step "
+                              f"t = {self.sim_s(expected):g} s; dropped")
             return
         self.faults.clear("duplicate", "late", "future")
         u = np.abs(spacecraft.torque_to_wheel_accel(tau, self.D))
-        where = f"{self.command_topic} at t = {t_ns / convert.NS_PER_S:g} s (|u| = {np.round(u, 3).tolist()} rad/s^2)"
+        where = f"{self.command_topic} at t = {self.sim_s(t_ns):g} s (|u| = {np.round(u, 3).tolist()} rad/s^2)"
         for kind, limit, what in (("outside_u", self.u_admissible, "is outside U; applied"),
                                   ("saturated", self.u_actuator, "is beyond the actuator limit; saturated")):
             if np.any(u > limit * (1 + LIMIT_RTOL)):

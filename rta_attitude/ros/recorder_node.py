@@ -205,6 +205,7 @@ class RecorderNode(RtaNode):
             "scenario": self.scenario.name, "rta": self.rta, "preset": self.cfg.filter.preset,
             "config": self.cfg.source, "duration_s": float(self.scenario.duration_s),
             "dt_s": float(self.cfg.filter.sample_time_s), "namespace": self.get_namespace(),
+            "epoch_utc": self.scenario.epoch_utc, "epoch_ns": self.epoch_ns,
         }  # fmt: skip
         facts.update({k: v for k, v in self.run_values.items() if k not in facts})
         return {k: (str(v).lower() if isinstance(v, bool) else repr(v) if isinstance(v, float) else str(v))

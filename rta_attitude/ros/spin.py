@@ -80,19 +80,20 @@ class RtaNode(Node):
     """
 
     def __init__(self, role: str, **kwargs: Any) -> None:
-        kwargs.setdefault("namespace", topics.DEFAULT_NAMESPACE)
-        super().__init__(topics.NODE_NAMES[role], automatically_declare_parameters_from_overrides=True, **kwargs)
+        super().__init__(topics.NODE_NAMES[role], automatically_declare_parameters_from_overrides=False, **kwargs)
         self.role = role
         self.exit_code = 0
         self.finished = Future()
         self.steady = Clock(clock_type=ClockType.STEADY_TIME)
         try:
-            self.cfg, self.knobs = parameters.load(self, topics.knobs_for(role))
+            self.cfg, self.knobs = parameters.load(self, role, self._on_live_parameters)
             self.scenario = self.cfg.scenario(self.knobs["scenario"])
         except RtaError:
             self.destroy_node()
             raise
         self.cfg = self.cfg.for_scenario(self.scenario)
+        self.epoch_ns = self.scenario.epoch_ns
+        """ROS time of t = 0 (the scenario's `epoch_utc`): every stamp of the run is epoch_ns + t."""
         self.rta: bool = self.knobs["rta"]
         self.truth: bool = self.cfg.sensors.enabled
         """Sensor errors on: the plant publishes the true state beside the measured one (TRUTH_TOPICS)."""
@@ -110,6 +111,18 @@ class RtaNode(Node):
         self._jump_handle = self.get_clock().create_jump_callback(
             JumpThreshold(min_forward=None, min_backward=Duration(nanoseconds=-1), on_clock_change=False),
             post_callback=self._on_clock_jump)
+
+    def _on_live_parameters(self, cfg: Any, changes: dict[str, Any]) -> None:
+        self.cfg = cfg.for_scenario(self.scenario)
+        self.on_live_parameters(changes)
+
+    def on_live_parameters(self, changes: dict[str, Any]) -> None:
+        """`ros2 param set` changed live parameters (topics.LIVE_PARAMETERS; self.cfg is the new configuration
+        already). Nodes with live parameters override it."""
+
+    def sim_s(self, t_ns: int) -> float:
+        """Scenario time [s] of a ROS time stamp [ns] (for log lines and diagnostics)."""
+        return (t_ns - self.epoch_ns) / convert.NS_PER_S
 
     def qos(self, topic: str) -> Any:
         """The QoS profile of one of the run's topics, with this run's liveliness lease."""
@@ -194,7 +207,7 @@ class RtaNode(Node):
         _, x = convert.state_from_msg(msg)
         x, renormalised = convert.unit_attitude(x, self.knobs["quaternion_tolerance"])
         if renormalised:
-            self.faults.fault("state_renormalised", f"state quaternion of t = {t_ns / convert.NS_PER_S:g} s "
+            self.faults.fault("state_renormalised", f"state quaternion of t = {self.sim_s(t_ns):g} s "
                               "renormalised")
         else:
             self.faults.clear("state_renormalised")
@@ -206,14 +219,14 @@ class RtaNode(Node):
         taken into `order`. Returns True if the state may be used."""
         kind = order.check(t_ns)
         if kind:
-            self.faults.fault(f"state_{kind}", f"stamp {t_ns / convert.NS_PER_S:g} s, newest "
-                              f"{(order.newest_ns or 0) / convert.NS_PER_S:g} s; dropped")
+            self.faults.fault(f"state_{kind}", f"stamp t = {self.sim_s(t_ns):g} s, newest "
+                              f"{self.sim_s(order.newest_ns or self.epoch_ns):g} s; dropped")
             return False
         max_age = self.knobs["max_state_age_s"]
         if max_age > 0 and self.uses_sim_time():
             age = (self.get_clock().now().nanoseconds - t_ns) / convert.NS_PER_S
             if age > max_age:
-                self.faults.fault("state_stale", f"state of t = {t_ns / convert.NS_PER_S:g} s is {age:g} s old "
+                self.faults.fault("state_stale", f"state of t = {self.sim_s(t_ns):g} s is {age:g} s old "
                                   f"(max_state_age_s {max_age:g}); dropped")
                 return False
         order.take(t_ns)
