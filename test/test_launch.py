@@ -110,6 +110,17 @@ def test_launch_checks_inputs_before_starting_anything(args: list[str], message:
     assert not (tmp_path / "x.mcap").exists()
 
 
+def test_launch_without_bag_or_out_leaves_no_temporary_files(tmp_path: Path) -> None:
+    """The temporary bag, its directory and the temporary node logs go when the run ends well."""
+    tmp = tmp_path / "tmp"
+    tmp.mkdir()
+    proc = subprocess.run([sys.executable, "-m", "rta_attitude.cli.launch", "--duration", "5"], capture_output=True,
+                          text=True, timeout=300, env={**os.environ, "TMPDIR": str(tmp)})
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert "SAFE" in proc.stdout
+    assert sorted(p.name for p in tmp.iterdir()) == []
+
+
 def test_launch_refuses_to_overwrite_a_bag(tmp_path: Path) -> None:
     bag = tmp_path / "old.mcap"
     bag.write_bytes(b"keep me")

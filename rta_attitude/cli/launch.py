@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import shutil
 import sys
 import tempfile
 from pathlib import Path
@@ -47,30 +48,56 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """`rta-attitude launch`: see the module docstring."""
+    from rta_attitude.simulation.closed_loop import compile_kernels
+
+    p = plan(args)
+    out: Path | None = None
+    log_dir = None
+    ok = False
+    try:
+        out = output_dir(args.out) if args.out is not None else None
+        if out is not None:
+            log_dir = output_dir(out / "logs")
+        elif not args.verbose:
+            log_dir = Path(tempfile.mkdtemp(prefix="rta_launch_logs_"))
+        mode = f"realtime x{args.realtime:g}" if args.realtime is not None else "lockstep"
+        # the nodes compile (or load) numba's kernels at start-up; do it once here, so that a fresh
+        # installation's compile happens before any node waits on another
+        ready_s = compile_kernels(p.cfg)
+        print(f"compiled kernels ready in {ready_s:.1f} s", flush=True)
+        print(f"launch {p.scenario_key}: {p.steps} steps, {mode}, rta={'off' if args.no_rta else 'on'}, "
+              f"namespace {args.namespace}, domain {p.env['ROS_DOMAIN_ID']} "
+              f"({p.env['ROS_AUTOMATIC_DISCOVERY_RANGE'].lower()}), bag {p.bag}", flush=True)
+        problems, facts = launch(p, log_dir)
+        code = _report(args, p, out, log_dir, mode, problems, facts)
+        ok = code == 0
+        return code
+    finally:
+        _clean_up(p, log_dir if out is None else None, ok)
+
+
+def _clean_up(p: Any, temporary_logs: Path | None, ok: bool) -> None:
+    """Remove what the launcher made for itself: the temporary bag and its directory (kept, and named,
+    after a failed run), and the temporary log directory (kept after a failed run: its path was printed)."""
+    if p.temporary_bag:
+        if ok or not p.bag.exists():
+            p.bag.unlink(missing_ok=True)
+            shutil.rmtree(p.bag.parent, ignore_errors=True)
+        else:
+            print(f"bag kept: {p.bag}", flush=True)
+    if temporary_logs is not None and ok:
+        shutil.rmtree(temporary_logs, ignore_errors=True)
+
+
+def _report(args: argparse.Namespace, p: Any, out: Path | None, log_dir: Path | None, mode: str,
+            problems: list[str], facts: dict[str, Any]) -> int:
+    """Print the run's summary from its bag (and write summary.json); the exit code."""
     from rta_attitude.recording.analysis import load_run
     from rta_attitude.recording.bag import read_bag
     from rta_attitude.recording.summary import summarize_run
     from rta_attitude.ros.convert import run_status_from_msg
     from rta_attitude.simulation.metrics import format_summary
 
-    p = plan(args)
-    out: Path | None = output_dir(args.out) if args.out is not None else None
-    log_dir = None
-    if out is not None:
-        log_dir = output_dir(out / "logs")
-    elif not args.verbose:
-        log_dir = Path(tempfile.mkdtemp(prefix="rta_launch_logs_"))
-    mode = f"realtime x{args.realtime:g}" if args.realtime is not None else "lockstep"
-    from rta_attitude.simulation.closed_loop import compile_kernels
-
-    # the nodes compile (or load) numba's kernels at start-up; do it once here, so that a fresh
-    # installation's compile happens before any node waits on another
-    ready_s = compile_kernels(p.cfg)
-    print(f"compiled kernels ready in {ready_s:.1f} s", flush=True)
-    print(f"launch {p.scenario_key}: {p.steps} steps, {mode}, rta={'off' if args.no_rta else 'on'}, "
-          f"namespace {args.namespace}, domain {p.env['ROS_DOMAIN_ID']} "
-          f"({p.env['ROS_AUTOMATIC_DISCOVERY_RANGE'].lower()}), bag {p.bag}", flush=True)
-    problems, facts = launch(p, log_dir)
     if problems:  # one ERROR line (the first problem); the rest, and where the logs are, on stdout
         print(f"ERROR: {problems[0]}", file=sys.stderr)
         for line in problems[1:]:
@@ -104,11 +131,9 @@ def run(args: argparse.Namespace) -> int:
     if out is not None:
         write_text(out / "summary.json", json.dumps(summary, indent=2, default=str) + "\n")
         print(f"wrote {out / 'summary.json'}, bag {p.bag}, logs {log_dir}")
-    if p.temporary_bag:
-        p.bag.unlink(missing_ok=True)
-        p.bag.parent.rmdir()
+    elif problems and log_dir is not None:
+        print(f"node logs: {log_dir}", flush=True)
     return 1 if problems else 0
-
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -121,8 +146,6 @@ def main(argv: list[str] | None = None) -> int:
     except RtaError as exc:
         print(f"ERROR: {exc}", file=sys.stderr)
         return 1
-
-
 
 
 __all__ = ["add_arguments", "main", "run"]
