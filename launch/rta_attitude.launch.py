@@ -29,7 +29,7 @@ from launch_ros.actions import Node
 
 from launch import LaunchDescription
 from rta_attitude import topics
-from rta_attitude.ros.launch_file import ARGUMENTS, RunEnd, validate
+from rta_attitude.ros.launch_file import ARGUMENTS, SIGTERM_TIMEOUT_S, RunEnd, validate
 
 
 def _nodes(context, *args, **kwargs):
@@ -45,7 +45,8 @@ def _nodes(context, *args, **kwargs):
 
     def node(executable: str, extra: dict, sim_time: bool = True) -> Node:
         return Node(package="rta_attitude", executable=executable, namespace=a["namespace"], output="screen",
-                    parameters=[a["params_file"], {**common, **extra, "use_sim_time": sim_time}])
+                    parameters=[a["params_file"], {**common, **extra, "use_sim_time": sim_time}],
+                    sigterm_timeout=str(SIGTERM_TIMEOUT_S))
 
     plant = {"stepping": a["stepping"], "real_time_factor": a["real_time_factor"]}
     exe = topics.EXECUTABLES
@@ -57,7 +58,9 @@ def _nodes(context, *args, **kwargs):
     end = RunEnd(record=a["record"])
 
     def on_exit(name: str):
-        def handler(event, _context):
+        def handler(event, context):
+            if context.is_shutdown and end.decided is None:  # the user stopped the launch (Ctrl-C)
+                return None
             verdict, reason = end.exited(name, event.returncode)
             if verdict == "failed":
                 raise RuntimeError(reason)  # ros2 launch: one error line, shutdown of the rest, exit 1

@@ -378,6 +378,10 @@ def test_plant_waits_for_a_reader_that_is_alive_but_still_starting() -> None:
     plant = PlantNode(context=context, namespace=NS, parameter_overrides=[Parameter(k, value=v) for k, v in {
         "rta": False, "record": False, "startup_timeout_s": 0.5, "stop_timeout_s": 0.5}.items()])
     starting = rclpy.create_node(topics.NODE_NAMES[topics.CONTROLLER], namespace=NS, context=context)
+    # a use_sim_time node reads /clock from its first moment, long before its kernels let it read `state`
+    clock = topics.TOPICS[topics.CLOCK]
+    starting.create_subscription(interface.msg_class(clock.type_name), clock.name, lambda m: None,
+                                 interface.qos_profile(clock.qos))
     executor.add_node(plant)
     executor.add_node(starting)
 

@@ -98,8 +98,8 @@ def test_a_normal_end_waits_for_the_recorder_and_ignores_the_shutdowns_exits() -
     assert verdict == "done"
     assert end.exited(FILTER, 0)[0] == "ignored" and end.exited(CONTROLLER, -2)[0] == "ignored"
     end = RunEnd(record=True)
-    assert end.exited(RECORDER, 0)[0] == "done"  # the recorder saw the final run_status first
-    assert end.exited(PLANT, 0)[0] == "ignored"
+    assert end.exited(RECORDER, 0)[0] == "running"  # the recorder saw the final run_status first: the plant's
+    assert end.exited(PLANT, 0)[0] == "done"          # exit code decides
     end = RunEnd(record=False)
     assert end.exited(PLANT, 0)[0] == "done"
 
@@ -117,6 +117,9 @@ def test_any_failure_ends_the_run_as_failed(record: bool) -> None:
     assert end.exited(PLANT, 0)[0] == "running"
     assert end.exited(CONTROLLER, 0)[0] == "running"  # after the plant is done: fine
     assert end.exited(RECORDER, 1) == ("failed", f"{RECORDER} exited with code 1")
+    end = RunEnd(record=True)  # a failed run: the recorder closes the bag on the final `failed` status first
+    assert end.exited(RECORDER, 0)[0] == "running"
+    assert end.exited(PLANT, 1) == ("failed", f"{PLANT} exited with code 1")
 
 
 def test_the_launch_file_declares_every_argument_and_uses_this_logic() -> None:
@@ -127,4 +130,7 @@ def test_the_launch_file_declares_every_argument_and_uses_this_logic() -> None:
     assert {"validate", "RunEnd", "ARGUMENTS", "OpaqueFunction", "OnProcessExit"} <= names
     called = [n.func.id for n in ast.walk(tree) if isinstance(n, ast.Call) and isinstance(n.func, ast.Name)]
     assert called.index("validate") < called.index("Node")  # nothing is built before the arguments are checked
+    node_calls = [n for n in ast.walk(tree) if isinstance(n, ast.Call) and getattr(n.func, "id", "") == "Node"]
+    assert all("sigterm_timeout" in {k.arg for k in n.keywords} for n in node_calls)  # no SIGTERM race on Ctrl-C
+    assert "is_shutdown" in LAUNCH_FILE.read_text()  # exits after a user's shutdown are not failures
     assert len(ARGUMENTS) == len({a.name for a in ARGUMENTS}) == 11

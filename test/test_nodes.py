@@ -139,6 +139,7 @@ def test_lockstep_run_over_dds_equals_in_process_run(rta: bool, tmp_path: Path, 
     stamps = [convert.state_from_msg(m.ros_msg)[0] for m in msgs[_topic(topics.STATE)]]
     epoch = CFG.scenario("paper_example").epoch_ns  # t = 0 is the scenario epoch in ROS time
     assert stamps == [epoch + convert.seconds_to_ns(t) for t in ref.t_s]
+    assert min(m.log_time_ns for ms in msgs.values() for m in ms) == epoch  # every bag time a real date, none 1970
     assert all(m.log_time_ns == s for m, s in zip(msgs[_topic(topics.STATE)], stamps))
     u_des = to_wheel_accel(
         np.array([convert.torque_from_msg(m.ros_msg)[1] for m in msgs[_topic(topics.TORQUE_DES)]]), CFG)[:n]

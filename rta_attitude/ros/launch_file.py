@@ -10,11 +10,16 @@ Two jobs, each a plain function or class the launch file calls:
   the launch file lets it propagate, so `ros2 launch` prints it once ("Caught exception in launch")
   and exits 1 with no process started. An empty `bag` gets a rosbag2-style unique, time-stamped name.
 - `RunEnd`: the event wiring. The launch file reports every node's exit to it; it answers whether the
-  run goes on, ended normally (the plant is done and, when recording, the recorder has closed the
+  run goes on, ended normally (the plant exited 0 and, when recording, the recorder has closed the
   bag), or failed (a node exited with a non-zero code, or a node other than the plant and recorder
   ended before the run did). On an end the launch file emits Shutdown (the other nodes get SIGINT
   and stop cleanly, exit code 0); on a failure it raises, which makes `ros2 launch` shut everything
-  down and exit 1. Exits after the end has been decided are the shutdown's own and are ignored.
+  down and exit 1. Exits after the end has been decided are the shutdown's own and are ignored, and
+  so are exits after a shutdown the user asked for (Ctrl-C: the launch file checks the context).
+
+Every node gets `sigterm_timeout` = SIGTERM_TIMEOUT_S: on SIGINT a node waits up to stop_timeout_s +
+2 s for its readers to acknowledge what it published, which raced launch's default 5 s and printed
+"failed to terminate '5' seconds after receiving 'SIGINT', escalating to 'SIGTERM'" on Ctrl-C.
 """
 
 from __future__ import annotations
@@ -36,6 +41,9 @@ STEPPING = ("lockstep", "realtime")
 DISCOVERY = ("LOCALHOST", "SUBNET", "OFF")
 MAX_DOMAIN_ID = 232
 """Largest ROS_DOMAIN_ID (ROS 2's documented range is 0-232; 0-101 is safe on every Linux)."""
+SIGTERM_TIMEOUT_S = 15.0
+"""How long launch waits after SIGINT before it escalates to SIGTERM: longer than a node's own bound on
+its stop (stop_timeout_s 3 s + spin.STOP_MARGIN_S 2 s, plus interpreter teardown)."""
 NAMESPACE = re.compile(r"/|(/[A-Za-z_][A-Za-z0-9_]*)+")
 """An absolute ROS namespace (ROS 2 name rules)."""
 
@@ -167,7 +175,9 @@ class RunEnd:
                 return "running", ""  # the recorder closes the bag once every message is in
             return "done", "the plant finished the run" + (" and the recorder closed the bag" if self.record else "")
         if node == recorder:
-            return "done", "the recorder closed the bag"  # after the plant's final run_status
+            if plant in self.exits:  # the plant exited 0 before (a non-zero exit decided already)
+                return "done", "the plant finished the run and the recorder closed the bag"
+            return "running", ""  # the bag is closed after the final run_status: the plant's exit code decides
         if plant in self.exits:
             return "running", ""
         return "failed", f"{node} ended before the run did"
@@ -184,4 +194,4 @@ class RunEnd:
         return verdict
 
 
-__all__ = ["ARGUMENTS", "LaunchArgument", "RunEnd", "validate"]
+__all__ = ["ARGUMENTS", "SIGTERM_TIMEOUT_S", "LaunchArgument", "RunEnd", "validate"]

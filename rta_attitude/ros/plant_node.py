@@ -119,20 +119,20 @@ class PlantNode(RtaNode):
     def _readers_starting(self) -> list[str]:
         """The run's reader nodes that exist in the ROS graph under our namespace but have not subscribed
         to everything they read yet: started, still building (a first start compiles the filter's kernels
-        for tens of seconds). Empty if every reader has subscribed, or if one is not even in the graph
-        (that one counts against startup_timeout_s)."""
+        for tens of seconds). Judged per topic: a node that already reads /clock (every use_sim_time node
+        does from its first moment) but not `state` is still starting. Empty if every reader has
+        subscribed, or if one is not even in the graph (that one counts against startup_timeout_s)."""
         ns = self.get_namespace()
         alive = {name for name, node_ns in self.get_node_names_and_namespaces() if node_ns == ns}
-        roles: set[str] = set()
+        pending: set[str] = set()
         for n, pub in self.pubs.items():
             want = topics.reader_roles(n, self.rta, self.record, self.truth)
-            if len(want) > pub.get_subscription_count():
-                roles |= set(want)
-        names = sorted(topics.NODE_NAMES[r] for r in roles)
-        subscribed = {info.node_name for n in self.pubs for info in self.get_subscriptions_info_by_topic(
-            self.pubs[n].topic_name) if info.node_namespace == ns}
-        pending = [name for name in names if name not in subscribed]
-        return pending if pending and all(name in alive for name in pending) else []
+            if len(want) <= pub.get_subscription_count():
+                continue
+            readers = {info.node_name for info in self.get_subscriptions_info_by_topic(pub.topic_name)
+                       if info.node_namespace == ns}
+            pending |= {topics.NODE_NAMES[r] for r in want if topics.NODE_NAMES[r] not in readers}
+        return sorted(pending) if pending and all(name in alive for name in pending) else []
 
     def _check_ready(self) -> None:
         missing = [(self.pubs[n].topic_name, self.pubs[n].get_subscription_count(), want)
@@ -154,7 +154,8 @@ class PlantNode(RtaNode):
             return
         self.destroy_timer(self._startup)
         self._started_s = self.wall_now_s()
-        self._publish(topics.RUN_STATUS, convert.run_status_msg(0, topics.RUN_RUNNING, self._status_values()))
+        self._publish(topics.RUN_STATUS, convert.run_status_msg(self._t_ns(0), topics.RUN_RUNNING,
+                                                                self._status_values()))
         self.get_logger().info("readers matched; running")
         self._running = True
         self._publish_sample()
