@@ -344,8 +344,12 @@ def _clean_shm(files: set[str]) -> None:
         time.sleep(0.2)
     # a name removed and back again is another program's (the names are global, not per domain or per
     # process: a second DDS session on the machine opens and closes the same ports); the dead process
-    # cannot make it again
-    assert sorted(set(launcher.stale_shm(files)) - removed) == [], sorted(files & _shm_now())
+    # cannot make it again. Listening-port files (`fastrtps_port*` and companions) are shared with every DDS
+    # program on the machine: removed above when stale, never blamed on the run (the launcher's rule; the
+    # hunt of 2026-11-25 saw `fastrtps_port7003` and its companions go stale only after the loop, while
+    # another DDS session beside the test opened and closed that port)
+    leaked = sorted(n for n in set(launcher.stale_shm(files)) - removed if not launcher.is_port_file(n))
+    assert leaked == [], sorted(files & _shm_now())
 
 
 @pytest.mark.slow
