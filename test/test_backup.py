@@ -17,6 +17,7 @@ from rta_attitude.errors import ConfigError
 from rta_attitude.filter.backup import (
     CORRIDOR_HALF_WIDTH_RAD,
     GATE_DTYPE,
+    RATE_LIMIT_FRACTION,
     TILT_WHEEL_MARGIN,
     backup_command,
     backup_rollout,
@@ -88,8 +89,8 @@ def test_backup_law_equals_the_viability_oracles_sun_safe_ff(cfg: Config) -> Non
     assert np.all(momentum_rad_s(x0, cfg) < 0.6 * cfg.limits.psi_max_rad_s)
     for x in x0:
         x[12] = rng.uniform(0.0, 2 * np.pi)
-        np.testing.assert_allclose(backup_command(x, f), law_command(x[:13], "sun_safe_ff", m), rtol=1e-9,
-                                   atol=1e-9)
+        np.testing.assert_allclose(backup_command(x, f), law_command(
+            x[:13], "sun_safe_ff", m, rate_limit_fraction=RATE_LIMIT_FRACTION), rtol=1e-9, atol=1e-9)
 
 
 def test_rollout_equals_the_plants_python_integrate(cfg: Config, states: Array) -> None:

@@ -65,8 +65,10 @@ M = N_CONSTRAINTS
 
 NO_LAW, SUN_SAFE = (BACKUP_LAWS.index(n) for n in ("none", "sun_safe"))
 """Codes of the backup laws (`filter.backup_law`)."""
-RATE_LIMIT_FRACTION = 0.7
-"""The backup law commands |w_ref_a| <= this fraction of w_max."""
+RATE_LIMIT_FRACTION = 0.9
+"""The backup law commands |w_ref_a| <= this fraction of w_max (0.7 until 2026-11-25: the rollout checks the
+rate limit at every substep, so the reserve only slowed the way out; the oracle's witnesses run the rates to
+within 2e-6 rad/s of w_max)."""
 RATE_TIME_CONSTANT_S = 2.0
 """Time constant of the backup law's rate loop, s."""
 SETTLED_ANGLE_RAD = math.radians(5.0)
@@ -74,8 +76,10 @@ SETTLED_ANGLE_RAD = math.radians(5.0)
 SETTLED_RATE_FRACTION = 0.1
 """... every body rate at most this fraction of w_max, ..."""
 # ... and every wheel can hold its share of the momentum at rest there (`_wheel_load`).
-TILT_WHEEL_MARGIN = 0.01
-"""The tilted sun-safe target keeps the panel-axis wheel this fraction of psi_max inside its limit."""
+TILT_WHEEL_MARGIN = 0.002
+"""The tilted sun-safe target keeps the panel-axis wheel this fraction of psi_max (1.2 rad/s) inside its limit
+(0.01 until 2026-11-25: the rollout checks the wheel speeds at every substep; the oracle's witnesses of the
+backup's failures keep the wheels 0.06 rad/s inside psi_max, and the smaller reserve saved two of them)."""
 CORRIDOR_HALF_WIDTH_RAD = math.radians(10.0)
 """Where H_body could cross the i_B-j_B plane only through corridors narrower than this either side of
 the diagonal (a large momentum), the tilted target keeps the panel on its side of H."""

@@ -80,8 +80,9 @@ def attitude_error(x: Array, m: OracleModel) -> Array:
     return -dq[:3] if dq[3] < 0 else dq[:3]
 
 
-def law_command(x: Array, law: str, m: OracleModel) -> Array:
-    """The command (3,) of a warm-start law at state x (13,), inside U."""
+def law_command(x: Array, law: str, m: OracleModel, rate_limit_fraction: float = RATE_LIMIT_FRACTION) -> Array:
+    """The command (3,) of a warm-start law at state x (13,), inside U; `rate_limit_fraction` bounds the
+    feed-forward laws' rate command (a test sets the filter's backup law's to compare the two)."""
     s, J, D = m.torque_sign, m.J, m.wheel_inertia_kgm2
     w = x[4:7]
     if law == "sun_safe":
@@ -90,7 +91,7 @@ def law_command(x: Array, law: str, m: OracleModel) -> Array:
     if law == "hold":
         w_ref = np.zeros(3)
     elif law == "sun_safe_ff":
-        lim = RATE_LIMIT_FRACTION * m.omega_max_rad_s
+        lim = rate_limit_fraction * m.omega_max_rad_s
         w_ref = np.clip(-(m.kp / m.kd) * attitude_error(x, m), -lim, lim)
     else:
         raise ValueError(f"unknown law {law!r}; known: {', '.join(LAWS)}")
