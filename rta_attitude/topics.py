@@ -390,8 +390,9 @@ every other parameter is read at start-up and read_only."""
 
 
 def config_sections(role: str, scenario: str) -> tuple[str, ...]:
-    """The dotted prefixes of the core parameters `role` declares when it runs `scenario`."""
-    return (*CONFIG_SECTIONS[role], f"scenarios.{scenario.replace('-', '_')}")
+    """The dotted prefixes of the core parameters `role` declares when it runs `scenario` (its key in the
+    parameter file, `Scenario.name`)."""
+    return (*CONFIG_SECTIONS[role], f"scenarios.{scenario}")
 
 
 def knobs_for(role: str) -> tuple[Knob, ...]:

@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from rta_attitude import topics
-from rta_attitude.cli.launcher import DEFAULT_DOMAIN_ID, DISCOVERY_RANGES, launch, plan
+from rta_attitude.cli.launcher import DEFAULT_DOMAIN_ID, DISCOVERY_RANGES, Plan, launch, plan
 from rta_attitude.config.schema import PRESETS
 from rta_attitude.errors import RtaError
 from rta_attitude.files import output_dir, write_text
@@ -76,7 +76,7 @@ def run(args: argparse.Namespace) -> int:
         _clean_up(p, log_dir if out is None else None, ok)
 
 
-def _clean_up(p: Any, temporary_logs: Path | None, ok: bool) -> None:
+def _clean_up(p: Plan, temporary_logs: Path | None, ok: bool) -> None:
     """Remove what the launcher made for itself: the temporary bag and its directory (kept, and named,
     after a failed run), and the temporary log directory (kept after a failed run: its path was printed)."""
     if p.temporary_bag:
@@ -89,7 +89,7 @@ def _clean_up(p: Any, temporary_logs: Path | None, ok: bool) -> None:
         shutil.rmtree(temporary_logs, ignore_errors=True)
 
 
-def _report(args: argparse.Namespace, p: Any, out: Path | None, log_dir: Path | None, mode: str,
+def _report(args: argparse.Namespace, p: Plan, out: Path | None, log_dir: Path | None, mode: str,
             problems: list[str], facts: dict[str, Any]) -> int:
     """Print the run's summary from its bag (and write summary.json); the exit code."""
     from rta_attitude.recording.analysis import load_run
