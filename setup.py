@@ -33,6 +33,7 @@ setup(
             "pd_controller_node = rta_attitude.ros.controller_node:main",
             "asif_filter_node = rta_attitude.ros.filter_node:main",
             "bag_recorder_node = rta_attitude.ros.recorder_node:main",
+            "scene_node = rta_attitude.ros.scene_node:main",
         ],
     },
 )

@@ -1,4 +1,5 @@
-"""Benchmark: the lockstep closed loop over DDS (four node processes), against a forward-only chain.
+"""Benchmark: the lockstep closed loop over DDS (four node processes), against a forward-only chain,
+and the cost of the scene node beside it.
 
     python bench/bench_dds.py [--duration 2000] [--repeat 3]
 
@@ -7,10 +8,13 @@ Runs, alternately and `--repeat` times each:
 - the real loop: `paper-example` through `rta_attitude.cli.launcher` (plant, PD controller, ASIF
   filter, recorder writing the MCAP bag; Fast DDS; lockstep); its time is the plant's `wall_time_s`
   (from its first state to the last command) and the launcher's total (start-up and bag close too);
+- the same loop with the scene node (`rta-attitude launch`'s default: five processes, the scene drawn at
+  every step and recorded);
 - the floor: bench/forward_chain.py, four rclpy processes with the same topics, types, QoS and
   messages per step that only forward (no physics, no filter, no bag); the same span is timed.
 
-Reports medians, the ratio real / floor (target <= 1.3), the state -> torque_cmd latency, and checks
+Reports medians, the ratio real / floor without the scene (target <= 1.3), the ratio with / without the
+scene (target <= 1.1), the state -> torque_cmd latency, and checks
 the recorded states of every real run against `simulate` (bit for bit). Appends to
 bench/results/dds.json with the machine's load. Not collected by pytest; runs on its own
 ROS_DOMAIN_ID with localhost-only discovery.
@@ -48,14 +52,14 @@ from rta_attitude.simulation.closed_loop import simulate  # noqa: E402
 ROLES = (topics.RECORDER, topics.FILTER, topics.CONTROLLER, topics.PLANT)
 
 
-def real_run(duration_s: float, work: Path, reference: np.ndarray) -> dict[str, float]:
-    """One launcher run: loop and total wall time, latency, max |x - simulate|."""
+def real_run(duration_s: float, work: Path, reference: np.ndarray, scene: bool = False) -> dict[str, float]:
+    """One launcher run (with or without the scene node): loop and total wall time, latency, max |x - simulate|."""
     import argparse as ap
 
     parser = ap.ArgumentParser()
     launch_cli.add_arguments(parser)
     bag = work / f"bench_{time.monotonic_ns()}.mcap"
-    args = parser.parse_args(["--bag", str(bag), "--duration", str(duration_s)])
+    args = parser.parse_args(["--bag", str(bag), "--duration", str(duration_s), *([] if scene else ["--no-scene"])])
     plan = launcher.plan(args)
     t0 = time.perf_counter()
     problems, _facts = launcher.launch(plan, log_dir=work)
@@ -101,30 +105,38 @@ def main() -> int:
     steps = round(args.duration / cfg.filter.sample_time_s)
     reference = simulate(cfg, "paper-example", duration_s=args.duration).x
     before = machine.describe()
-    real, floor = [], []
+    real, floor, scened = [], [], []
     with tempfile.TemporaryDirectory(prefix="bench_dds_") as tmp:
         for i in range(args.repeat):
             floor.append(floor_run(steps, Path(tmp)))
             real.append(real_run(args.duration, Path(tmp), reference))
-            print(f"pass {i + 1}: real loop {real[-1]['loop_s']:.2f} s, forward chain {floor[-1]['loop_s']:.2f} s, "
-                  f"max |x_dds - x_simulate| = {real[-1]['max_abs_dx']:.3g}", flush=True)
+            scened.append(real_run(args.duration, Path(tmp), reference, scene=True))
+            print(f"pass {i + 1}: real loop {real[-1]['loop_s']:.2f} s, with the scene {scened[-1]['loop_s']:.2f} s, "
+                  f"forward chain {floor[-1]['loop_s']:.2f} s, max |x_dds - x_simulate| = "
+                  f"{max(real[-1]['max_abs_dx'], scened[-1]['max_abs_dx']):.3g}", flush=True)
     med = {k: float(np.median([r[k] for r in real])) for k in real[0]}
+    smed = {k: float(np.median([r[k] for r in scened])) for k in scened[0]}
     fmed = {k: float(np.median([r[k] for r in floor])) for k in floor[0]}
     ratio = med["loop_s"] / fmed["loop_s"]
+    scene_ratio = smed["loop_s"] / med["loop_s"]
     print(f"\npaper-example, {steps} lockstep steps, medians of {args.repeat} (ROS_DOMAIN_ID "
           f"{os.environ['ROS_DOMAIN_ID']}; load average before {before['load_average']})")
     print(f"{'':<44}{'loop':>9}{'per step':>11}{'total':>9}")
     print(f"{'real loop (4 processes, filter, bag)':<44}{med['loop_s']:>8.2f}s{med['loop_s'] / steps * 1e3:>9.2f}ms"
           f"{med['total_s']:>8.1f}s")
+    print(f"{'real loop + scene node (5 processes)':<44}{smed['loop_s']:>8.2f}s"
+          f"{smed['loop_s'] / steps * 1e3:>9.2f}ms{smed['total_s']:>8.1f}s")
     print(f"{'floor: forward-only chain (4 processes)':<44}{fmed['loop_s']:>8.2f}s"
           f"{fmed['loop_s'] / steps * 1e3:>9.2f}ms{fmed['total_s']:>8.1f}s")
     print(f"{'ratio real / floor (target <= 1.3)':<44}{ratio:>9.2f}")
+    print(f"{'ratio with / without the scene (<= 1.1)':<44}{scene_ratio:>9.2f}")
     print(f"state -> torque_cmd latency: median {med['latency_median_s'] * 1e3:.2f} ms, p99 "
           f"{med['latency_p99_s'] * 1e3:.2f} ms; worst |x_dds - x_simulate| {max(r['max_abs_dx'] for r in real):.3g}")
     rec = {"steps": steps, "repeat": args.repeat, "real": real, "floor": floor, "real_median": med,
-           "floor_median": fmed, "ratio": ratio, "machine_before": before, "machine_after": machine.describe()}
+           "floor_median": fmed, "ratio": ratio, "scene": scened, "scene_median": smed, "scene_ratio": scene_ratio,
+           "machine_before": before, "machine_after": machine.describe()}
     print(f"appended to {machine.append('dds', rec, args.out)}")
-    if any(r["max_abs_dx"] != 0.0 for r in real):
+    if any(r["max_abs_dx"] != 0.0 for r in real + scened):
         print("ERROR: the DDS loop does not equal simulate bit for bit", file=sys.stderr)
         return 1
     return 0

@@ -38,6 +38,7 @@ from rta_attitude.filter.asif import AsifFilter
 from rta_attitude.ros import convert, interface
 
 LEASE_S = 2.0
+MATCH_TIMEOUT_S = 60.0
 
 
 def _stamp(msg: Any, t_ns: int) -> Any:
@@ -51,6 +52,7 @@ class Forwarder(Node):
         super().__init__(topics.NODE_NAMES[role], namespace=topics.DEFAULT_NAMESPACE, parameter_overrides=sim_time)
         self.role, self.steps, self.done = role, steps, False
         self.result: dict[str, Any] = {}
+        self.matched: set[str] = set()
         self.pubs = {s.name: self.create_publisher(interface.msg_class(s.type_name), s.name,
                                                    interface.qos_profile(s.qos, LEASE_S))
                      for s in topics.published(role, rta=True)}  # fmt: skip
@@ -93,6 +95,14 @@ class Forwarder(Node):
                                  interface.qos_profile(spec.qos, LEASE_S), raw=raw)
 
     def publish(self, topic: str, t_ns: int) -> None:
+        if topic not in self.matched:  # as the nodes' PublishGate: a volatile message sent before its reader
+            # matched is lost, and the lockstep chain would stall on it (found: a bench run hung at its start)
+            deadline = time.monotonic() + MATCH_TIMEOUT_S
+            while self.pubs[topic].get_subscription_count() < topics.expected_readers(topic, rta=True, record=True):
+                if time.monotonic() > deadline:
+                    raise SystemExit(f"forward chain: {topic} has no reader after {MATCH_TIMEOUT_S:g} s")
+                time.sleep(0.005)
+            self.matched.add(topic)
         self.pubs[topic].publish(_stamp(self.msgs[topic], t_ns) if topic in self.msgs else convert.clock_msg(t_ns))
 
     # plant

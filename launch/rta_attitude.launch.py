@@ -4,8 +4,9 @@
     ros2 launch rta_attitude rta_attitude.launch.py stepping:=realtime real_time_factor:=50.0
     ros2 launch rta_attitude rta_attitude.launch.py --show-args
 
-Starts plant_node, pd_controller_node, asif_filter_node (pass-through with rta:=false) and
-bag_recorder_node under `namespace`, all with the package's parameter file (`params_file`) and
+Starts plant_node, pd_controller_node, asif_filter_node (pass-through with rta:=false),
+bag_recorder_node and scene_node (the 3D view, off the control path; scene:=false leaves it out) under
+`namespace`, all with the package's parameter file (`params_file`) and
 use_sim_time (except the plant, which publishes /clock).
 
 Every argument is checked before any node starts (rta_attitude.ros.launch_file.validate): a bad one
@@ -41,7 +42,8 @@ def _nodes(context, *args, **kwargs):
     for key, value in (("ROS_DOMAIN_ID", str(a["domain_id"])), ("ROS_AUTOMATIC_DISCOVERY_RANGE", a["discovery_range"]),
                        ("ROS_STATIC_PEERS", "")):
         os.environ[key] = value  # inherited by every node started below
-    common = {"config_file": a["params_file"], "scenario": a["scenario"], "rta": a["rta"], "record": a["record"]}
+    common = {"config_file": a["params_file"], "scenario": a["scenario"], "rta": a["rta"], "record": a["record"],
+              "scene": a["scene"]}
 
     def node(executable: str, extra: dict, sim_time: bool = True) -> Node:
         return Node(package="rta_attitude", executable=executable, namespace=a["namespace"], output="screen",
@@ -52,6 +54,8 @@ def _nodes(context, *args, **kwargs):
     exe = topics.EXECUTABLES
     nodes = {exe[topics.FILTER]: node(exe[topics.FILTER], {}), exe[topics.CONTROLLER]: node(exe[topics.CONTROLLER], {}),
              exe[topics.PLANT]: node(exe[topics.PLANT], plant, sim_time=False)}
+    if a["scene"]:
+        nodes = {exe[topics.SCENE]: node(exe[topics.SCENE], {}, sim_time=False), **nodes}  # draws by the stamps
     if a["record"]:
         recorder = {"bag_path": a["bag"], "bag_overwrite": a["bag_overwrite"]}
         nodes = {exe[topics.RECORDER]: node(exe[topics.RECORDER], recorder), **nodes}  # readers first

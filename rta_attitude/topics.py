@@ -27,19 +27,21 @@ DEFAULT_NAMESPACE = "/rta"
 """Namespace the launch file and `rta-attitude launch` give every node (`namespace:=`, `--namespace`). A node
 takes its namespace from ROS only (`-r __ns:=/sat1`, the launch `namespace`; `/` when none is given)."""
 PACKAGE = "rta_attitude"
-PLANT, CONTROLLER, FILTER, RECORDER = "plant", "controller", "filter", "recorder"
+PLANT, CONTROLLER, FILTER, RECORDER, SCENE = "plant", "controller", "filter", "recorder", "scene"
 NODE_NAMES: dict[str, str] = {
     PLANT: "plant", CONTROLLER: "pd_controller", FILTER: "asif_filter", RECORDER: "bag_recorder",
+    SCENE: "attitude_scene",
 }  # fmt: skip
-"""ROS node name of each role."""
+"""ROS node name of each role. The scene is a view, off the control path: no node of the loop waits for it."""
 EXECUTABLES: dict[str, str] = {
     PLANT: "plant_node", CONTROLLER: "pd_controller_node", FILTER: "asif_filter_node",
-    RECORDER: "bag_recorder_node",
+    RECORDER: "bag_recorder_node", SCENE: "scene_node",
 }  # fmt: skip
 """Console scripts (`ros2 run rta_attitude <name>`) of each role."""
 MODULES: dict[str, str] = {
     PLANT: "rta_attitude.ros.plant_node", CONTROLLER: "rta_attitude.ros.controller_node",
     FILTER: "rta_attitude.ros.filter_node", RECORDER: "rta_attitude.ros.recorder_node",
+    SCENE: "rta_attitude.ros.scene_node",
 }  # fmt: skip
 """Python modules of each role (`python -m <module> --ros-args ...`)."""
 
@@ -75,6 +77,11 @@ filter covers a dead controller with `desired_timeout_s`)."""
 STATUS_QOS = QosSpec(durability="transient_local", history="keep_last", depth=10)
 """run_status: late joiners get the latest statuses."""
 COMMAND_QOS = QosSpec(history="keep_last", depth=10)
+VIEW_QOS = QosSpec(reliability="best_effort", history="keep_last", depth=1000)
+"""The scene node's readers of the loop's topics: best effort, keep last 1000. A view never holds back the loop:
+a writer does not wait for a best-effort reader's acknowledgements (reliable readers acknowledge the last
+samples of a burst only at the writer's next periodic heartbeat, seconds later), and a view that falls more
+than 1000 states behind, or loses a sample under load, skips states (its counters say how many it drew)."""
 DIAGNOSTICS = "/diagnostics"
 """The standard status topic (rqt_robot_monitor, the diagnostic aggregator); `ros.diagnostics` publishes a
 node's summary there at ~1 Hz, outside the loop (no run node waits for its readers)."""
@@ -121,6 +128,8 @@ TEMPERATURE = "temperature"
 BATTERY = "battery"
 SUN_VECTOR = "sun_vector"
 RUN_STATUS = "run_status"
+SCENE_TRANSFORM = "scene/transform"
+SCENE_MARKERS = "scene/markers"
 
 _ALL = ((RECORDER, False, False),)
 TOPICS: dict[str, TopicSpec] = {
@@ -129,7 +138,7 @@ TOPICS: dict[str, TopicSpec] = {
         TopicSpec(CLOCK, "rosgraph_msgs/msg/Clock", STREAM_QOS, PLANT, _ALL,
                   "simulation time t_k, one per step (nodes run with use_sim_time)"),
         TopicSpec(STATE, "sensor_msgs/msg/JointState", STATE_QOS, PLANT,
-                  ((CONTROLLER, False, False), (FILTER, True, False), *_ALL),
+                  ((CONTROLLER, False, False), (FILTER, True, False), (SCENE, False, False), *_ALL),
                   "the whole state: name = STATE_NAMES, position = values (model units), stamp = t_k; "
                   "as measured (sensors: on, docs/noise.md)"),
         TopicSpec(STATE_TRUE, "sensor_msgs/msg/JointState", STREAM_QOS, PLANT, _ALL,
@@ -143,7 +152,8 @@ TOPICS: dict[str, TopicSpec] = {
         TopicSpec(TORQUE_CMD, "geometry_msgs/msg/Vector3Stamped", STREAM_QOS, FILTER,
                   ((PLANT, False, False), *_ALL),
                   "filtered body torque D u_act [N m] (without RTA: torque_des passed through), same stamp"),
-        TopicSpec(FILTER_STATUS, "diagnostic_msgs/msg/DiagnosticArray", STREAM_QOS, FILTER, _ALL,
+        TopicSpec(FILTER_STATUS, "diagnostic_msgs/msg/DiagnosticArray", STREAM_QOS, FILTER,
+                  ((SCENE, True, False), *_ALL),
                   "per constraint h, Psi, BC, slack, intervening; QP status, fallback, solve time"),
         TopicSpec(TORQUE_APPLIED, "geometry_msgs/msg/Vector3Stamped", STREAM_QOS, PLANT, _ALL,
                   "torque the plant held over [t_k, t_k + dt) before saturation (ZOH, deadline fallback)"),
@@ -157,6 +167,11 @@ TOPICS: dict[str, TopicSpec] = {
                   "inspection: unit vector to the sun, frame hill"),
         TopicSpec(RUN_STATUS, "diagnostic_msgs/msg/DiagnosticArray", STATUS_QOS, PLANT, _ALL,
                   "run state (running, done, failed), step counts, deadline misses, expected counts"),
+        TopicSpec(SCENE_TRANSFORM, "geometry_msgs/msg/TransformStamped", STREAM_QOS, SCENE, _ALL,
+                  "view (scene node): the attitude as a transform hill -> body (3D panels read it as tf)"),
+        TopicSpec(SCENE_MARKERS, "visualization_msgs/msg/MarkerArray", STREAM_QOS, SCENE, _ALL,
+                  "view (scene node), frame hill: body and axes, sensor boresight and field of view, sun and "
+                  "keep-out cone, antenna, Earth and communication cone, panel normal, filter state text"),
     )
 }  # fmt: skip
 """Every topic of a run, by (relative) name."""
@@ -167,10 +182,12 @@ PER_STEP_ANSWERS: tuple[str, ...] = (TORQUE_DES, TORQUE_CMD, FILTER_STATUS)
 waits for them at the end while their writers are there)."""
 TRUTH_TOPICS: tuple[str, ...] = (STATE_TRUE,)
 """Topics of a run with sensor errors only (`truth`): the true state beside the measured one."""
+SCENE_TOPICS: tuple[str, ...] = (SCENE_TRANSFORM, SCENE_MARKERS)
+"""Topics of a run with a scene node (`scene`); one message each per drawn state, off the control path."""
 
 
-def _in_run(name: str, truth: bool) -> bool:
-    return truth or name not in TRUTH_TOPICS
+def _in_run(name: str, truth: bool, scene: bool = False) -> bool:
+    return (truth or name not in TRUTH_TOPICS) and (scene or name not in SCENE_TOPICS)
 
 
 
@@ -189,27 +206,31 @@ def published(role: str, rta: bool, truth: bool = False) -> list[TopicSpec]:
     """Topics a role publishes (filter_status only with RTA: without, the filter passes through;
     TRUTH_TOPICS only with sensor errors, `truth`)."""
     return [t for t in TOPICS.values()
-            if t.publisher == role and (rta or t.name != FILTER_STATUS) and _in_run(t.name, truth)]
+            if t.publisher == role and (rta or t.name != FILTER_STATUS) and _in_run(t.name, truth, role == SCENE)]
 
 
-def recorded(rta: bool, truth: bool = False) -> list[TopicSpec]:
+def recorded(rta: bool, truth: bool = False, scene: bool = False) -> list[TopicSpec]:
     """Topics the recorder writes to the bag: all of the run's (filter_status only with RTA,
-    TRUTH_TOPICS only with sensor errors)."""
-    return [t for t in subscribed(RECORDER, rta) if (rta or t.name != FILTER_STATUS) and _in_run(t.name, truth)]
+    TRUTH_TOPICS only with sensor errors, SCENE_TOPICS only with a scene node)."""
+    return [t for t in subscribed(RECORDER, rta)
+            if (rta or t.name != FILTER_STATUS) and _in_run(t.name, truth, scene)]
 
 
-def reader_roles(topic: str, rta: bool, record: bool, truth: bool = False) -> list[str]:
-    """The roles of the run's own nodes that subscribe to `topic`."""
-    if not _in_run(topic, truth):
+def reader_roles(topic: str, rta: bool, record: bool, truth: bool = False, scene: bool = False) -> list[str]:
+    """The roles of the run's own nodes that subscribe to `topic` (`scene`: a scene node takes part; its
+    best-effort readers of `state` and `filter_status` are waited for at start-up like any reader, so the
+    view misses no state, but they never hold a writer back during the run)."""
+    if not _in_run(topic, truth, scene):
         return []
     return [who for who, only_rta, only_plain in TOPICS[topic].readers
-            if not ((only_rta and not rta) or (only_plain and rta) or (who == RECORDER and not record))]
+            if not ((only_rta and not rta) or (only_plain and rta) or (who == RECORDER and not record)
+                    or (who == SCENE and not scene))]
 
 
-def expected_readers(topic: str, rta: bool, record: bool, truth: bool = False) -> int:
+def expected_readers(topic: str, rta: bool, record: bool, truth: bool = False, scene: bool = False) -> int:
     """How many of the run's own nodes subscribe to `topic`; a writer waits for this many matches
     before its first message (tools such as `ros2 topic echo` only add readers)."""
-    return len(reader_roles(topic, rta, record, truth))
+    return len(reader_roles(topic, rta, record, truth, scene))
 
 
 # ----------------------------------------------------------------------------- diagnostics
@@ -321,7 +342,7 @@ class Knob:
         return f"{kind} {low}" + (f" and < {self.maximum:g}" if self.maximum is not None else "")
 
 
-_EVERY = (PLANT, CONTROLLER, FILTER, RECORDER)
+_EVERY = (PLANT, CONTROLLER, FILTER, RECORDER, SCENE)
 KNOBS: tuple[Knob, ...] = (
     Knob("config_file", "", _EVERY, "parameter file the nodes read their defaults from ('' = installed one)"),
     Knob("scenario", "paper_example", _EVERY, "scenario name from the parameter file"),
@@ -366,6 +387,11 @@ KNOBS: tuple[Knob, ...] = (
          minimum=1),
     Knob("drain_timeout_s", 10.0, (RECORDER,), "after run_status done: longest wait for the last messages [s]"),
     Knob("drain_quiet_s", 0.3, (RECORDER,), "after done, topics without a known count: close after this quiet [s]"),
+    Knob("scene", False, _EVERY, "a scene_node takes part (the launch sets it with scene:=true): the plant and the "
+         "filter wait for its readers at start-up, the recorder records its topics"),
+    Knob("scene_every", 1, (SCENE,), "draw every n-th state (the steps k with k % n == 0)", minimum=1),
+    Knob("scene_warn_deg", 5.0, (SCENE,), "a pointing margin below this is drawn as a warning (orange) [deg]",
+         positive=True, maximum=180.0),
 )  # fmt: skip
 """Node-only parameters; every other parameter comes from the core YAML."""
 SYSTEM_PARAMETERS: tuple[str, ...] = ("use_sim_time", "start_type_description_service")
@@ -379,6 +405,7 @@ CONFIG_SECTIONS: dict[str, tuple[str, ...]] = {
     FILTER: ("spacecraft", "environment", "thermal", "power", "limits", "constraints", "filter", "integrator",
              "sensors"),
     RECORDER: ("filter.preset", "filter.sample_time_s"),
+    SCENE: ("limits", "filter.sample_time_s"),
 }  # fmt: skip
 """The core parameters (sections, or single dotted names) each role uses and declares as ROS parameters,
 besides its own scenario's (`scenarios.<scenario>.*`). The node's configuration is still built from the
@@ -409,7 +436,8 @@ __all__ = [
     "NODE_NAMES", "NO_FALLBACK", "ODOMETRY", "PACKAGE", "PER_STEP_ANSWERS", "PLANT", "PLANT_COUNTERS", "QP_KEYS",
     "QP_STATUS_NAME",
     "RECORDER", "RUN_DONE", "RUN_FAILED", "RUN_INTERRUPTED", "RUN_RUNNING", "RUN_STATUS",
-    "RUN_STATUS_NAME", "STATE", "STATE_QOS", "STATE_TRUE", "TRUTH_TOPICS",
+    "RUN_STATUS_NAME", "SCENE", "SCENE_MARKERS", "SCENE_TOPICS", "SCENE_TRANSFORM", "STATE", "STATE_QOS",
+    "STATE_TRUE", "TRUTH_TOPICS", "VIEW_QOS",
     "STATUS_HARDWARE_ID", "STATUS_QOS", "STREAM_QOS", "SUN_VECTOR",
     "SYSTEM_PARAMETERS",
     "TEMPERATURE", "TOPICS", "TORQUE_APPLIED", "TORQUE_CMD", "TORQUE_DES", "Knob", "QosSpec", "TopicSpec",

@@ -13,7 +13,7 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGE_FILES = ("setup.py", "setup.cfg", "package.xml", "resource", "config", "launch", "rta_attitude")
-EXECUTABLES = ("plant_node", "pd_controller_node", "asif_filter_node", "bag_recorder_node")
+EXECUTABLES = ("plant_node", "pd_controller_node", "asif_filter_node", "bag_recorder_node", "scene_node")
 
 
 @pytest.fixture(scope="module")

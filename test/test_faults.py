@@ -497,7 +497,7 @@ def test_clock_jumping_back_resets_the_stamp_screens_once(tmp_path: Path) -> Non
     screens and answer the second pass's states (same stamps as the first) as new."""
     parser = argparse.ArgumentParser()
     launch.add_arguments(parser)
-    plan = launcher.plan(parser.parse_args(["--bag", str(tmp_path / "unused.mcap"), "-p", "record=false",
+    plan = launcher.plan(parser.parse_args(["--bag", str(tmp_path / "unused.mcap"), "--no-scene", "-p", "record=false",
                                             "-p", "stop_timeout_s=1.0"]))
     env = {**os.environ, **plan.env, "PYTHONUNBUFFERED": "1", "RCUTILS_COLORIZED_OUTPUT": "0"}
     logs = {role: tmp_path / f"{role}.log" for role in (topics.CONTROLLER, topics.FILTER)}

@@ -45,8 +45,8 @@ DEADLINE_S = 60.0
 RUN_TOPICS: dict[str, str] = {
     (n if n.startswith("/") else f"{topics.DEFAULT_NAMESPACE}/{n}"): spec.type_name
     for n, spec in topics.TOPICS.items()
-}
-"""Every topic a run publishes (default namespace) -> its type."""
+} | {topics.DIAGNOSTICS: "diagnostic_msgs/msg/DiagnosticArray"}
+"""Every topic a run publishes (default namespace) -> its type, and /diagnostics (every node's summary)."""
 
 
 # ----------------------------------------------------------------------------- a Foxglove client (stdlib only)

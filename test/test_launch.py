@@ -54,9 +54,10 @@ def _check_clean(summary: dict[str, Any], bag: Path) -> None:
     assert run["problems"] == []
     assert run["shm_clean"] is True
     assert set(run["exit_codes"].values()) == {0}
-    # the plant and the recorder exit on their own; controller and filter stop at the first SIGINT
-    assert run["signals"] == {topics.EXECUTABLES[topics.CONTROLLER]: ["SIGINT"],
-                              topics.EXECUTABLES[topics.FILTER]: ["SIGINT"]}
+    # the plant and the recorder exit on their own; controller, filter and the scene stop at the first SIGINT
+    stopped = (topics.CONTROLLER, topics.FILTER, topics.SCENE)
+    assert run["signals"] == {topics.EXECUTABLES[r]: ["SIGINT"] for r in stopped
+                              if topics.EXECUTABLES[r] in run["exit_codes"]}
     assert _survivors(str(bag)) == []
 
 

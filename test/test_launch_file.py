@@ -133,4 +133,4 @@ def test_the_launch_file_declares_every_argument_and_uses_this_logic() -> None:
     node_calls = [n for n in ast.walk(tree) if isinstance(n, ast.Call) and getattr(n.func, "id", "") == "Node"]
     assert all("sigterm_timeout" in {k.arg for k in n.keywords} for n in node_calls)  # no SIGTERM race on Ctrl-C
     assert "is_shutdown" in LAUNCH_FILE.read_text()  # exits after a user's shutdown are not failures
-    assert len(ARGUMENTS) == len({a.name for a in ARGUMENTS}) == 11
+    assert len(ARGUMENTS) == len({a.name for a in ARGUMENTS}) == 12

@@ -321,8 +321,17 @@ def test_wiring_counts_every_reader_of_the_run() -> None:
     assert topics.expected_readers(topics.TORQUE_DES, rta=False, record=False) == 1
     assert topics.expected_readers(topics.TORQUE_CMD, rta=True, record=True) == 2
     assert topics.expected_readers(topics.CLOCK, rta=True, record=False) == 0
-    assert {t.name for t in topics.recorded(False)} == set(topics.TOPICS) - {topics.FILTER_STATUS, topics.STATE_TRUE}
-    assert {t.name for t in topics.recorded(True, truth=True)} == set(topics.TOPICS)
+    scene = set(topics.SCENE_TOPICS)
+    assert {t.name for t in topics.recorded(False)} == \
+        set(topics.TOPICS) - {topics.FILTER_STATUS, topics.STATE_TRUE} - scene
+    assert {t.name for t in topics.recorded(True, truth=True)} == set(topics.TOPICS) - scene
+    assert {t.name for t in topics.recorded(True, truth=True, scene=True)} == set(topics.TOPICS)
+    # a scene node is waited for at start-up on what it reads (state, filter_status with RTA); it waits for the recorder
+    assert topics.expected_readers(topics.STATE, rta=True, record=True, scene=True) == 4
+    assert topics.expected_readers(topics.FILTER_STATUS, rta=True, record=True, scene=True) == 2
+    assert topics.expected_readers(topics.FILTER_STATUS, rta=True, record=True) == 1
+    assert topics.expected_readers(topics.SCENE_MARKERS, rta=False, record=True, scene=True) == 1
+    assert topics.expected_readers(topics.SCENE_MARKERS, rta=False, record=False, scene=True) == 0
     assert topics.expected_readers(topics.STATE_TRUE, rta=True, record=True) == 0
     assert topics.expected_readers(topics.STATE_TRUE, rta=True, record=True, truth=True) == 1
 

@@ -22,6 +22,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Arguments of `rta-attitude launch`."""
     parser.add_argument("--scenario", default="paper-example", help="scenario in the parameter file")
     parser.add_argument("--no-rta", action="store_true", help="filter node passes torque_des through (no RTA)")
+    parser.add_argument("--no-scene", action="store_true",
+                        help="leave out the scene node (the 3D view topics scene/transform and scene/markers)")
     parser.add_argument("--preset", choices=PRESETS, default=None, help="filter preset (default: the config's)")
     parser.add_argument("--realtime", type=float, default=None, metavar="RTF",
                         help="real-time stepping at this real-time factor (default: lockstep)")
@@ -122,7 +124,8 @@ def _report(args: argparse.Namespace, p: Plan, out: Path | None, log_dir: Path |
         if isinstance(lat, float) else ""
     loop = run_values.get("wall_time_s")
     loop_text = f"loop {loop:.1f} s" if isinstance(loop, float) else "loop ?"
-    print(f"DDS run, 4 processes: {loop_text} for {p.steps} steps ({facts['run_s']:.1f} s with start-up and "
+    print(f"DDS run, {len(p.commands)} processes: {loop_text} for {p.steps} steps ({facts['run_s']:.1f} s with "
+          "start-up and "
           f"shutdown){extra}; deadline misses {run_values.get('deadline_misses', 0)}; re-integration residual "
           f"{bag_run.reintegration_residual:.2g}")
     counters = {k: run_values[k] for k in topics.PLANT_COUNTERS if k != "commands" and run_values.get(k)}

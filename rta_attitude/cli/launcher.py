@@ -65,7 +65,8 @@ STOP_TIMEOUT_S = 10.0
 POLL_S = 0.05
 SHM_SCAN_S = 0.5
 """How often the launcher notes which /dev/shm files its children use [s]."""
-START_ORDER = (topics.RECORDER, topics.FILTER, topics.CONTROLLER, topics.PLANT)
+START_ORDER = (topics.RECORDER, topics.SCENE, topics.FILTER, topics.CONTROLLER, topics.PLANT)
+"""Readers first; a plan without the scene (`--no-scene`) leaves it out."""
 DEFAULT_DOMAIN_ID = 0
 """ROS_DOMAIN_ID of the nodes when neither --domain-id nor $ROS_DOMAIN_ID says otherwise."""
 DOMAIN_ID_RANGE = (0, 232)
@@ -174,7 +175,7 @@ def plan(args: argparse.Namespace) -> Plan:
     rta = not args.no_rta
     base = ["--ros-args", "--params-file", str(path), "-r", f"__ns:={args.namespace}",
             "-p", f"config_file:={path}", "-p", f"scenario:={key}", "-p", f"rta:={_ros_value(rta)}",
-            "-p", "record:=true"]  # fmt: skip
+            "-p", "record:=true", "-p", f"scene:={_ros_value(not args.no_scene)}"]  # fmt: skip
     for name, value in core.items():
         base += ["-p", f"{name}:={_ros_value(value)}"]
     per_role: dict[str, dict[str, Any]] = {
@@ -183,10 +184,13 @@ def plan(args: argparse.Namespace) -> Plan:
         topics.CONTROLLER: {"use_sim_time": True},
         topics.FILTER: {"use_sim_time": True},
         topics.RECORDER: {"use_sim_time": True, "bag_path": str(bag), "bag_overwrite": bool(args.overwrite)},
+        topics.SCENE: {"use_sim_time": False},  # it draws by the stamps: no /clock reader, a message a step less
     }  # fmt: skip
     env = _environment(args)
     commands = {}
     for role in START_ORDER:
+        if role == topics.SCENE and args.no_scene:
+            continue
         extra = dict(per_role[role])
         extra.update({k: v for k, v in knobs.items() if any(k == kn.name for kn in topics.knobs_for(role))})
         cmd = [sys.executable, "-m", topics.MODULES[role], *base]
@@ -368,7 +372,7 @@ def launch(p: Plan, log_dir: Path | None) -> tuple[list[str], dict[str, Any]]:
     t0 = time.monotonic()
     facts: dict[str, Any] = {}
     try:
-        for role in START_ORDER:
+        for role in p.commands:  # START_ORDER
             children.append(_start(role, p.commands[role], log_dir, env))
         by_role = {c.role: c for c in children}
         plant, recorder = by_role[topics.PLANT], by_role[topics.RECORDER]

@@ -17,18 +17,18 @@ by its margin: green (ok), orange (within `warn_rad` of its limit), red (violate
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from rta_attitude.config.schema import Config
 from rta_attitude.constraints import ConstraintSet, battery, communication, exclusion_zone
 from rta_attitude.dynamics import quaternion as quat
 from rta_attitude.dynamics.spacecraft import EARTH_HILL
-from rta_attitude.dynamics.state import THETA_S, Q
+from rta_attitude.dynamics.state import STATE_SIZE, THETA_S, Q
 from rta_attitude.errors import RtaError
 from rta_attitude.files import atomic
 from rta_attitude.recording.plots import _pyplot
@@ -87,20 +87,28 @@ class Scene:
         return self.comm_rad - self.antenna_earth_rad
 
 
-def scene(run: SkyRun, cfg: Config) -> Scene:
-    """The run's attitude scene (no matplotlib)."""
-    t = np.asarray(run.t_s, dtype=float)
-    x = np.asarray(run.x, dtype=float)
+def scene(run: SkyRun, cfg: Config, constraints: ConstraintSet | None = None) -> Scene:
+    """The run's attitude scene (no matplotlib); `constraints`: a ConstraintSet of cfg made once by a caller
+    that draws many runs or samples."""
+    sc = scene_of_states(run.t_s, run.x, cfg, constraints)
+    inter = np.zeros(len(sc.t_s), dtype=bool)
+    inter[: len(run.u)] = intervened_steps(run)
+    return replace(sc, intervened=inter)
+
+
+def scene_of_states(t_s: ArrayLike, x: ArrayLike, cfg: Config, constraints: ConstraintSet | None = None) -> Scene:
+    """The scene of states x (N, 19) at times t_s (N,), without commands (`intervened` all False): what
+    the scene node draws at each state it receives."""
+    t = np.asarray(t_s, dtype=float).reshape(-1)
+    x = np.asarray(x, dtype=float).reshape(-1, STATE_SIZE)
     A = quat.attitude_matrices(x[:, Q])
     sun = sun_frames(x[:, THETA_S])[:, 2]  # the map frames' pole: r_S
-    inter = np.zeros(len(t), dtype=bool)
-    inter[: len(run.u)] = intervened_steps(run)
-    angles = ConstraintSet(cfg).angles(x)
+    angles = (constraints or ConstraintSet(cfg)).angles(x)
     return Scene(t_s=t, body_axes=A, sensor=body_axis_in_hill(A, exclusion_zone.AXIS_BODY),
                  antenna=body_axis_in_hill(A, communication.AXIS_BODY), panel=body_axis_in_hill(A, battery.AXIS_BODY),
                  sun=sun, earth=np.array(EARTH_HILL, dtype=float), sensor_sun_rad=angles["sensor_sun"],
                  antenna_earth_rad=angles["antenna_earth"], keep_out_rad=cfg.limits.exclusion_angle_rad,
-                 comm_rad=cfg.limits.comm_angle_rad, intervened=inter)
+                 comm_rad=cfg.limits.comm_angle_rad, intervened=np.zeros(len(t), dtype=bool))
 
 
 def margin_level(margin_rad: Array | float, warn_rad: float = WARN_RAD) -> NDArray[np.int_]:

@@ -9,7 +9,8 @@ Floats in DiagnosticStatus values are written with `repr`, which round-trips flo
 
 One module because each message the run reads back has its builder and its parser side by side
 (state, torques, filter_status, run_status), so a layout and the code that reads it change together;
-it is also the one module that imports the message packages directly.
+it is also the one module that imports the message packages directly (the scene's messages too:
+`SceneBuilder`).
 """
 
 from __future__ import annotations
@@ -22,11 +23,13 @@ from typing import Any
 import numpy as np
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from geometry_msgs.msg import Vector3Stamped
+from geometry_msgs.msg import Point, TransformStamped, Vector3Stamped
 from nav_msgs.msg import Odometry
 from numpy.typing import NDArray
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import BatteryState, JointState, Temperature
+from std_msgs.msg import ColorRGBA
+from visualization_msgs.msg import Marker, MarkerArray
 
 from rta_attitude import topics
 from rta_attitude.config.loader import CELSIUS_OFFSET_K
@@ -35,6 +38,7 @@ from rta_attitude.dynamics import spacecraft
 from rta_attitude.dynamics.state import AXES, CW, ENERGY, OMEGA, STATE_NAMES, STATE_SIZE, TEMP, THETA_S, Q
 from rta_attitude.errors import MessageError
 from rta_attitude.filter.asif import FilterCounters, FilterResult
+from rta_attitude.recording.scene import Scene, margin_level
 
 Array = NDArray[np.float64]
 NS_PER_S = 1_000_000_000
@@ -67,15 +71,21 @@ def stamp_ns(stamp_msg: Any) -> int:
     return sec * NS_PER_S + nanosec
 
 
-def cdr_stamp_ns(data: bytes) -> int:
+def cdr_stamp_ns(data: bytes, offset: int = 0) -> int:
     """The leading builtin_interfaces/Time of a serialized message (a Header's stamp, or Clock.clock)
-    read straight from the CDR bytes: 4-byte encapsulation header, then int32 sec, uint32 nanosec."""
-    if len(data) < 12 or data[0] != 0 or data[1] not in (0, 1):
+    read straight from the CDR bytes: 4-byte encapsulation header, then int32 sec, uint32 nanosec;
+    `offset` bytes after the encapsulation header (STAMP_OFFSETS: a MarkerArray's first marker)."""
+    if len(data) < 12 + offset or data[0] != 0 or data[1] not in (0, 1):
         raise MessageError(f"not a CDR message with a leading stamp ({len(data)} bytes)")
-    sec, nanosec = struct.unpack("<iI" if data[1] == 1 else ">iI", data[4:12])
+    sec, nanosec = struct.unpack("<iI" if data[1] == 1 else ">iI", data[4 + offset:12 + offset])
     if sec < 0 or nanosec >= NS_PER_S:
         raise MessageError(f"stamp {sec}.{nanosec:09d} is not a time >= 0")
     return sec * NS_PER_S + nanosec
+
+
+STAMP_OFFSETS: dict[str, int] = {"visualization_msgs/msg/MarkerArray": 4}
+"""Where a type without a leading header keeps its stamp, for `cdr_stamp_ns`: a MarkerArray starts with
+its uint32 marker count, then the first marker's header (the scene node stamps every marker alike)."""
 
 
 # ----------------------------------------------------------------------------- state
@@ -395,8 +405,206 @@ def run_status_from_msg(msg: Any) -> tuple[str, dict[str, Any]]:
     return str(values.pop("_message")), values
 
 
+# ----------------------------------------------------------------------------- scene (a view)
+
+SCENE_NS = "rta_attitude"
+"""Marker namespace of the scene; markers are replaced by (namespace, id) at every message."""
+SCENE_IDS: dict[str, int] = {
+    "body": 0, "axis_x": 1, "axis_y": 2, "axis_z": 3, "sensor": 4, "sensor_fov": 5, "sun": 6, "keep_out": 7,
+    "antenna": 8, "earth": 9, "comm": 10, "panel": 11, "text": 12,
+}  # fmt: skip
+"""Marker id of each part of the scene (tests and viewers find a part by its id)."""
+SCENE_LENGTHS: dict[str, float] = {
+    "axis": 0.8, "sensor": 1.6, "antenna": 1.6, "panel": 1.2, "sun": 2.4, "earth": 2.4, "sensor_fov": 1.2,
+    "keep_out": 2.0, "comm": 2.0,
+}  # fmt: skip
+"""Drawn lengths in scene units (directions matter, lengths do not; the body box is not to scale)."""
+BODY_BOX = (0.5, 0.35, 0.2)
+CONE_GENERATORS = 8
+CONE_RIM_POINTS = 24
+LEVEL_RGBA = ((0.2, 0.8, 0.2, 1.0), (1.0, 0.6, 0.0, 1.0), (0.9, 0.1, 0.1, 1.0))
+"""Colour of a margin level (recording.scene.margin_level): ok, within the warning band, violated."""
+
+
+def cone_points(half_angle_rad: float, length: float) -> Array:
+    """A cone about +x as LINE_LIST vertices (2 (generators + rim points), 3): CONE_GENERATORS segments
+    from the apex, then the rim as CONE_RIM_POINTS segments; every far end lies at half_angle_rad from
+    +x, `length` from the apex."""
+    phi = np.linspace(0.0, 2.0 * np.pi, CONE_RIM_POINTS + 1)
+    rim = length * np.stack([np.full_like(phi, math.cos(half_angle_rad)), math.sin(half_angle_rad) * np.cos(phi),
+                             math.sin(half_angle_rad) * np.sin(phi)], axis=1)
+    gen = rim[np.linspace(0, CONE_RIM_POINTS, CONE_GENERATORS, endpoint=False).astype(int)]
+    apex = np.zeros_like(gen)
+    return np.concatenate([np.stack([apex, gen], axis=1).reshape(-1, 3),
+                           np.stack([rim[:-1], rim[1:]], axis=1).reshape(-1, 3)])
+
+
+def x_to(d: Array) -> Array:
+    """The unit quaternion (x y z w) of the shortest rotation that takes +x to the unit vector d (the pose
+    of a cone drawn about +x): vector part +x cross d = (0, -d_z, d_y), scalar part 1 + d_x, normalised;
+    a half turn about z for d = -x. Plain floats: the scene node calls it twice a step."""
+    dx, dy, dz = float(d[0]), float(d[1]), float(d[2])
+    w = 1.0 + dx
+    n = math.sqrt(w * w + dy * dy + dz * dz)
+    if n < 1e-12:
+        return np.array([0.0, 0.0, 1.0, 0.0])
+    return np.array([0.0, -dz / n, dy / n, w / n])
+
+
+def _set_quaternion(o: Any, q: Array) -> None:
+    o.x, o.y, o.z, o.w = (float(c) for c in q)
+
+
+class SceneBuilder:
+    """The scene's two messages for one state, serialized: a geometry_msgs/TransformStamped hill -> body
+    (rotation = q: it maps body vectors to Hill, A(q)^T) and a visualization_msgs/MarkerArray in the hill
+    frame (SCENE_IDS): the body box (pose q) and its axes, the sensor boresight +i_B and its field of view
+    (half-angle FOV/2), the sun and the keep-out cone (FOV/2 + beta), the antenna +j_B, the Earth and the
+    communication cone (comm_fov/2), the panel normal +k_B and a text (TEXT_BYTES, padded with spaces).
+    Arrows are two points (tail at the origin, head along the direction); cones are LINE_LISTs about +x
+    (`cone_points`) posed by `x_to` their axis. The sensor and its field of view are coloured by the
+    exclusion-zone margin, the antenna by the communication margin (LEVEL_RGBA).
+
+    Speed: the scene node may draw every step of the lockstep loop, and building and serializing ~13
+    markers with ~200 points through rclpy took ~0.4 ms a step. So both messages are built once as
+    message objects, serialized by rclpy into templates, and each `build` writes only what changes (stamps,
+    arrow heads, poses, colours, the text, all fixed-size) into the templates' bytes at offsets found once
+    by serializing marker values; a test decodes the result with rosbags.
+
+    Args:
+        sensor_fov_rad: the sensor's full field of view (limits.exclusion_fov_rad).
+        keep_out_rad, comm_rad: FOV/2 + beta and comm_fov/2.
+        warn_rad: margins below this are drawn as warnings.
+    """
+
+    TEXT_BYTES = 240
+    """The text marker's length in bytes (ASCII; longer texts are cut)."""
+
+    def __init__(self, sensor_fov_rad: float, keep_out_rad: float, comm_rad: float, warn_rad: float) -> None:
+        from rclpy.serialization import serialize_message  # here: this module is read without rclpy (bags)
+
+        self.warn_rad = warn_rad
+        transform = TransformStamped()
+        transform.header.frame_id = topics.HILL_FRAME
+        transform.child_frame_id = topics.BODY_FRAME
+        m: dict[str, Marker] = {}
+        L = SCENE_LENGTHS
+        grey, axis_rgba = (0.6, 0.6, 0.6, 1.0), ((0.9, 0.2, 0.2, 1.0), (0.2, 0.8, 0.2, 1.0), (0.3, 0.5, 1.0, 1.0))
+
+        def shape(name: str, kind: int, scale: tuple[float, float, float], rgba: tuple[float, ...]) -> Marker:
+            mk = Marker()
+            mk.header.frame_id = topics.HILL_FRAME
+            mk.ns, mk.id, mk.action, mk.type = SCENE_NS, SCENE_IDS[name], Marker.ADD, kind
+            mk.pose.orientation.w = 1.0
+            mk.scale.x, mk.scale.y, mk.scale.z = scale
+            mk.color = ColorRGBA(r=rgba[0], g=rgba[1], b=rgba[2], a=rgba[3])
+            m[name] = mk
+            return mk
+
+        def arrow(name: str, rgba: tuple[float, ...], shaft: float) -> None:
+            shape(name, Marker.ARROW, (shaft, 2.0 * shaft, 3.0 * shaft), rgba).points = [Point(), Point(x=1.0)]
+
+        shape("body", Marker.CUBE, BODY_BOX, (0.75, 0.75, 0.8, 0.9))
+        for i, a in enumerate("xyz"):
+            arrow(f"axis_{a}", axis_rgba[i], 0.03)
+        arrow("sensor", LEVEL_RGBA[0], 0.05)
+        for name, half, rgba in (("sensor_fov", sensor_fov_rad / 2, LEVEL_RGBA[0]),
+                                 ("keep_out", keep_out_rad, (1.0, 0.3, 0.1, 0.8)),
+                                 ("comm", comm_rad, (0.3, 0.55, 1.0, 0.8))):
+            shape(name, Marker.LINE_LIST, (0.01, 0.0, 0.0), rgba).points = [
+                Point(x=float(p[0]), y=float(p[1]), z=float(p[2])) for p in cone_points(half, L[name])]
+        arrow("sun", (1.0, 0.85, 0.1, 1.0), 0.06)
+        arrow("antenna", LEVEL_RGBA[0], 0.05)
+        arrow("earth", (0.2, 0.45, 1.0, 1.0), 0.06)
+        arrow("panel", grey, 0.04)
+        shape("text", Marker.TEXT_VIEW_FACING, (0.0, 0.0, 0.15), (1.0, 1.0, 1.0, 1.0)).pose.position.z = 2.8
+        _set_quaternion(m["comm"].pose.orientation, x_to(np.array(spacecraft.EARTH_HILL)))
+        markers = MarkerArray(markers=sorted(m.values(), key=lambda mk: mk.id))
+        # sentinels: values that occur nowhere else in the serialized messages, one per field written later
+        sentinel = iter(range(1, 1_000_000))
+
+        def mark(obj: Any, fields: str) -> tuple[float, ...]:
+            vals = tuple(1.0e300 / (7 + next(sentinel)) for _ in fields)  # float64 values no real field holds
+            for f, v in zip(fields, vals, strict=True):
+                setattr(obj, f, v)
+            return vals
+
+        stamps, rgba_marks, text = [], {}, b"\x01" * self.TEXT_BYTES
+        for i, mk in enumerate(markers.markers):
+            mk.header.stamp = Time(sec=0x5CE70000 + i, nanosec=0x0A0B0C00 + i)
+            stamps.append(struct.pack("<iI", mk.header.stamp.sec, mk.header.stamp.nanosec))
+        transform.header.stamp = Time(sec=0x5CE7FFFF, nanosec=0x0A0B0CFF)
+        heads = {name: mark(m[name].points[1], "xyz") for name in
+                 ("axis_x", "axis_y", "axis_z", "sensor", "antenna", "panel", "sun", "earth")}
+        poses = {name: mark(m[name].pose.orientation, "xyzw") for name in ("body", "sensor_fov", "keep_out")}
+        rotation = mark(transform.transform.rotation, "xyzw")
+        for name, code in (("sensor", 0.125), ("sensor_fov", 0.375), ("antenna", 0.625), ("text", 0.875)):
+            c = m[name].color
+            c.r, c.g, c.b, c.a = code, code + 1 / 64, code + 2 / 64, code + 3 / 64  # exact in float32
+            rgba_marks[name] = struct.pack("<4f", c.r, c.g, c.b, c.a)
+        m["text"].text = text.decode()
+        self._tf = bytearray(serialize_message(transform))
+        self._mk = bytearray(serialize_message(markers))
+        if self._tf[:2] != b"\x00\x01" or self._mk[:2] != b"\x00\x01":
+            raise RuntimeError("scene templates: expected little-endian CDR")
+
+        def at(buf: bytearray, pattern: bytes) -> int:
+            i = buf.find(pattern)
+            if i < 0 or buf.find(pattern, i + 1) >= 0:
+                raise RuntimeError("scene templates: a field was not found exactly once")
+            return i
+
+        d8 = struct.Struct("<d")
+        self._mk_stamps = [at(self._mk, p) for p in stamps]
+        self._tf_stamp = at(self._tf, struct.pack("<iI", transform.header.stamp.sec, transform.header.stamp.nanosec))
+        self._tf_rotation = at(self._tf, b"".join(d8.pack(v) for v in rotation))
+        self._heads = {n: at(self._mk, b"".join(d8.pack(v) for v in vals)) for n, vals in heads.items()}
+        self._poses = {n: at(self._mk, b"".join(d8.pack(v) for v in vals)) for n, vals in poses.items()}
+        self._colors = {n: at(self._mk, p) for n, p in rgba_marks.items()}
+        self._text = at(self._mk, text)
+        self._initial_colors = {"sensor": LEVEL_RGBA[0], "sensor_fov": LEVEL_RGBA[0], "antenna": LEVEL_RGBA[0],
+                                "text": (1.0, 1.0, 1.0, 1.0)}
+        for name, rgba in self._initial_colors.items():
+            struct.pack_into("<4f", self._mk, self._colors[name], *rgba)
+
+    def _level_rgba(self, margin_rad: float) -> tuple[float, ...]:
+        return LEVEL_RGBA[int(margin_level(margin_rad, self.warn_rad))]
+
+    def build(self, q: Array, sc: Scene, k: int, t_ns: int, text: str, text_level: int = 0) -> tuple[bytes, bytes]:
+        """The serialized transform and markers of the state with attitude q (4,) (body in Hill, x y z w),
+        sample k of its scene `sc` (`recording.scene.scene_of_states`), stamped t_ns; `text` drawn in the
+        colour of `text_level` (0 ok: white, 1 warning, 2 error)."""
+        L = SCENE_LENGTHS
+        sec, nanosec = divmod(int(t_ns), NS_PER_S)
+        mk, tf = self._mk, self._tf
+        for off in self._mk_stamps:
+            struct.pack_into("<iI", mk, off, sec, nanosec)
+        struct.pack_into("<iI", tf, self._tf_stamp, sec, nanosec)
+        qx, qy, qz, qw = (float(c) for c in q)
+        struct.pack_into("<4d", tf, self._tf_rotation, qx, qy, qz, qw)
+        struct.pack_into("<4d", mk, self._poses["body"], qx, qy, qz, qw)
+        axes = sc.body_axes[k] * L["axis"]
+        for i, a in enumerate("xyz"):
+            struct.pack_into("<3d", mk, self._heads[f"axis_{a}"], *axes[i].tolist())
+        for name in ("sensor", "antenna", "panel", "sun"):
+            struct.pack_into("<3d", mk, self._heads[name], *(getattr(sc, name)[k] * L[name]).tolist())
+        struct.pack_into("<3d", mk, self._heads["earth"], *(sc.earth * L["earth"]).tolist())
+        struct.pack_into("<4d", mk, self._poses["sensor_fov"], *x_to(sc.sensor[k]).tolist())
+        struct.pack_into("<4d", mk, self._poses["keep_out"], *x_to(sc.sun[k]).tolist())
+        sensor = self._level_rgba(float(sc.sensor_margin_rad[k]))
+        struct.pack_into("<4f", mk, self._colors["sensor"], *sensor)
+        struct.pack_into("<4f", mk, self._colors["sensor_fov"], *sensor)
+        struct.pack_into("<4f", mk, self._colors["antenna"], *self._level_rgba(float(sc.antenna_margin_rad[k])))
+        struct.pack_into("<4f", mk, self._colors["text"], *(LEVEL_RGBA[text_level] if text_level else
+                                                            (1.0, 1.0, 1.0, 1.0)))
+        raw = text.encode("ascii", "replace")[: self.TEXT_BYTES]
+        mk[self._text:self._text + self.TEXT_BYTES] = raw + b" " * (self.TEXT_BYTES - len(raw))
+        return bytes(tf), bytes(mk)
+
 __all__ = [
-    "NS_PER_S", "UNIT_NORM_EPS", "FilterStatusBuilder", "battery_msg", "cdr_stamp_ns", "clock_msg",
+    "NS_PER_S", "SCENE_IDS", "SCENE_NS", "STAMP_OFFSETS", "UNIT_NORM_EPS", "FilterStatusBuilder", "SceneBuilder",
+    "cone_points",
+    "x_to", "battery_msg", "cdr_stamp_ns", "clock_msg",
     "diagnostic_values", "filter_record", "filter_status_msg", "odometry_msg", "quaternion_from_msg",
     "run_status_from_msg", "run_status_msg",
     "seconds_to_ns", "stamp", "stamp_ns", "state_from_msg", "state_msg", "sun_vector_msg", "temperature_msg",

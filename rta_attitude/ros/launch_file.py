@@ -70,6 +70,8 @@ ARGUMENTS: tuple[LaunchArgument, ...] = (
     LaunchArgument("bag", "", "MCAP file the recorder writes (default: rta_attitude_YYYY_MM_DD-HH_MM_SS.mcap "
                    "in the working directory)"),
     LaunchArgument("bag_overwrite", "false", "replace an existing bag file", TRUE_FALSE, "bool"),
+    LaunchArgument("scene", "true", "start scene_node (3D view: scene/transform, scene/markers; off the control path)",
+                   TRUE_FALSE, "bool"),
     LaunchArgument("stepping", "lockstep", "lockstep or realtime", STEPPING),
     LaunchArgument("real_time_factor", "1.0", "realtime stepping: sim seconds per wall second (> 0)", kind="float"),
     LaunchArgument("domain_id", "", f"ROS_DOMAIN_ID of the nodes, 0-{MAX_DOMAIN_ID} (default: $ROS_DOMAIN_ID, "

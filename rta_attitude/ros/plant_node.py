@@ -126,7 +126,7 @@ class PlantNode(RtaNode):
         alive = {name for name, node_ns in self.get_node_names_and_namespaces() if node_ns == ns}
         pending: set[str] = set()
         for n, pub in self.pubs.items():
-            want = topics.reader_roles(n, self.rta, self.record, self.truth)
+            want = topics.reader_roles(n, self.rta, self.record, self.truth, self.scene)
             if len(want) <= pub.get_subscription_count():
                 continue
             readers = {info.node_name for info in self.get_subscriptions_info_by_topic(pub.topic_name)
@@ -136,7 +136,8 @@ class PlantNode(RtaNode):
 
     def _check_ready(self) -> None:
         missing = [(self.pubs[n].topic_name, self.pubs[n].get_subscription_count(), want)
-                   for n in self.pubs if (want := topics.expected_readers(n, self.rta, self.record, self.truth))
+                   for n in self.pubs
+                   if (want := topics.expected_readers(n, self.rta, self.record, self.truth, self.scene))
                    and self.pubs[n].get_subscription_count() < want]  # fmt: skip
         if missing:
             if self.wall_now_s() - self._progress_s > self.knobs["startup_timeout_s"]:
@@ -377,13 +378,23 @@ class PlantNode(RtaNode):
             # the final status is what the recorder closes on: under load a lost reliable sample is repaired
             # only at the writer's next heartbeat (seconds), and a writer that has exited repairs nothing
             # (found by the flake hunt: a bag ended with run_status `running`); it waits only if an ack is owed
-            self.flush(max(self.knobs["stop_timeout_s"], FINAL_STATUS_ACK_S))
+            # the other streams only while the recorder is there: it closes the bag once it holds every
+            # message, and no other reader needs them after the run (found: with the scene node reading
+            # `state`, the acknowledgements of the last states came only with Fast DDS's periodic heartbeat,
+            # and every run ended ~2.5 s late)
+            self.flush(max(self.knobs["stop_timeout_s"], FINAL_STATUS_ACK_S), needed=self._recorder_present)
         if state.startswith(topics.RUN_FAILED):
             self.fail(f"run failed at step {self.k}: {state[len(topics.RUN_FAILED) + 2:]}")
             return
         self.get_logger().info(f"run {state}: {self.k} steps; counters: {self.faults.summary()}")
         if self.knobs["exit_when_done"] or interrupted:
             self.finish()
+
+    def _recorder_present(self) -> bool:
+        """The run's recorder still reads run_status (it leaves once the bag is closed)."""
+        recorder = topics.NODE_NAMES[topics.RECORDER]
+        return self.record and any(i.node_name == recorder for i in
+                                   self.get_subscriptions_info_by_topic(self.pubs[topics.RUN_STATUS].topic_name))
 
     def published_counts(self) -> dict[str, int]:
         return dict(self.published)

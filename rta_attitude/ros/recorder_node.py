@@ -3,7 +3,8 @@ rosbag2's conventions (rta_attitude.recording.bag.BagWriter).
 
 Messages are recorded as rosbag2 does, as the serialized CDR bytes received (raw subscriptions, no
 decode and re-encode), with log and publish time = the message's own stamp (sim time), read from the
-leading header stamp of the bytes. Channels carry the writers' offered QoS and the type hash.
+leading header stamp of the bytes (a MarkerArray's: its first marker's, `convert.STAMP_OFFSETS`).
+Channels carry the writers' offered QoS and the type hash.
 
 At close the recorder adds an MCAP metadata record `rta_attitude` with the run's facts (scenario,
 rta, preset, config, duration_s, dt_s, namespace, and the final run_status values such as stepping
@@ -86,7 +87,9 @@ class RecorderNode(RtaNode):
         self.per_step = [self.resolve_topic_name(t) for t in topics.PER_STEP_ANSWERS]
         """The chain's answers to each state (one per state in a run without faults)."""
         self._status_type = interface.msg_class(topics.TOPICS[topics.RUN_STATUS].type_name)
-        specs = {self.resolve_topic_name(spec.name): spec for spec in topics.recorded(self.rta, self.truth)}
+        specs = {self.resolve_topic_name(spec.name): spec
+                 for spec in topics.recorded(self.rta, self.truth, self.scene)}
+        self.stamp_offset = {name: convert.STAMP_OFFSETS.get(spec.type_name, 0) for name, spec in specs.items()}
         for name, spec in specs.items():
             self.received[name] = 0
             self.subscribe(spec.name, partial(self._on_message, name), raw=True,
@@ -119,7 +122,7 @@ class RecorderNode(RtaNode):
         if self.bag is None:
             return
         try:
-            t_ns = convert.cdr_stamp_ns(data)
+            t_ns = convert.cdr_stamp_ns(data, self.stamp_offset[topic])
         except MessageError as exc:
             self.faults.fault("not_recorded", f"{topic}: {exc}")
             return

@@ -64,6 +64,8 @@ GATE_POLL_S = 0.005
 SPIN_TIMEOUT_S = 0.1
 """spin_once timeout of main's loop: a signal is noticed within this time [s] (the EventsExecutor's
 own spin() does not return on SIGINT in rclpy 7.1)."""
+FLUSH_SLICE_S = 0.05
+"""`flush` waits for acknowledgements in slices this long [s] (see there)."""
 STOP_MARGIN_S = 2.0
 """After a stop request, main gives the node stop_timeout_s + this before it stops spinning anyway [s]."""
 
@@ -98,6 +100,8 @@ class RtaNode(Node):
         self.truth: bool = self.cfg.sensors.enabled
         """Sensor errors on: the plant publishes the true state beside the measured one (TRUTH_TOPICS)."""
         self.record: bool = self.knobs["record"]
+        self.scene: bool = self.knobs["scene"]
+        """A scene_node takes part (its readers are waited for at start-up; the recorder records its topics)."""
         self.stopping = ""
         """The signal name once a stop was requested ('' before)."""
         self.counts: dict[str, int] = {}
@@ -182,7 +186,7 @@ class RtaNode(Node):
 
     def gate(self, topic: str, publisher: Publisher) -> PublishGate:
         """A PublishGate for one of this node's publishers, expecting the run's readers of `topic`."""
-        expected = topics.expected_readers(topic, self.rta, self.record, self.truth)
+        expected = topics.expected_readers(topic, self.rta, self.record, self.truth, self.scene)
         self.gates[topic] = PublishGate(self, publisher, expected, self.knobs["startup_timeout_s"])
         return self.gates[topic]
 
@@ -238,17 +242,28 @@ class RtaNode(Node):
         clock = self.get_clock()
         return bool(self.get_parameter("use_sim_time").value) and bool(getattr(clock, "ros_time_is_active", False))
 
-    def flush(self, timeout_s: float) -> bool:
+    def flush(self, timeout_s: float, needed: Callable[[], bool] | None = None) -> bool:
         """Wait until every reader acknowledged what this node's publishers sent (at most timeout_s in
-        total). Returns True if all did."""
+        total). Returns True if all did.
+
+        Args:
+            needed: for the publishers other than run_status: wait only while this says the data is still
+                needed (the plant's final flush: while the recorder is there; once it has closed the bag,
+                nothing is owed). Checked every FLUSH_SLICE_S.
+        """
         deadline = self.wall_now_s() + timeout_s
         ok = True
         # run_status first: the final status is what readers wait for; a dead reader of another topic
         # (a killed node stays matched until its lease expires) must not use up the time before it
         status = "/" + topics.RUN_STATUS
         for pub in sorted(self.own_publishers(), key=lambda p: not p.topic_name.endswith(status)):
-            left = max(deadline - self.wall_now_s(), 0.0)
-            ok = pub.wait_for_all_acked(Duration(nanoseconds=int(left * 1e9))) and ok
+            # in slices, so that `needed` is checked and a new wait counts only the readers still matched
+            while not pub.wait_for_all_acked(Duration(nanoseconds=int(FLUSH_SLICE_S * 1e9))):
+                if self.wall_now_s() >= deadline:
+                    ok = False
+                    break
+                if needed is not None and not pub.topic_name.endswith(status) and not needed():
+                    break
         return ok
 
     def own_publishers(self) -> list[Publisher]:

@@ -1,0 +1,239 @@
+"""scene_node: the attitude scene as ROS topics a 3D panel draws (Foxglove, Lichtblick, RViz), off the
+control path.
+
+Reads `state` (what the filter sees; with sensor errors, the measured state) and, with RTA, the
+filter's `filter_status`, both best effort (topics.VIEW_QOS: no writer of the loop waits for a view; a
+view that falls behind or loses a sample under load skips states),
+and for every `scene_every`-th state (the steps k with k % scene_every == 0, by the state's stamp)
+publishes, stamped like the state:
+
+- `scene/transform` (geometry_msgs/TransformStamped, hill -> body, rotation = the state's q), which
+  Foxglove's and Lichtblick's 3D panels read as a transform on any topic (no tf2_msgs wheel on PyPI);
+- `scene/markers` (visualization_msgs/MarkerArray, frame hill; `convert.SceneBuilder`): the body and
+  its axes, the sensor boresight and field of view, the sun and the keep-out cone (FOV/2 + beta), the
+  antenna, the Earth and the communication cone, the panel normal, coloured by margin (ok, within
+  `scene_warn_deg`, violated), and a text with the time, the filter's status, the constraints it
+  intervenes for and the two pointing angles against their limits.
+
+The node runs without use_sim_time (it draws by the states' stamps, and reading /clock would cost it a
+message a step); a state older than the last one drawn (a replay that starts over) starts it over.
+
+With RTA a state is drawn when its filter_status (same stamp) has come too, so the text belongs to the
+state drawn; a state whose status never comes (a filter that died) is drawn without it once
+PENDING_MAX later states are waiting. Every geometric fact comes from the core (`recording.scene`:
+A(q), the sun direction, the constraint axes and `ConstraintSet.angles`).
+
+Bad input: a state that the fast CDR reader cannot read, with wrong names or non-finite values, is
+counted (`state_rejected`) and not drawn; nothing of the loop depends on this node.
+"""
+
+from __future__ import annotations
+
+import math
+import struct
+import time
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from rta_attitude import topics
+from rta_attitude.constraints import CONSTRAINT_NAMES, ConstraintSet
+from rta_attitude.dynamics.state import STATE_NAMES, Q
+from rta_attitude.recording.cdr import Cdr, CdrError, read_diagnostics, read_state
+from rta_attitude.recording.scene import scene_of_states
+from rta_attitude.ros import convert, interface, spin
+from rta_attitude.ros.spin import RtaNode
+
+PENDING_MAX = 16
+"""States (or statuses) kept waiting for their partner; beyond, the oldest state is drawn alone."""
+LEVELS = {"pass": 0, "solved": 1}
+"""filter_status QP status -> text level (anything else, a fallback: 2)."""
+
+
+_U32 = struct.Struct("<I")
+
+
+def _string(buf: bytes, pos: int) -> tuple[str, int]:
+    """A CDR string at pos (aligned to 4 from the payload's start): (text, position after it)."""
+    pos += -(pos - 4) % 4
+    (n,) = _U32.unpack_from(buf, pos)
+    if n < 1 or pos + 4 + n > len(buf) or buf[pos + 3 + n] != 0:
+        raise CdrError("bad string")
+    return buf[pos + 4:pos + 3 + n].decode(), pos + 4 + n
+
+
+def _cdr_name(name: str) -> bytes:
+    return _U32.pack(len(name) + 1) + name.encode() + b"\x00"
+
+
+_GAVE_WAY = _cdr_name("gave_way")
+_CONSTRAINTS = tuple((n, _cdr_name(topics.CONSTRAINT_STATUS_PREFIX + n)) for n in CONSTRAINT_NAMES)
+
+
+def filter_summary(data: bytes) -> tuple[int, str, str, list[str]]:
+    """(stamp [ns], message of the `filter` entry, gave_way, the constraints intervening) of a serialized
+    filter_status (little-endian CDR, the layout of `convert.FilterStatusBuilder`), read without decoding
+    its ~120 key-value pairs (a full read took ~0.1 ms, at every step): the `filter` entry's head, then its
+    last key `gave_way`, then each constraint entry's name and message (`intervening`, `ok`, `violated`) in
+    order. Raises CdrError on anything else (the caller then reads it with `read_diagnostics`)."""
+    if len(data) < 8 or data[:2] != b"\x00\x01":
+        raise CdrError("not little-endian CDR")
+    c = Cdr(data)
+    t_ns = c.header()
+    c.u32()
+    c.u8()
+    if c.string() != topics.QP_STATUS_NAME:
+        raise CdrError("the first entry is not the filter's")
+    message = c.string()
+    i = data.find(_GAVE_WAY, c.pos)
+    if i < 0:
+        raise CdrError("no gave_way key")
+    gave_way, pos = _string(data, i + len(_GAVE_WAY))
+    intervening = []
+    for name, pattern in _CONSTRAINTS:
+        j = data.find(pattern, pos)
+        if j < 0:
+            raise CdrError(f"no {name} entry")
+        text, pos = _string(data, j + len(pattern))
+        if text == "intervening":
+            intervening.append(name)
+    return t_ns, message, gave_way, intervening
+
+
+def summary_from_values(values: dict[str, dict[str, str]]) -> tuple[str, str, list[str]]:
+    """(message, gave_way, intervening) of a filter_status read by `recording.cdr.read_diagnostics`."""
+    qp = values.get(topics.QP_STATUS_NAME, {})
+    status, fallback = qp.get(topics.KEY_STATUS, "?"), qp.get(topics.KEY_FALLBACK, topics.NO_FALLBACK)
+    message = status + (f" ({fallback})" if fallback != topics.NO_FALLBACK else "")
+    inter = [n for n in CONSTRAINT_NAMES
+             if values.get(topics.CONSTRAINT_STATUS_PREFIX + n, {}).get(topics.KEY_INTERVENING) == "true"]
+    return message, qp.get("gave_way", ""), inter
+
+
+def filter_text(message: str, gave_way: str, intervening: Sequence[str]) -> tuple[str, int]:
+    """(line, level) for the scene's text: the filter entry's message (`solved`, `fallback (prioritize)`),
+    the level that gave way, the constraints the filter intervened for; level 0 pass, 1 solved, 2 else."""
+    line = f"filter {message}" + (f", gave way: {gave_way}" if gave_way else "")
+    if intervening:
+        line += "\nintervening: " + ", ".join(intervening)
+    return line, LEVELS.get(message.split(" ")[0], 2)
+
+
+class SceneNode(RtaNode):
+    """The attitude scene; see the module docstring."""
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__(topics.SCENE, **kwargs)
+        self.every: int = self.knobs["scene_every"]
+        self.dt_ns = round(self.cfg.filter.sample_time_s * convert.NS_PER_S)
+        self.constraints = ConstraintSet(self.cfg)
+        L = self.cfg.limits
+        self.builder = convert.SceneBuilder(L.exclusion_fov_rad, L.exclusion_angle_rad, L.comm_angle_rad,
+                                            math.radians(self.knobs["scene_warn_deg"]))
+        self.counts.update(state_rejected=0, drawn=0, drawn_without_status=0)
+        self.outs = {}
+        for topic in topics.SCENE_TOPICS:
+            spec = topics.TOPICS[topic]
+            pub = self.create_publisher(interface.msg_class(spec.type_name), spec.name, self.qos(topic))
+            self.outs[topic] = self.gate(topic, pub)
+        self.states: dict[int, np.ndarray] = {}
+        self.statuses: dict[int, tuple[str, int]] = {}
+        self.drawn_ns = -1
+        view = interface.qos_profile(topics.VIEW_QOS)
+        source = topics.STATE
+        for topic, callback in ((source, self._on_state), (topics.FILTER_STATUS, self._on_status)):
+            if topic == topics.FILTER_STATUS and not self.rta:
+                continue
+            spec = topics.TOPICS[topic]
+            self.create_subscription(interface.msg_class(spec.type_name), spec.name, callback, view, raw=True)
+        scene_of_states([0.0], self.scenario.x0, self.cfg, self.constraints)  # compiled kernels loaded before we draw
+        self.get_logger().info(f"drawing {self.resolve_topic_name(source)} every {self.every} step(s)"
+                               + (" with the filter's status" if self.rta else ""))
+
+    def _wanted(self, t_ns: int) -> bool:
+        return round((t_ns - self.epoch_ns) / self.dt_ns) % self.every == 0
+
+    def _on_state(self, data: bytes) -> None:
+        try:
+            t_ns, names, x = read_state(Cdr(data))
+            if names != STATE_NAMES or x.shape != (len(STATE_NAMES),) or not np.all(np.isfinite(x)):
+                raise CdrError(f"not a usable state ({len(names)} names, {x.size} values)")
+        except (CdrError, ValueError, IndexError) as exc:
+            self.faults.fault("state_rejected", f"state not drawn: {exc}")
+            return
+        self.faults.clear("state_rejected")
+        if t_ns <= self.drawn_ns:
+            if t_ns < self.drawn_ns:  # time went back (a replay started over): start over too
+                self.on_clock_jump()
+            else:
+                return
+        if not self._wanted(t_ns):
+            return
+        if not self.rta:
+            self._draw(t_ns, x, None)
+        elif t_ns in self.statuses:
+            self._draw(t_ns, x, self.statuses.pop(t_ns))
+        else:
+            self.states[t_ns] = x
+            if len(self.states) > PENDING_MAX:
+                oldest = min(self.states)
+                self.counts["drawn_without_status"] += 1
+                self._draw(oldest, self.states.pop(oldest), None)
+
+    def _on_status(self, data: bytes) -> None:
+        try:
+            try:
+                t_ns, *summary = filter_summary(data)
+            except (CdrError, ValueError, IndexError, UnicodeDecodeError, struct.error):
+                t_ns, values = read_diagnostics(Cdr(data))
+                summary = list(summary_from_values(values))
+        except (CdrError, ValueError, IndexError, UnicodeDecodeError, struct.error):
+            return  # the text then says the status is missing; the filter's own checks count bad statuses
+        if t_ns <= self.drawn_ns or not self._wanted(t_ns):
+            return
+        info = filter_text(*summary)
+        if t_ns in self.states:
+            self._draw(t_ns, self.states.pop(t_ns), info)
+        else:
+            self.statuses[t_ns] = info
+            while len(self.statuses) > PENDING_MAX:
+                self.statuses.pop(min(self.statuses))
+
+    def _draw(self, t_ns: int, x: np.ndarray, info: tuple[str, int] | None) -> None:
+        t_s = self.sim_s(t_ns)
+        sc = scene_of_states([t_s], x, self.cfg, self.constraints)
+        if info is None:
+            info = ("filter off (no RTA)", 0) if not self.rta else ("filter status missing", 2)
+        line, level = info
+        deg = math.degrees
+        text = (f"t = {t_s:.0f} s   {line}\nsensor-sun {deg(sc.sensor_sun_rad[0]):.1f} deg (keep-out "
+                f"{deg(sc.keep_out_rad):.1f})   antenna-Earth {deg(sc.antenna_earth_rad[0]):.1f} deg (limit "
+                f"{deg(sc.comm_rad):.1f})")
+        transform, markers = self.builder.build(x[Q], sc, 0, t_ns, text, level)
+        self.outs[topics.SCENE_TRANSFORM].publish(transform)
+        self.outs[topics.SCENE_MARKERS].publish(markers)
+        self.counts["drawn"] += 1
+        self.drawn_ns = t_ns
+        for pending in (self.states, self.statuses):
+            for old in [s for s in pending if s <= t_ns]:
+                del pending[old]
+
+    def close(self) -> None:
+        """Log as every node does, and the CPU time this process used (the view's cost beside the loop)."""
+        self.get_logger().info(f"CPU time {time.process_time():.2f} s for {self.counts['drawn']} drawn states")
+        super().close()
+
+    def on_clock_jump(self) -> None:
+        self.drawn_ns = -1
+        self.states.clear()
+        self.statuses.clear()
+
+
+def main(args: Sequence[str] | None = None) -> None:
+    """Console script `scene_node` (`ros2 run rta_attitude scene_node --ros-args ...`)."""
+    spin.main(SceneNode, args, topics.NODE_NAMES[topics.SCENE])
+
+
+if __name__ == "__main__":
+    main()
