@@ -27,6 +27,7 @@ from typing import Any
 
 import numpy as np
 import rclpy
+from rclpy.duration import Duration
 from rclpy.experimental import EventsExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -128,6 +129,9 @@ class Forwarder(Node):
         if self.k == self.steps:
             self.result = {"loop_s": time.perf_counter() - self.t0, "steps": self.steps}
             self.pubs[topics.RUN_STATUS].publish(convert.run_status_msg(t_ns, topics.RUN_DONE, {}))
+            # as the plant node: the recorder ends on this status, and a reliable sample lost under load is
+            # repaired only while its writer lives (found: a bench run's recorder waited out its timeout)
+            self.pubs[topics.RUN_STATUS].wait_for_all_acked(Duration(seconds=MATCH_TIMEOUT_S))
             self.done = True
             return
         self.k += 1
