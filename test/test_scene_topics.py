@@ -126,7 +126,7 @@ def test_transform_maps_body_axes_to_the_hill_directions_of_a_q(scene_bag: dict[
 @DDS
 def test_boresight_arrows_make_the_constraint_angles_of_the_state(scene_bag: dict[str, Any]) -> None:
     q_i, th_i = STATE_NAMES.index("q1"), STATE_NAMES.index("theta_S")
-    colours = set()
+    colours, with_status = set(), 0
     for t_ns, m in scene_bag["markers"].items():
         x = np.array(scene_bag["state"][t_ns].position)
         A = attitude_matrix(x[q_i:q_i + 4])
@@ -145,8 +145,12 @@ def test_boresight_arrows_make_the_constraint_angles_of_the_state(scene_bag: dic
         status = scene_bag["status"][t_ns]
         qp = next(s for s in status.status if s.name == topics.QP_STATUS_NAME)
         word = next(kv.value for kv in qp.values if kv.key == topics.KEY_STATUS)
-        assert f"filter {word}" in mk[IDS["text"]].text
-    assert GREEN in colours
+        # the status of its own step, or (a best-effort sample lost, e.g. while the reader was still matching
+        # the writer at start-up: found by the flake hunt at t = 0) says that it is missing
+        text = mk[IDS["text"]].text
+        assert f"filter {word}" in text or "filter status missing" in text, text
+        with_status += f"filter {word}" in text
+    assert GREEN in colours and with_status > 0
 
 
 @DDS
