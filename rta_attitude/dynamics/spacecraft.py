@@ -160,6 +160,14 @@ def thermal_rate(cos_sun: float, cos_earth: float, T_K: float, p: np.void) -> fl
 
 
 @numba.njit(**LEAF)
+def thermal_rates(cos_sun: Array, cos_earth: Array, T_K: Array, p: np.void, out: Array) -> None:
+    """`thermal_rate` of arrays (n,) into out (n,): the one thermal law for callers that bound it over many
+    states at once (the Monte Carlo's temperature rule)."""
+    for k in range(T_K.shape[0]):
+        out[k] = thermal_rate(cos_sun[k], cos_earth[k], T_K[k], p)
+
+
+@numba.njit(**LEAF)
 def net_power(cos_panel_sun: float, p: np.void) -> float:
     """E_dot (W): the +k_B panel's power minus the load."""
     return p.panel_peak_W * positive_part(cos_panel_sun) - p.load_W

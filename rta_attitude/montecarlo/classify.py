@@ -10,6 +10,7 @@ from numpy.typing import NDArray
 
 from rta_attitude.config.schema import CONSTRAINT_NAMES, Config
 from rta_attitude.constraints import ConstraintSet
+from rta_attitude.dynamics.spacecraft import thermal_rates
 from rta_attitude.dynamics.state import ENERGY, OMEGA, PSI, TEMP
 
 Array = NDArray[np.float64]
@@ -59,7 +60,7 @@ def unavoidable(x0: Array, cfg: Config, duration_s: float = math.inf) -> dict[st
     constraints = ConstraintSet(cfg)
     angles = constraints.angles(x0)
     m = len(CONSTRAINT_NAMES)
-    L, env, th, pw = cfg.limits, cfg.environment, cfg.thermal, cfg.power
+    L, env, pw = cfg.limits, cfg.environment, cfg.power
     Omega = math.sqrt(3.0) * L.omega_max_rad_s
     n_orb = env.mean_motion_rad_s
     out = {r: np.zeros((n, m), dtype=bool) for r in UNRECOVERABLE_RULES}
@@ -81,21 +82,19 @@ def unavoidable(x0: Array, cfg: Config, duration_s: float = math.inf) -> dict[st
         loss = np.where(t_star <= duration_s, loss, 0.0)
     out["battery_energy"][:, col["battery"]] = x0[:, ENERGY] - loss < L.energy_min_J
 
-    # temperature: lower bound of T while the face turns away at the largest rate
+    # temperature: lower bound of T while the face turns away at the largest rate (the heat input falls as
+    # the incidence angles grow, so the plant's own thermal law at the bounding angles bounds T from below)
     th_s0, th_e0 = angles["face_sun"], angles["face_earth"]
-    solar = th.absorptivity * th.area_m2 * env.solar_constant_W_m2
-    earth_coeff = (solar * env.albedo_factor
-                   + env.stefan_boltzmann_W_m2K4 * th.emissivity * th.area_m2 * env.earth_temperature_K**4)
-    heat_capacity = th.mass_kg * th.specific_heat_J_kgK
-    sea = env.stefan_boltzmann_W_m2K4 * th.emissivity * th.area_m2
+    plant = constraints.plant[0]
     T = x0[:, TEMP].copy()
     T_peak = T.copy()
+    T_dot = np.empty_like(T)
     horizon = min(math.pi / min(rate, Omega), duration_s)
     for k in range(math.ceil(horizon / CLASSIFY_STEP_S)):
         t = k * CLASSIFY_STEP_S
-        q_min = (solar * np.maximum(0.0, np.cos(np.minimum(th_s0 + rate * t, np.pi)))
-                 + earth_coeff * env.earth_view_factor * np.maximum(0.0, np.cos(np.minimum(th_e0 + Omega * t, np.pi))))
-        T = T + CLASSIFY_STEP_S * (q_min - sea * T**4) / heat_capacity
+        thermal_rates(np.cos(np.minimum(th_s0 + rate * t, np.pi)), np.cos(np.minimum(th_e0 + Omega * t, np.pi)),
+                      T, plant, T_dot)
+        T = T + CLASSIFY_STEP_S * T_dot
         np.maximum(T_peak, T, out=T_peak)
     out["temperature_heating"][:, col["temperature"]] = T_peak > L.temperature_max_K + CLASSIFY_MARGIN_K
 
