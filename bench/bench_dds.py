@@ -8,8 +8,8 @@ Runs, alternately and `--repeat` times each:
 - the real loop: `paper-example` through `rta_attitude.cli.launcher` (plant, PD controller, ASIF
   filter, recorder writing the MCAP bag; Fast DDS; lockstep); its time is the plant's `wall_time_s`
   (from its first state to the last command) and the launcher's total (start-up and bag close too);
-- the same loop with the scene node (`rta-attitude launch`'s default: five processes, the scene drawn at
-  every step and recorded);
+- the same loop with the scene (`rta-attitude launch`'s default: the scene node hosted by the recorder's
+  process, drawing every step into the bag and onto its topics);
 - the floor: bench/forward_chain.py, four rclpy processes with the same topics, types, QoS and
   messages per step that only forward (no physics, no filter, no bag); the same span is timed.
 
@@ -124,7 +124,7 @@ def main() -> int:
     print(f"{'':<44}{'loop':>9}{'per step':>11}{'total':>9}")
     print(f"{'real loop (4 processes, filter, bag)':<44}{med['loop_s']:>8.2f}s{med['loop_s'] / steps * 1e3:>9.2f}ms"
           f"{med['total_s']:>8.1f}s")
-    print(f"{'real loop + scene node (5 processes)':<44}{smed['loop_s']:>8.2f}s"
+    print(f"{'real loop + scene (hosted by the recorder)':<44}{smed['loop_s']:>8.2f}s"
           f"{smed['loop_s'] / steps * 1e3:>9.2f}ms{smed['total_s']:>8.1f}s")
     print(f"{'floor: forward-only chain (4 processes)':<44}{fmed['loop_s']:>8.2f}s"
           f"{fmed['loop_s'] / steps * 1e3:>9.2f}ms{fmed['total_s']:>8.1f}s")

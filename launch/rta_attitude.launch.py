@@ -42,8 +42,11 @@ def _nodes(context, *args, **kwargs):
     for key, value in (("ROS_DOMAIN_ID", str(a["domain_id"])), ("ROS_AUTOMATIC_DISCOVERY_RANGE", a["discovery_range"]),
                        ("ROS_STATIC_PEERS", "")):
         os.environ[key] = value  # inherited by every node started below
+    # the scene: hosted by the recorder when there is one (it draws from what the recorder receives), else a
+    # scene_node process of its own
+    scene = (topics.SCENE_OFF if not a["scene"] else topics.SCENE_RECORDER if a["record"] else topics.SCENE_NODE)
     common = {"config_file": a["params_file"], "scenario": a["scenario"], "rta": a["rta"], "record": a["record"],
-              "scene": a["scene"]}
+              "scene": scene}
 
     def node(executable: str, extra: dict, sim_time: bool = True) -> Node:
         return Node(package="rta_attitude", executable=executable, namespace=a["namespace"], output="screen",
@@ -54,7 +57,7 @@ def _nodes(context, *args, **kwargs):
     exe = topics.EXECUTABLES
     nodes = {exe[topics.FILTER]: node(exe[topics.FILTER], {}), exe[topics.CONTROLLER]: node(exe[topics.CONTROLLER], {}),
              exe[topics.PLANT]: node(exe[topics.PLANT], plant, sim_time=False)}
-    if a["scene"]:
+    if scene == topics.SCENE_NODE:
         nodes = {exe[topics.SCENE]: node(exe[topics.SCENE], {}, sim_time=False), **nodes}  # draws by the stamps
     if a["record"]:
         recorder = {"bag_path": a["bag"], "bag_overwrite": a["bag_overwrite"]}

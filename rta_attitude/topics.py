@@ -184,10 +184,17 @@ TRUTH_TOPICS: tuple[str, ...] = (STATE_TRUE,)
 """Topics of a run with sensor errors only (`truth`): the true state beside the measured one."""
 SCENE_TOPICS: tuple[str, ...] = (SCENE_TRANSFORM, SCENE_MARKERS)
 """Topics of a run with a scene node (`scene`); one message each per drawn state, off the control path."""
+SCENE_OFF, SCENE_NODE, SCENE_RECORDER = "none", "node", "recorder"
+SCENE_MODES: tuple[str, ...] = (SCENE_OFF, SCENE_NODE, SCENE_RECORDER)
+"""The `scene` knob ("none", not "off": ROS parses `-p scene:=off` as YAML, a boolean): no scene node; a
+scene_node process of its own, reading `state` and `filter_status`
+(runs without a recorder, `ros2 run`); or the scene node hosted in the recorder's process, fed the bytes the
+recorder receives (no second reception of the loop's messages) and writing what it draws into the bag
+itself, as well as publishing it (the launch file and `rta-attitude launch` with a recorder)."""
 
 
-def _in_run(name: str, truth: bool, scene: bool = False) -> bool:
-    return (truth or name not in TRUTH_TOPICS) and (scene or name not in SCENE_TOPICS)
+def _in_run(name: str, truth: bool, scene: str = SCENE_OFF) -> bool:
+    return (truth or name not in TRUTH_TOPICS) and (scene != SCENE_OFF or name not in SCENE_TOPICS)
 
 
 
@@ -209,25 +216,27 @@ def published(role: str, rta: bool, truth: bool = False) -> list[TopicSpec]:
             if t.publisher == role and (rta or t.name != FILTER_STATUS) and _in_run(t.name, truth, role == SCENE)]
 
 
-def recorded(rta: bool, truth: bool = False, scene: bool = False) -> list[TopicSpec]:
+def recorded(rta: bool, truth: bool = False, scene: str = SCENE_OFF) -> list[TopicSpec]:
     """Topics the recorder writes to the bag: all of the run's (filter_status only with RTA,
-    TRUTH_TOPICS only with sensor errors, SCENE_TOPICS only with a scene node)."""
+    TRUTH_TOPICS only with sensor errors, SCENE_TOPICS only with a scene node; a hosted one's messages the
+    recorder writes itself)."""
     return [t for t in subscribed(RECORDER, rta)
             if (rta or t.name != FILTER_STATUS) and _in_run(t.name, truth, scene)]
 
 
-def reader_roles(topic: str, rta: bool, record: bool, truth: bool = False, scene: bool = False) -> list[str]:
-    """The roles of the run's own nodes that subscribe to `topic` (`scene`: a scene node takes part; its
-    best-effort readers of `state` and `filter_status` are waited for at start-up like any reader, so the
-    view misses no state, but they never hold a writer back during the run)."""
-    if not _in_run(topic, truth, scene):
+def reader_roles(topic: str, rta: bool, record: bool, truth: bool = False, scene: str = SCENE_OFF) -> list[str]:
+    """The roles of the run's own nodes that subscribe to `topic` (`scene`, SCENE_MODES: a scene_node of its
+    own has best-effort readers of `state` and `filter_status`, waited for at start-up like any reader, so
+    the view misses no state, but never holding a writer back during the run; a scene hosted by the
+    recorder reads nothing, and the recorder does not read its topics)."""
+    if not _in_run(topic, truth, scene) or (topic in SCENE_TOPICS and scene == SCENE_RECORDER):
         return []
     return [who for who, only_rta, only_plain in TOPICS[topic].readers
             if not ((only_rta and not rta) or (only_plain and rta) or (who == RECORDER and not record)
-                    or (who == SCENE and not scene))]
+                    or (who == SCENE and scene != SCENE_NODE))]
 
 
-def expected_readers(topic: str, rta: bool, record: bool, truth: bool = False, scene: bool = False) -> int:
+def expected_readers(topic: str, rta: bool, record: bool, truth: bool = False, scene: str = SCENE_OFF) -> int:
     """How many of the run's own nodes subscribe to `topic`; a writer waits for this many matches
     before its first message (tools such as `ros2 topic echo` only add readers)."""
     return len(reader_roles(topic, rta, record, truth, scene))
@@ -387,11 +396,12 @@ KNOBS: tuple[Knob, ...] = (
          minimum=1),
     Knob("drain_timeout_s", 10.0, (RECORDER,), "after run_status done: longest wait for the last messages [s]"),
     Knob("drain_quiet_s", 0.3, (RECORDER,), "after done, topics without a known count: close after this quiet [s]"),
-    Knob("scene", False, _EVERY, "a scene_node takes part (the launch sets it with scene:=true): the plant and the "
-         "filter wait for its readers at start-up, the recorder records its topics"),
-    Knob("scene_every", 1, (SCENE,), "draw every n-th state (the steps k with k % n == 0)", minimum=1),
-    Knob("scene_warn_deg", 5.0, (SCENE,), "a pointing margin below this is drawn as a warning (orange) [deg]",
-         positive=True, maximum=180.0),
+    Knob("scene", SCENE_OFF, _EVERY, "the run's scene node (the launch sets it with scene:=true): none; node (a "
+         "scene_node process of its own: the plant and filter wait for its readers at start-up); recorder (hosted "
+         "in the recorder's process, fed what the recorder receives)", SCENE_MODES),
+    Knob("scene_every", 1, (SCENE, RECORDER), "draw every n-th state (the steps k with k % n == 0)", minimum=1),
+    Knob("scene_warn_deg", 5.0, (SCENE, RECORDER), "a pointing margin below this is drawn as a warning (orange) "
+         "[deg]", positive=True, maximum=180.0),
 )  # fmt: skip
 """Node-only parameters; every other parameter comes from the core YAML."""
 SYSTEM_PARAMETERS: tuple[str, ...] = ("use_sim_time", "start_type_description_service")
@@ -436,7 +446,8 @@ __all__ = [
     "NODE_NAMES", "NO_FALLBACK", "ODOMETRY", "PACKAGE", "PER_STEP_ANSWERS", "PLANT", "PLANT_COUNTERS", "QP_KEYS",
     "QP_STATUS_NAME",
     "RECORDER", "RUN_DONE", "RUN_FAILED", "RUN_INTERRUPTED", "RUN_RUNNING", "RUN_STATUS",
-    "RUN_STATUS_NAME", "SCENE", "SCENE_MARKERS", "SCENE_TOPICS", "SCENE_TRANSFORM", "STATE", "STATE_QOS",
+    "RUN_STATUS_NAME", "SCENE", "SCENE_MARKERS", "SCENE_MODES", "SCENE_NODE", "SCENE_OFF", "SCENE_RECORDER",
+    "SCENE_TOPICS", "SCENE_TRANSFORM", "STATE", "STATE_QOS",
     "STATE_TRUE", "TRUTH_TOPICS", "VIEW_QOS",
     "STATUS_HARDWARE_ID", "STATUS_QOS", "STREAM_QOS", "SUN_VECTOR",
     "SYSTEM_PARAMETERS",

@@ -325,13 +325,19 @@ def test_wiring_counts_every_reader_of_the_run() -> None:
     assert {t.name for t in topics.recorded(False)} == \
         set(topics.TOPICS) - {topics.FILTER_STATUS, topics.STATE_TRUE} - scene
     assert {t.name for t in topics.recorded(True, truth=True)} == set(topics.TOPICS) - scene
-    assert {t.name for t in topics.recorded(True, truth=True, scene=True)} == set(topics.TOPICS)
-    # a scene node is waited for at start-up on what it reads (state, filter_status with RTA); it waits for the recorder
-    assert topics.expected_readers(topics.STATE, rta=True, record=True, scene=True) == 4
-    assert topics.expected_readers(topics.FILTER_STATUS, rta=True, record=True, scene=True) == 2
+    node, hosted = topics.SCENE_NODE, topics.SCENE_RECORDER
+    assert {t.name for t in topics.recorded(True, truth=True, scene=node)} == set(topics.TOPICS)
+    assert {t.name for t in topics.recorded(True, truth=True, scene=hosted)} == set(topics.TOPICS)
+    # a scene node of its own is waited for at start-up on what it reads (state, filter_status with RTA), and
+    # waits for the recorder; one hosted by the recorder reads nothing and nobody reads its topics over DDS
+    assert topics.expected_readers(topics.STATE, rta=True, record=True, scene=node) == 4
+    assert topics.expected_readers(topics.FILTER_STATUS, rta=True, record=True, scene=node) == 2
     assert topics.expected_readers(topics.FILTER_STATUS, rta=True, record=True) == 1
-    assert topics.expected_readers(topics.SCENE_MARKERS, rta=False, record=True, scene=True) == 1
-    assert topics.expected_readers(topics.SCENE_MARKERS, rta=False, record=False, scene=True) == 0
+    assert topics.expected_readers(topics.SCENE_MARKERS, rta=False, record=True, scene=node) == 1
+    assert topics.expected_readers(topics.SCENE_MARKERS, rta=False, record=False, scene=node) == 0
+    assert topics.expected_readers(topics.STATE, rta=True, record=True, scene=hosted) == 3
+    assert topics.expected_readers(topics.FILTER_STATUS, rta=True, record=True, scene=hosted) == 1
+    assert topics.expected_readers(topics.SCENE_MARKERS, rta=True, record=True, scene=hosted) == 0
     assert topics.expected_readers(topics.STATE_TRUE, rta=True, record=True) == 0
     assert topics.expected_readers(topics.STATE_TRUE, rta=True, record=True, truth=True) == 1
 

@@ -22,8 +22,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Arguments of `rta-attitude launch`."""
     parser.add_argument("--scenario", default="paper-example", help="scenario in the parameter file")
     parser.add_argument("--no-rta", action="store_true", help="filter node passes torque_des through (no RTA)")
-    parser.add_argument("--no-scene", action="store_true",
-                        help="leave out the scene node (the 3D view topics scene/transform and scene/markers)")
+    parser.add_argument("--scene", choices=(topics.SCENE_RECORDER, topics.SCENE_NODE), default=topics.SCENE_RECORDER,
+                        help="the scene node (3D view topics scene/transform, scene/markers): hosted in the recorder's "
+                             "process (default) or a process of its own")
+    parser.add_argument("--no-scene", action="store_true", help="leave out the scene node")
     parser.add_argument("--preset", choices=PRESETS, default=None, help="filter preset (default: the config's)")
     parser.add_argument("--realtime", type=float, default=None, metavar="RTF",
                         help="real-time stepping at this real-time factor (default: lockstep)")

@@ -66,7 +66,8 @@ POLL_S = 0.05
 SHM_SCAN_S = 0.5
 """How often the launcher notes which /dev/shm files its children use [s]."""
 START_ORDER = (topics.RECORDER, topics.SCENE, topics.FILTER, topics.CONTROLLER, topics.PLANT)
-"""Readers first; a plan without the scene (`--no-scene`) leaves it out."""
+"""Readers first; the scene has a process of its own only with `--scene node` (by default the recorder
+hosts it)."""
 DEFAULT_DOMAIN_ID = 0
 """ROS_DOMAIN_ID of the nodes when neither --domain-id nor $ROS_DOMAIN_ID says otherwise."""
 DOMAIN_ID_RANGE = (0, 232)
@@ -107,6 +108,11 @@ def _overrides(args: argparse.Namespace) -> dict[str, Any]:
     if args.preset is not None:
         out["filter.preset"] = args.preset
     return out
+
+
+def scene_mode(args: argparse.Namespace) -> str:
+    """The run's scene (topics.SCENE_MODES): `--scene`, `off` with `--no-scene`."""
+    return topics.SCENE_OFF if args.no_scene else args.scene
 
 
 def _ros_value(value: Any) -> str:
@@ -175,7 +181,7 @@ def plan(args: argparse.Namespace) -> Plan:
     rta = not args.no_rta
     base = ["--ros-args", "--params-file", str(path), "-r", f"__ns:={args.namespace}",
             "-p", f"config_file:={path}", "-p", f"scenario:={key}", "-p", f"rta:={_ros_value(rta)}",
-            "-p", "record:=true", "-p", f"scene:={_ros_value(not args.no_scene)}"]  # fmt: skip
+            "-p", "record:=true", "-p", f"scene:={scene_mode(args)}"]  # fmt: skip
     for name, value in core.items():
         base += ["-p", f"{name}:={_ros_value(value)}"]
     per_role: dict[str, dict[str, Any]] = {
@@ -189,8 +195,8 @@ def plan(args: argparse.Namespace) -> Plan:
     env = _environment(args)
     commands = {}
     for role in START_ORDER:
-        if role == topics.SCENE and args.no_scene:
-            continue
+        if role == topics.SCENE and scene_mode(args) != topics.SCENE_NODE:
+            continue  # none, or hosted by the recorder
         extra = dict(per_role[role])
         extra.update({k: v for k, v in knobs.items() if any(k == kn.name for kn in topics.knobs_for(role))})
         cmd = [sys.executable, "-m", topics.MODULES[role], *base]

@@ -22,6 +22,10 @@ publisher has gone (a killed node) is not waited for beyond that quiet time; at 
 `drain_timeout_s` in all. Then it closes the bag and, with `exit_when_done`,
 exits.
 
+Scene (`scene:=recorder`): the process also hosts the scene node (`ros.scene_node`), fed what the recorder
+receives; its drawings go straight into the bag (`_write_scene`), so the bag holds one scene/transform and
+one scene/markers per state that has its filter_status, with no count to wait for.
+
 SIGINT/SIGTERM: the recorder does not close at once, which would lose the messages published just
 before the signal and still in flight. It drains the same way (the plant, stopped too, publishes an
 `interrupted` run_status with its counts), for at most `stop_timeout_s`, then closes the bag
@@ -90,8 +94,22 @@ class RecorderNode(RtaNode):
         specs = {self.resolve_topic_name(spec.name): spec
                  for spec in topics.recorded(self.rta, self.truth, self.scene)}
         self.stamp_offset = {name: convert.STAMP_OFFSETS.get(spec.type_name, 0) for name, spec in specs.items()}
+        self.scene_node = None
+        """The scene node this process hosts (scene:=recorder): fed what the recorder receives, its drawings
+        written into the bag here."""
+        self.hosted_topics = set()
+        if self.scene == topics.SCENE_RECORDER:
+            from rta_attitude.ros.scene_node import SceneNode
+
+            self.scene_node = SceneNode(hosted=self._write_scene, context=self.context, namespace=self.get_namespace(),
+                                        parameter_overrides=list(self._parameter_overrides.values()))
+            self.companions.append(self.scene_node)
+            self.hosted_topics = {self.resolve_topic_name(t) for t in topics.SCENE_TOPICS}
+            self.status_topic_fs = self.resolve_topic_name(topics.FILTER_STATUS)
         for name, spec in specs.items():
             self.received[name] = 0
+            if name in self.hosted_topics:
+                continue  # the hosted scene's messages are written by `_write_scene`
             self.subscribe(spec.name, partial(self._on_message, name), raw=True,
                            peer=topics.PLANT if spec.name == topics.STATE else "")
         # the file is created last, so a node that fails to start leaves no half-written bag
@@ -137,6 +155,25 @@ class RecorderNode(RtaNode):
         self._last_s = self.wall_now_s()
         if topic == self.status_topic:
             self._on_status(data)
+        elif self.scene_node is not None:
+            if topic == self.state_topic:
+                self.scene_node.take_state(data)
+            elif topic == self.status_topic_fs:
+                self.scene_node.take_status(data)
+
+    def _write_scene(self, t_ns: int, transform: bytes, markers: bytes) -> None:
+        """What the hosted scene node drew for the state stamped t_ns, into the bag."""
+        if self.bag is None:
+            return
+        for topic, data in ((self.resolve_topic_name(topics.SCENE_TRANSFORM), transform),
+                            (self.resolve_topic_name(topics.SCENE_MARKERS), markers)):
+            try:
+                self.bag.write(topic, data, t_ns)
+            except BagError as exc:
+                self.bag = None
+                self.fail(str(exc))
+                return
+            self.received[topic] += 1
 
     def _on_status(self, data: bytes) -> None:
         try:
@@ -174,7 +211,7 @@ class RecorderNode(RtaNode):
         # a short topic whose publisher has left cannot deliver more (a killed node): no waiting for it
         behind = self._behind(expected)
         waiting = [t for t in short if self.count_publishers(t) > 0] + behind
-        unknown = any(t not in expected for t in self.received)
+        unknown = any(t not in expected and t not in self.hosted_topics for t in self.received)
         settled = now - self._last_s >= self.knobs["drain_quiet_s"]
         if self.stopping and not self._terminal:
             # stopped before the plant's final run_status: wait for it while the plant is still there (a

@@ -100,8 +100,10 @@ class RtaNode(Node):
         self.truth: bool = self.cfg.sensors.enabled
         """Sensor errors on: the plant publishes the true state beside the measured one (TRUTH_TOPICS)."""
         self.record: bool = self.knobs["record"]
-        self.scene: bool = self.knobs["scene"]
-        """A scene_node takes part (its readers are waited for at start-up; the recorder records its topics)."""
+        self.scene: str = self.knobs["scene"]
+        """The run's scene node (topics.SCENE_MODES)."""
+        self.companions: list[RtaNode] = []
+        """Nodes this node hosts in its process (the recorder: the scene); `run` spins and closes them too."""
         self.stopping = ""
         """The signal name once a stop was requested ('' before)."""
         self.counts: dict[str, int] = {}
@@ -446,6 +448,8 @@ def run(factory: Callable[[], RtaNode], args: Sequence[str] | None = None, name:
         node = factory()
         executor = make_executor(node.knobs["executor"])
         executor.add_node(node)
+        for companion in node.companions:
+            executor.add_node(companion)
         hard_stop = float("inf")
         while rclpy.ok() and not node.finished.done():
             if received and not node.stopping:
@@ -470,6 +474,9 @@ def run(factory: Callable[[], RtaNode], args: Sequence[str] | None = None, name:
         _INTERRUPTIBLE[0] = False
         if executor is not None:
             executor.shutdown()
+        for companion in node.companions if node is not None else []:
+            companion.close()
+            companion.destroy_node()
         if node is not None:
             try:
                 node.close()
