@@ -111,7 +111,7 @@ def _overrides(args: argparse.Namespace) -> dict[str, Any]:
 
 
 def scene_mode(args: argparse.Namespace) -> str:
-    """The run's scene (topics.SCENE_MODES): `--scene`, `off` with `--no-scene`."""
+    """The run's scene (topics.SCENE_MODES): `--scene`, or none (topics.SCENE_OFF) with `--no-scene`."""
     return topics.SCENE_OFF if args.no_scene else args.scene
 
 

@@ -562,9 +562,9 @@ class SceneBuilder:
         self._poses = {n: at(self._mk, b"".join(d8.pack(v) for v in vals)) for n, vals in poses.items()}
         self._colors = {n: at(self._mk, p) for n, p in rgba_marks.items()}
         self._text = at(self._mk, text)
-        self._initial_colors = {"sensor": LEVEL_RGBA[0], "sensor_fov": LEVEL_RGBA[0], "antenna": LEVEL_RGBA[0],
-                                "text": (1.0, 1.0, 1.0, 1.0)}
-        for name, rgba in self._initial_colors.items():
+        initial_colors = {"sensor": LEVEL_RGBA[0], "sensor_fov": LEVEL_RGBA[0], "antenna": LEVEL_RGBA[0],
+                          "text": (1.0, 1.0, 1.0, 1.0)}
+        for name, rgba in initial_colors.items():
             struct.pack_into("<4f", self._mk, self._colors[name], *rgba)
 
     def _level_rgba(self, margin_rad: float) -> tuple[float, ...]:

@@ -97,15 +97,16 @@ class RecorderNode(RtaNode):
         self.scene_node = None
         """The scene node this process hosts (scene:=recorder): fed what the recorder receives, its drawings
         written into the bag here."""
-        self.hosted_topics = set()
+        self.hosted_topics: tuple[str, ...] = ()
+        """scene/transform and scene/markers (resolved) when the scene is hosted: written, not subscribed."""
         if self.scene == topics.SCENE_RECORDER:
             from rta_attitude.ros.scene_node import SceneNode
 
             self.scene_node = SceneNode(hosted=self._write_scene, context=self.context, namespace=self.get_namespace(),
                                         parameter_overrides=list(self._parameter_overrides.values()))
             self.companions.append(self.scene_node)
-            self.hosted_topics = {self.resolve_topic_name(t) for t in topics.SCENE_TOPICS}
-            self.status_topic_fs = self.resolve_topic_name(topics.FILTER_STATUS)
+            self.hosted_topics = tuple(self.resolve_topic_name(t) for t in topics.SCENE_TOPICS)  # transform, markers
+            self.filter_status_topic = self.resolve_topic_name(topics.FILTER_STATUS)
         for name, spec in specs.items():
             self.received[name] = 0
             if name in self.hosted_topics:
@@ -158,15 +159,14 @@ class RecorderNode(RtaNode):
         elif self.scene_node is not None:
             if topic == self.state_topic:
                 self.scene_node.take_state(data)
-            elif topic == self.status_topic_fs:
+            elif topic == self.filter_status_topic:
                 self.scene_node.take_status(data)
 
     def _write_scene(self, t_ns: int, transform: bytes, markers: bytes) -> None:
         """What the hosted scene node drew for the state stamped t_ns, into the bag."""
         if self.bag is None:
             return
-        for topic, data in ((self.resolve_topic_name(topics.SCENE_TRANSFORM), transform),
-                            (self.resolve_topic_name(topics.SCENE_MARKERS), markers)):
+        for topic, data in zip(self.hosted_topics, (transform, markers), strict=True):
             try:
                 self.bag.write(topic, data, t_ns)
             except BagError as exc:

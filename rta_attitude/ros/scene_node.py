@@ -68,15 +68,6 @@ LEVELS = {"pass": 0, "solved": 1}
 _U32 = struct.Struct("<I")
 
 
-def _string(buf: bytes, pos: int) -> tuple[str, int]:
-    """A CDR string at pos (aligned to 4 from the payload's start): (text, position after it)."""
-    pos += -(pos - 4) % 4
-    (n,) = _U32.unpack_from(buf, pos)
-    if n < 1 or pos + 4 + n > len(buf) or buf[pos + 3 + n] != 0:
-        raise CdrError("bad string")
-    return buf[pos + 4:pos + 3 + n].decode(), pos + 4 + n
-
-
 def _cdr_name(name: str) -> bytes:
     return _U32.pack(len(name) + 1) + name.encode() + b"\x00"
 
@@ -103,14 +94,15 @@ def filter_summary(data: bytes) -> tuple[int, str, str, list[str]]:
     i = data.find(_GAVE_WAY, c.pos)
     if i < 0:
         raise CdrError("no gave_way key")
-    gave_way, pos = _string(data, i + len(_GAVE_WAY))
+    c.pos = i + len(_GAVE_WAY)
+    gave_way = c.string()
     intervening = []
     for name, pattern in _CONSTRAINTS:
-        j = data.find(pattern, pos)
+        j = data.find(pattern, c.pos)
         if j < 0:
             raise CdrError(f"no {name} entry")
-        text, pos = _string(data, j + len(pattern))
-        if text == "intervening":
+        c.pos = j + len(pattern)
+        if c.string() == "intervening":
             intervening.append(name)
     return t_ns, message, gave_way, intervening
 
@@ -248,8 +240,8 @@ class SceneNode(RtaNode):
                 del pending[old]
 
     def close(self) -> None:
-        """Log as every node does, and the CPU time this process used (the view's cost beside the loop)."""
-        self.get_logger().info(f"CPU time {time.process_time():.2f} s for {self.counts['drawn']} drawn states")
+        """Log as every node does, and the CPU time of its process (hosted: the recorder's too)."""
+        self.get_logger().info(f"process CPU time {time.process_time():.2f} s; {self.counts['drawn']} states drawn")
         super().close()
 
     def on_clock_jump(self) -> None:
