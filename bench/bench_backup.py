@@ -1,6 +1,6 @@
 """Benchmark: the cost of the gatekeeper (filter.backup_law) per filter call.
 
-    python bench/bench_backup.py [--runs 5] [--duration 600] [--horizon 120]
+    python bench/bench_backup.py [--runs 5] [--duration 600] [--horizon S] [--nominal S]
 
 States: Monte Carlo runs (seed 1, u_des = 0, the campaign's loop) with the gatekeeper on, recorded;
 each run's states are then fed in order to `AsifFilter.filter` (what a node pays, Python in and out),
@@ -31,10 +31,11 @@ from rta_attitude.montecarlo.sampling import sample_initial_states
 
 
 def time_calls(cfg: config.Config, runs: np.ndarray) -> tuple[np.ndarray, dict[str, int]]:
-    """Per-call wall times (s) of `AsifFilter.filter` over runs (R, steps, 19), u_des = 0; gate counts."""
+    """Per-call wall times (s) of `AsifFilter.filter` over runs (R, steps, 19), u_des = 0; gate counts
+    ('reused': verified calls answered from a committed nominal plan, without a rollout)."""
     f = AsifFilter(cfg)
     times = []
-    gates = dict.fromkeys(GATE_NAMES, 0)
+    gates = dict.fromkeys((*GATE_NAMES, "reused"), 0)
     u = np.zeros(3)
     for run in runs:
         f.reset()
@@ -43,6 +44,7 @@ def time_calls(cfg: config.Config, runs: np.ndarray) -> tuple[np.ndarray, dict[s
             r = f.filter(x, u)
             times.append(time.perf_counter() - t0)
             gates[GATE_NAMES[int(r.record["gate"])]] += 1
+        gates["reused"] += int(f._ws[0]["gate"]["reused"])
     return np.asarray(times), gates
 
 
@@ -50,23 +52,28 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--runs", type=int, default=5)
     ap.add_argument("--duration", type=float, default=600.0)
-    ap.add_argument("--horizon", type=float, default=120.0)
+    ap.add_argument("--horizon", type=float, default=None, help="backup_horizon_s (default: the config's)")
+    ap.add_argument("--nominal", type=float, default=None, help="backup_nominal_s (default: the config's)")
     args = ap.parse_args()
     before = machine.describe()
     base = config.load()
-    on = dataclasses.replace(base, filter=dataclasses.replace(base.filter, backup_law="sun_safe",
-                                                              backup_horizon_s=args.horizon))
+    o = base.filter
+    horizon = o.backup_horizon_s if args.horizon is None else args.horizon
+    nominal = o.backup_nominal_s if args.nominal is None else args.nominal
+    on = dataclasses.replace(base, filter=dataclasses.replace(o, backup_law="sun_safe", backup_horizon_s=horizon,
+                                                              backup_nominal_s=nominal))
     x0, _ = sample_initial_states(args.runs, 1, on)
     mc = run_runs(on, x0, args.duration, record=True)
     assert mc.trajectory is not None
     runs = mc.trajectory[:, :-1]
     records = []
-    for name, cfg in (("none", base), ("sun_safe", on)):
+    for name, cfg in (("none", base.with_backup("none")), ("sun_safe", on)):
         AsifFilter(cfg).filter(runs[0, 0], np.zeros(3))  # compile or load first
         t, gates = time_calls(cfg, runs)
         us = t * 1e6
-        rec = {"backup_law": name, "horizon_s": args.horizon, "calls": len(us), "median_us": float(np.median(us)),
-               "p99_us": float(np.percentile(us, 99)), "max_us": float(us.max()), "gates": gates}
+        rec = {"backup_law": name, "horizon_s": horizon, "nominal_s": nominal, "calls": len(us),
+               "median_us": float(np.median(us)), "p99_us": float(np.percentile(us, 99)), "max_us": float(us.max()),
+               "gates": gates}
         records.append(rec)
         print(f"{name:9s} calls {len(us):6d}  median {rec['median_us']:8.1f} us  p99 {rec['p99_us']:8.1f} us  "
               f"max {rec['max_us']:8.1f} us  gates {gates}")

@@ -4,6 +4,8 @@ the default (no backup law) unchanged."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import numba
 import numpy as np
 import pytest
@@ -286,3 +288,108 @@ def test_a_large_momentum_moves_h_in_the_body_before_the_roll(cfg: Config) -> No
         np.testing.assert_allclose(dq, 0.5 * np.cross(hb / np.linalg.norm(hb), ht), atol=1e-12)
         seen += 1
     assert seen >= 5
+
+
+def test_backup_nominal_s_is_validated() -> None:
+    cfg = config.load()
+    for bad in (0.0, 0.4, 121.0, float("nan")):
+        with pytest.raises(ConfigError, match=r"filter\.backup_nominal_s"):
+            dataclasses.replace(cfg, filter=dataclasses.replace(cfg.filter, backup_nominal_s=bad))
+    assert filter_record(cfg)[0]["backup"]["nominal_steps"] == round(cfg.filter.backup_nominal_s)
+
+
+def test_a_nominal_plan_holds_what_it_claims(cfg: Config, states: Array) -> None:
+    """The plan the gate commits (the answer held a sample, then the filter's own answers, u_des held,
+    then the backup law) is re-derived independently: its states are the plant's Python `integrate` of
+    its commands, its answers are those of a filter without a gatekeeper at those states, every substep
+    of its nominal part keeps every hard constraint and the backup law from its end settles safely.
+    Fed those states in order, the filter applies the plan's answers without a new rollout; a state one
+    ulp off the plan is checked afresh."""
+    from rta_attitude.filter.asif import AsifFilter
+
+    assert cfg.filter.backup_nominal_s > cfg.filter.sample_time_s
+    on, alone = AsifFilter(cfg), AsifFilter(cfg.with_backup("none"))
+    cs = ConstraintSet.from_config(cfg)
+    hard = np.array([n not in cfg.slacked_constraints for n in CONSTRAINT_NAMES])
+    p = filter_record(cfg)["plant"]
+    D = cfg.spacecraft.wheel_inertia_kgm2
+    u_des = np.zeros(3)
+    checked = 0
+    for x in states[:8]:
+        if momentum_rad_s(x, cfg) > 500.0:
+            continue
+        on.reset()
+        res = on.filter(x, u_des)
+        g = on._ws[0]["gate"]
+        n = int(g["plan_n"])
+        if res.gate != "verified" or n == 0:
+            continue
+        second_x = None
+        x1 = x
+        np.testing.assert_array_equal(res.u, alone.filter(x, u_des).u)
+        assert n == round(cfg.filter.backup_nominal_s / cfg.filter.sample_time_s)
+        plan_x, plan_u = g["plan_x"][:n].copy(), g["plan_u"][:n].copy()
+        np.testing.assert_array_equal(plan_x[0], x1)
+        np.testing.assert_array_equal(plan_u[0], res.u)
+        y, subs_all = x1, []
+        for j in range(n):
+            if j > 0:
+                np.testing.assert_array_equal(plan_x[j], y)
+                np.testing.assert_array_equal(plan_u[j], alone.filter(y, u_des).u)
+            y, subs = integrate(y, torque_to_wheel_accel(wheel_accel_to_torque(plan_u[j], D), D), 1.0, p,
+                                cfg.substeps)
+            subs_all.append(subs)
+        assert np.all(cs.safety_values(np.concatenate(subs_all))[:, hard] >= 0.0)
+        found, tail = backup_rollout(y, backup_command(y, f := filter_record(cfg)), f)
+        assert found == "settled"
+        assert np.all(cs.safety_values(tail)[:, hard] >= 0.0)
+        # the filter follows the plan without a new rollout while the states are the predicted ones
+        for j in range(1, n):
+            before = int(g["reused"])
+            step = on.filter(plan_x[j], u_des)
+            assert step.gate == "verified"
+            np.testing.assert_array_equal(step.u, plan_u[j])
+            assert int(on._ws[0]["gate"]["reused"]) == before + 1
+            if j == 3:
+                second_x = plan_x[j + 1].copy()
+                break
+        assert second_x is not None
+        second_x[10] = np.nextafter(second_x[10], np.inf)  # one ulp off the plan: a fresh check
+        before = int(on._ws[0]["gate"]["reused"])
+        on.filter(second_x, u_des)
+        assert int(on._ws[0]["gate"]["reused"]) == before
+        checked += 1
+    assert checked >= 2
+
+
+def test_an_answer_off_the_plan_is_checked_alone_or_replaced_by_the_plans(cfg: Config, states: Array) -> None:
+    """On a committed nominal plan's state but with another desired command (the answer differs from the
+    plan's), the gate applies that answer only if a rollout of it verifies, else the plan's own answer."""
+    from rta_attitude.filter.asif import AsifFilter
+
+    on = AsifFilter(cfg)
+    f = filter_record(cfg)
+    u_max = cfg.u_max_rad_s2
+    rng = np.random.default_rng(2)
+    seen: list[str] = []
+    for x in states[:10]:
+        if momentum_rad_s(x, cfg) > 500.0:
+            continue
+        for _ in range(3):
+            on.reset()
+            on.filter(x, np.zeros(3))
+            g = on._ws[0]["gate"]
+            if int(g["plan_n"]) < 2:
+                break
+            at = int(g["plan_at"])
+            planned, y = g["plan_u"][at].copy(), g["plan_x"][at].copy()
+            g["nominal_wait"] = 1  # the answer alone, not a new nominal plan
+            res = on.filter(y, rng.uniform(-1.0, 1.0, 3) * u_max)
+            assert not np.array_equal(res.u_des, np.zeros(3))
+            seen.append(res.gate)
+            if res.gate == "verified":
+                assert any(backup_rollout(y, res.u, f, v)[0] != "failed" for v in ("sun_safe", "momentum"))
+            else:
+                assert res.gate == "backup"
+                np.testing.assert_array_equal(res.u, planned)
+    assert len(seen) >= 3

@@ -44,6 +44,8 @@ applied); sun_safe (the filter applies its answer only if the answer then the su
 over `filter.backup_horizon_s`, else the sun-safe law of its committed plan: `filter.backup`)."""
 MAX_BACKUP_SUBSTEPS = 64
 """integrator.substeps at most this with a backup law (the gatekeeper's scratch rows)."""
+MAX_NOMINAL_STEPS = 120
+"""filter.backup_nominal_s / filter.sample_time_s at most this (the gatekeeper's plan rows)."""
 PLANT_MODELS: tuple[str, ...] = ("gyrostat", "paper")
 """Models of the spacecraft, for the simulated plant (`spacecraft.model`) and for the filter's barriers
 (`filter.model`): gyrostat: the wheels' momentum in Euler's equations (-omega x (J omega - s D psi));
@@ -357,6 +359,10 @@ class FilterOptions:
     """The gatekeeper's backup law (BACKUP_LAWS); none: no gatekeeper."""
     backup_horizon_s: float = 300.0
     """How far the gatekeeper simulates the backup law after the candidate's hold, s."""
+    backup_nominal_s: float = 20.0
+    """How long the gatekeeper's rollout follows the filter's own answers (u_des held) before the backup
+    law, s (one sample: the candidate alone). A plan verified that way is applied, without a new rollout,
+    at each later sample whose state and answer are the ones it predicted (docs/backup.md)."""
     priorities: tuple[tuple[str, ...], ...] = DEFAULT_PRIORITIES
     """Levels of constraint groups (BARRIER_GROUPS), most important first: with `fallback: prioritize`, an
     infeasible QP is answered by letting the least important level give way first, by as little as
@@ -380,6 +386,10 @@ class FilterOptions:
                    else "an empty level")
             raise ConfigError(f"filter.priorities must name every constraint group once, in non-empty levels ({why})")
         _positive("filter.sample_time_s", self.sample_time_s)
+        nominal = self.backup_nominal_s / self.sample_time_s
+        if not (math.isfinite(nominal) and 1 <= round(nominal) <= MAX_NOMINAL_STEPS):
+            raise ConfigError(f"filter.backup_nominal_s must be between one sample ({self.sample_time_s:g} s) and "
+                              f"{MAX_NOMINAL_STEPS} samples, got {self.backup_nominal_s!r}")
         if not 0 <= self.zoh_margin < 1:
             raise ConfigError(f"filter.zoh_margin must be in [0, 1), got {self.zoh_margin!r}")
         for name in ("max_iterations", "max_inner_iterations"):

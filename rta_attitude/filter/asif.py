@@ -219,8 +219,9 @@ class AsifFilter:
 
     def reset(self) -> None:
         """Forget the gatekeeper's committed plan (a new run starts; nothing else carries over)."""
-        self._ws[0]["gate"]["plan_steps"] = 0
-        self._ws[0]["gate"]["plan_law"] = SUN_SAFE_VARIANT
+        g = self._ws[0]["gate"]
+        g["plan_steps"] = g["plan_n"] = g["plan_at"] = g["nominal_wait"] = g["reused"] = 0
+        g["plan_law"] = SUN_SAFE_VARIANT
 
     def filter(self, x: Array, u_des: Array) -> FilterResult:
         """Filter one desired command.

@@ -23,7 +23,7 @@ The check (`rollout`) of a candidate u0 at state x: hold u0 for one sample, then
 command at each sample, held), `integrator.substeps` RK4 steps per sample, for `backup_horizon_s`;
 every enabled, non-slacked constraint must have h >= 0 at every substep, until the state is in the
 terminal set (`settled`: near the sun-safe attitude with small rates and a wheel momentum the wheels
-can hold there), which the backup law keeps (docs/backup.md). `_verify` accepts a settled rollout,
+can hold there), which the backup law keeps (docs/backup.md). `verify` accepts a settled rollout,
 and, only with a large momentum (|H| / D > psi_max - max J_a w_max / D), one whose horizon ends safe;
 it tries the committed plan's variant of the law first (VARIANTS: sun-safe, momentum mode).
 
@@ -42,7 +42,7 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
-from rta_attitude.config.schema import BACKUP_LAWS, MAX_BACKUP_SUBSTEPS, Config
+from rta_attitude.config.schema import BACKUP_LAWS, MAX_BACKUP_SUBSTEPS, MAX_NOMINAL_STEPS, Config
 from rta_attitude.constraints.base import N_CONSTRAINTS
 from rta_attitude.constraints.geometry import CONTEXT_DTYPE
 from rta_attitude.constraints.rows import safety_values
@@ -103,11 +103,18 @@ BACKUP_DTYPE = np.dtype([
     ("omega_max_rad_s", np.float64),
     ("psi_max_rad_s", np.float64),
     ("momentum_variant_rad_s", np.float64),  # the MOMENTUM variant only where |J w - s D psi| / D exceeds this
+    ("nominal_steps", np.int64),         # samples of the filter's own answers before the backup law (>= 1)
 ])  # fmt: skip
 """The gatekeeper's parameters (a field of the filter's record)."""
 
 GATE_DTYPE = np.dtype([
     ("plan_steps", np.int64),            # samples the committed plan is still verified for (0: none)
+    ("plan_n", np.int64),                # samples of the committed nominal plan (0: none) ...
+    ("plan_at", np.int64),               # ... the one the next call should be at
+    ("plan_x", np.float64, (MAX_NOMINAL_STEPS, STATE_SIZE)),  # its states at the samples (as received)
+    ("plan_u", np.float64, (MAX_NOMINAL_STEPS, 3)),           # the filter's answers there (candidates)
+    ("nominal_wait", np.int64),          # calls to wait before the next nominal plan is tried
+    ("reused", np.int64),                # calls answered from a committed nominal plan (since reset)
     ("checked", np.int64),               # substeps the last rollout checked
     ("x", np.float64, (STATE_SIZE,)),    # the rollout's state at the samples
     ("u", np.float64, (3,)),             # the command of the rollout's sample
@@ -147,6 +154,7 @@ def backup_record(cfg: Config) -> NDArray[np.void]:
     b["omega_max_rad_s"], b["psi_max_rad_s"] = L.omega_max_rad_s, L.psi_max_rad_s
     sc = cfg.spacecraft
     b["momentum_variant_rad_s"] = L.psi_max_rad_s - float(np.max(sc.J)) * L.omega_max_rad_s / sc.wheel_inertia_kgm2
+    b["nominal_steps"] = max(1, round(o.backup_nominal_s / o.sample_time_s))
     return rec
 
 
@@ -154,7 +162,7 @@ def backup_record(cfg: Config) -> NDArray[np.void]:
 
 
 @numba.njit(**LEAF)
-def _large_momentum(x: Array, p: np.void, b: np.void) -> bool:
+def large_momentum(x: Array, p: np.void, b: np.void) -> bool:
     """|J w - s D psi| / D of the state x (19,) above b.momentum_variant_rad_s (psi_max - max J_a w_max /
     D): a momentum the sun-safe attitude may not hold at rest (the gate's and the backup law's test)."""
     hh = 0.0
@@ -279,7 +287,7 @@ def sun_safe_error(x: Array, p: np.void, b: np.void, g: np.void) -> float:
     wheels could not hold the body's momentum H there at rest (`_wheel_load` > 0): then i_B, j_B lie
     at 45 deg to H's part perpendicular to the sun (each wheel takes 1/sqrt(2) of it), the one of the
     four such rolls with j_B nearest the Earth. With a large momentum (|H| / D above
-    b.momentum_variant_rad_s, as `_verify`'s), or where the wheels could not hold H there either, the
+    b.momentum_variant_rad_s, as `verify`'s), or where the wheels could not hold H there either, the
     target the wheels can hold with the panel nearest the sun (`_tilted_target`, g.momentum_mode = 2),
     and H_body goes straight to its place at that target first (`_h_first`, as below); if the wheels
     could not hold H at any panel angle, or with the
@@ -309,9 +317,9 @@ def sun_safe_error(x: Array, p: np.void, b: np.void, g: np.void) -> float:
     T[1, 0], T[1, 1], T[1, 2] = jx, jy, jz
     T[2, 0], T[2, 1], T[2, 2] = cs, sn, 0.0
     T[0, 0], T[0, 1], T[0, 2] = jy * 0.0 - jz * sn, jz * cs - jx * 0.0, jx * sn - jy * cs  # j x k
-    # a large momentum (as `_verify`'s) is shared between the wheels even where one could hold it, and
+    # a large momentum (as `verify`'s) is shared between the wheels even where one could hold it, and
     # H_body goes to its place at the target first: a straight slew can carry H_body past a wheel's limit
-    large = _large_momentum(x, p, b)
+    large = large_momentum(x, p, b)
     rolled = large or _wheel_load(T, g.Hh, p, b) > 0.0
     if rolled:
         Hh = g.Hh
@@ -389,6 +397,12 @@ def sun_safe_command(x: Array, p: np.void, c: np.void, b: np.void, g: np.void, o
     """The backup law's command (3,) at state x (19,) into out, rad/s^2, inside U; p the plant model
     (PLANT_DTYPE), c the constraints (the box U), b the BACKUP_DTYPE record, g GATE_DTYPE scratch."""
     sun_safe_error(x, p, b, g)
+    _rate_command(x, p, c, b, g, out)
+
+
+@numba.njit(**LEAF)
+def _rate_command(x: Array, p: np.void, c: np.void, b: np.void, g: np.void, out: Array) -> None:
+    """`sun_safe_command` with g.dq and g.A already those of x (`sun_safe_error` ran on it)."""
     omega_drift(x, g.A, p, g.wd)
     lim = b.rate_limit_rad_s
     for a in range(3):
@@ -421,44 +435,63 @@ def settled(x: Array, p: np.void, b: np.void, g: np.void) -> bool:
 
 
 @numba.njit(**LEAF)
-def rollout(x0: Array, u0: Array, f: np.void, g: np.void, traj: Array, record: bool) -> int:
-    """Check candidate u0 (3,) at state x0 (19,) on the filter's model: hold u0 (across the torque
-    interface, saturated, as the loop applies it) for one sample, then the backup law, each sample held
-    over `substeps` RK4 steps, for horizon_steps samples or until `settled`. Returns FAILED (an
-    enabled, non-slacked constraint has h < 0 (or NaN) at a substep), HORIZON or SETTLED. g.checked:
-    the substeps checked; with record, their states go to traj ((horizon_steps + 1) substeps, 19).
-    f: FILTER_DTYPE record; g: GATE_DTYPE scratch."""
+def hold_sample(u: Array, f: np.void, g: np.void, traj: Array, record: bool) -> bool:
+    """One sample of a rollout from g.x (19,): u (3,) held (across the torque interface, saturated, as the
+    loop applies it), `substeps` RK4 steps of the filter's model, every enabled, non-slacked constraint
+    checked at each substep (h >= 0, NaN fails). g.x becomes the state at the sample's end; g.checked
+    counts the substeps (with record, their states go to traj). Returns False at the first violation."""
     p, c, b = f.plant, f.constraints, f.backup
     S = b.substeps
-    dt = c.dt_s
     subs = g.subs[:S]
     x = g.x
+    torque_round_trip(u, p, g.us)
+    saturate(g.us, p, g.us)
+    rk4_hold(x, g.us, c.dt_s, S, p, subs, g.work)
+    for j in range(S):
+        if record:
+            for i in range(STATE_SIZE):
+                traj[g.checked, i] = subs[j, i]
+        g.checked += 1
+        safety_values(subs[j], p, c, g.ctx, g.h)
+        for i in range(M):
+            gi = c.gains[i]
+            if gi.enabled != 0 and gi.slack_weight == 0.0 and not g.h[i] >= 0.0:
+                return False
     for i in range(STATE_SIZE):
-        x[i] = x0[i]
+        x[i] = subs[S - 1, i]
+    return True
+
+
+@numba.njit(**LEAF)
+def backup_tail(f: np.void, g: np.void, traj: Array, record: bool) -> int:
+    """The backup law (variant g.law) from g.x, one held command per sample, for horizon_steps samples or
+    until `settled`: FAILED, HORIZON or SETTLED (`hold_sample` checks each sample)."""
+    p, c, b = f.plant, f.constraints, f.backup
+    for _ in range(b.horizon_steps):
+        if settled(g.x, p, b, g):
+            return SETTLED
+        _rate_command(g.x, p, c, b, g, g.u)  # settled's sun_safe_error filled g.dq and g.A
+        if not hold_sample(g.u, f, g, traj, record):
+            return FAILED
+    return HORIZON
+
+
+@numba.njit(**LEAF)
+def rollout(x0: Array, u0: Array, f: np.void, g: np.void, traj: Array, record: bool) -> int:
+    """Check candidate u0 (3,) at state x0 (19,) on the filter's model: hold u0 for one sample
+    (`hold_sample`), then the backup law (`backup_tail`), each sample held over `substeps` RK4 steps, for
+    horizon_steps samples or until `settled`. Returns FAILED (an enabled, non-slacked constraint has
+    h < 0 (or NaN) at a substep), HORIZON or SETTLED. g.checked: the substeps checked; with record,
+    their states go to traj ((horizon_steps + 1) substeps, 19). f: FILTER_DTYPE record; g: GATE_DTYPE
+    scratch."""
+    for i in range(STATE_SIZE):
+        g.x[i] = x0[i]
     for a in range(3):
         g.u[a] = u0[a]
     g.checked = 0
-    for k in range(b.horizon_steps + 1):
-        if k > 0:
-            if settled(x, p, b, g):
-                return SETTLED
-            sun_safe_command(x, p, c, b, g, g.u)
-        torque_round_trip(g.u, p, g.us)
-        saturate(g.us, p, g.us)
-        rk4_hold(x, g.us, dt, S, p, subs, g.work)
-        for j in range(S):
-            if record:
-                for i in range(STATE_SIZE):
-                    traj[g.checked, i] = subs[j, i]
-            g.checked += 1
-            safety_values(subs[j], p, c, g.ctx, g.h)
-            for i in range(M):
-                gi = c.gains[i]
-                if gi.enabled != 0 and gi.slack_weight == 0.0 and not g.h[i] >= 0.0:
-                    return FAILED
-        for i in range(STATE_SIZE):
-            x[i] = subs[S - 1, i]
-    return HORIZON
+    if not hold_sample(g.u, f, g, traj, record):
+        return FAILED
+    return backup_tail(f, g, traj, record)
 
 
 @numba.njit(**LEAF)
@@ -466,10 +499,13 @@ def reset(g: np.void) -> None:
     """Forget the committed plan (a new run starts): the gate's only memory."""
     g.plan_steps = 0
     g.plan_law = SUN_SAFE_VARIANT
+    g.plan_n = g.plan_at = 0
+    g.nominal_wait = 0
+    g.reused = 0
 
 
 @numba.njit(**LEAF)
-def _verify(x: Array, u: Array, candidate: bool, f: np.void, g: np.void) -> bool:
+def verify(x: Array, u: Array, candidate: bool, f: np.void, g: np.void) -> bool:
     """Roll out from x with each variant of the backup law in turn, the committed plan's first (the
     MOMENTUM variant only with a momentum |H| / D above psi_max - max J_a w_max / D: below it the
     sun-safe attitude holds H and the panel charges there, where the momentum mode may drain the
@@ -480,7 +516,7 @@ def _verify(x: Array, u: Array, candidate: bool, f: np.void, g: np.void) -> bool
     committed (plan_law, plan_steps) and u holds the command to apply."""
     b = f.backup
     p = f.plant
-    large = _large_momentum(x, p, b)
+    large = large_momentum(x, p, b)
     for t in range(len(VARIANTS)):
         g.law = g.plan_law if t == 0 else 1 - g.plan_law
         if g.law == MOMENTUM and not large:  # the sun-safe attitude holds a small momentum: charge there
@@ -503,10 +539,10 @@ def gate(x: Array, f: np.void, g: np.void, u: Array) -> int:
     b = f.backup
     if b.law == NO_LAW:
         return GATE_OFF
-    if _verify(x, u, True, f, g):
+    if verify(x, u, True, f, g):
         return GATE_VERIFIED
     if g.plan_steps > 0:  # the plan verified earlier: its next command is its backup law's, here
-        if _verify(x, g.u_backup, False, f, g):  # a fresh plan from here (either variant): extend
+        if verify(x, g.u_backup, False, f, g):  # a fresh plan from here (either variant): extend
             for a in range(3):
                 u[a] = g.u_backup[a]
             return GATE_BACKUP
@@ -516,7 +552,7 @@ def gate(x: Array, f: np.void, g: np.void, u: Array) -> int:
         for a in range(3):
             u[a] = g.u_backup[a]
         return GATE_BACKUP
-    if not _verify(x, g.u_backup, False, f, g):
+    if not verify(x, g.u_backup, False, f, g):
         return GATE_UNVERIFIED
     for a in range(3):
         u[a] = g.u_backup[a]
@@ -582,6 +618,6 @@ def backup_rollout(x: Array, u0: Array, f: NDArray[np.void], variant: str = "sun
 __all__ = [
     "BACKUP_DTYPE", "FAILED", "GATE_DTYPE", "HORIZON", "MOMENTUM", "NO_LAW", "RATE_LIMIT_FRACTION",
     "RATE_TIME_CONSTANT_S", "SETTLED", "SETTLED_ANGLE_RAD", "SETTLED_RATE_FRACTION", "SUN_SAFE", "SUN_SAFE_VARIANT",
-    "VARIANTS", "backup_command", "backup_record", "backup_rollout", "gate", "is_settled", "reset", "rollout",
-    "settled", "sun_safe_command", "sun_safe_error",
+    "VARIANTS", "backup_command", "backup_record", "backup_rollout", "backup_tail", "gate", "hold_sample",
+    "is_settled", "large_momentum", "reset", "rollout", "settled", "sun_safe_command", "sun_safe_error", "verify",
 ]  # fmt: skip

@@ -46,11 +46,26 @@ from rta_attitude.constraints.rows import rows
 from rta_attitude.dynamics.spacecraft import PLANT_DTYPE, plant_record
 from rta_attitude.dynamics.state import STATE_SIZE
 from rta_attitude.filter import active_set, outcome, proxsuite_qp
-from rta_attitude.filter.backup import BACKUP_DTYPE, GATE_DTYPE, backup_record, gate
+from rta_attitude.filter.backup import (
+    BACKUP_DTYPE,
+    GATE_DTYPE,
+    HORIZON,
+    NO_LAW,
+    SETTLED,
+    SUN_SAFE_VARIANT,
+    backup_record,
+    backup_tail,
+    gate,
+    hold_sample,
+    large_momentum,
+    verify,
+)
 from rta_attitude.filter.outcome import (
     ACTIVE_SET,
     FALLBACK,
+    GATE_BACKUP,
     GATE_OFF,
+    GATE_VERIFIED,
     HOLD,
     INVALID_STATE,
     NO_FALLBACK,
@@ -140,7 +155,11 @@ WORKSPACE_DTYPE = np.dtype([
     ("u_target", np.float64, (3,)),          # u_des with non-finite entries set to 0
     ("gnorm", np.float64, (M,)),             # |dBC/du| of each row
     ("gate", GATE_DTYPE),                    # the gatekeeper's committed plan and scratch (memory!)
+    ("result", RESULT_DTYPE),                # scratch: the answers the gatekeeper's nominal plan predicts
 ])  # fmt: skip
+"""Scratch and memory of one filter: a WORKSPACES-long array (`new_workspace`); the call uses the first,
+the gatekeeper's nominal plan runs the filter's own answers in the second."""
+WORKSPACES = 2
 
 
 def filter_record(cfg: Config) -> NDArray[np.void]:
@@ -171,8 +190,8 @@ def constraint_levels(priorities: tuple[tuple[str, ...], ...]) -> NDArray[np.int
 
 
 def new_workspace() -> NDArray[np.void]:
-    """A workspace record array (1,): scratch, and the gatekeeper's plan (none yet)."""
-    return np.zeros(1, WORKSPACE_DTYPE)
+    """A workspace record array (WORKSPACES,): scratch, and the gatekeeper's plan (none yet)."""
+    return np.zeros(WORKSPACES, WORKSPACE_DTYPE)
 
 
 # ----------------------------------------------------------------------------- steps
@@ -519,8 +538,10 @@ def prioritize(f: np.void, ws: np.void, r: np.void
 
 
 @numba.njit(**JIT)
-def filter_state(x: Array, u_des: Array, f: np.void, ws: np.void, r: np.void) -> None:
-    """One whole filter call: state x (19,), desired wheel accelerations u_des (3,) -> result record r."""
+def answer(x: Array, u_des: Array, f: np.void, ws: np.void, r: np.void) -> bool:
+    """The ASIF's answer r.u at state x (19,) for the desired wheel accelerations u_des (3,): every step of
+    the call but the gate and finish (a pure function of x and u_des: ws is scratch). Returns False for an
+    invalid state, answered (u = 0) and finished here."""
     t = ws.table
     for i in range(M):
         r.slack[i] = 0.0
@@ -540,14 +561,12 @@ def filter_state(x: Array, u_des: Array, f: np.void, ws: np.void, r: np.void) ->
         finish(ws, r)
         for i in range(M):
             r.h[i] = r.psi0[i] = r.psi1[i] = r.bc[i] = np.nan
-        return
+        return False
     for a in range(3):
         r.u[a] = min(max(ws.u_target[a], t.lo[a]), t.hi[a])
     if not need:
         r.status, r.fallback = PASS, NO_FALLBACK
-        r.gate = gate(ws.x, f, ws.gate, r.u)
-        finish(ws, r)
-        return
+        return True
     mode = np.empty(M, dtype=np.int8)
     row_modes(f, False, mode)
     relax = np.zeros(M + ZOH_ROWS)
@@ -583,7 +602,107 @@ def filter_state(x: Array, u_des: Array, f: np.void, ws: np.void, r: np.void) ->
                 r.slack[i] = max(r.slack[i], relax[M + q])
     r.fallback = reason
     r.status = FALLBACK if reason != NO_FALLBACK else SOLVED
-    r.gate = gate(ws.x, f, ws.gate, r.u)
+    return True
+
+
+@numba.njit(**LEAF)
+def _same(a: Array, b: Array) -> bool:
+    """a and b (n,) hold the same floats, bit for bit (a NaN never matches)."""
+    for i in range(a.shape[0]):
+        if not (a[i] == b[i] and math.copysign(1.0, a[i]) == math.copysign(1.0, b[i])):
+            return False
+    return True
+
+
+@numba.njit(**JIT)
+def plan_nominal(x: Array, u: Array, u_des: Array, f: np.void, wsa: NDArray[np.void]) -> bool:
+    """The gatekeeper's nominal plan from the state x (19,, as received): u (3,) held for a sample, then
+    for nominal_steps - 1 samples the filter's own answer (`answer`, u_des held) at each predicted state,
+    then the backup law (the committed plan's variant, the momentum mode only with a large momentum)
+    until it settles (small momentum) or to the horizon (large), every sample checked at every substep
+    (`backup.hold_sample`). On success the plan is committed: its states and answers at the samples go to
+    the gate's plan_x, plan_u, and later calls at those states with those answers are applied unchecked
+    (`gate_call`). Returns False (nothing committed) at the first violation or invalid state."""
+    b = f.backup
+    g, inner = wsa[0].gate, wsa[1]
+    N = b.nominal_steps
+    large = large_momentum(x, f.plant, b)
+    g.law = g.plan_law if (g.plan_law == SUN_SAFE_VARIANT or large) else SUN_SAFE_VARIANT
+    for i in range(STATE_SIZE):
+        g.x[i] = x[i]
+    g.checked = 0
+    for j in range(N):
+        for i in range(STATE_SIZE):
+            g.plan_x[j, i] = g.x[i]
+        if j == 0:
+            for a in range(3):
+                g.plan_u[0, a] = u[a]
+        else:
+            if not answer(g.x, u_des, f, inner, inner.result):
+                return False
+            for a in range(3):
+                g.plan_u[j, a] = inner.result.u[a]
+        if not hold_sample(g.plan_u[j], f, g, g.subs, False):
+            return False
+    found = backup_tail(f, g, g.subs, False)
+    if not (found == SETTLED or (found == HORIZON and large)):
+        return False
+    g.plan_law = g.law
+    g.plan_steps = b.horizon_steps + N - 1
+    g.plan_n = N
+    g.plan_at = 1
+    return True
+
+
+@numba.njit(**JIT)
+def gate_call(x: Array, u_des: Array, f: np.void, wsa: NDArray[np.void], r: np.void) -> int:
+    """The gatekeeper at the state x (19,, as received) with the filter's answer r.u (replaced in place by
+    the command to apply); returns its GATE_NAMES code. In order: on a committed nominal plan (x and r.u
+    are, bit for bit, the state and answer it predicted) -> apply, verified by that plan's rollout; a new
+    nominal plan (`plan_nominal`; after one fails, or its answers were not the ones predicted, not
+    again for nominal_steps calls) -> apply; on the plan but with another answer (u_des changed) -> that
+    answer alone (`backup.verify`), else the plan's own command; otherwise `backup.gate` (the answer held
+    a sample then the backup law, at the normalised state)."""
+    b = f.backup
+    if b.law == NO_LAW:
+        return GATE_OFF
+    ws = wsa[0]
+    g = ws.gate
+    at = g.plan_at
+    on_plan = at < g.plan_n and _same(x, g.plan_x[at])
+    if on_plan and _same(r.u, g.plan_u[at]):
+        g.plan_at += 1
+        g.plan_steps -= 1
+        g.reused += 1
+        return GATE_VERIFIED
+    k0, k1, k2 = g.plan_u[at, 0], g.plan_u[at, 1], g.plan_u[at, 2]  # the plan's command (a new plan overwrites)
+    if on_plan:  # u_des is not the one the plan held: predicting it so failed, so wait before planning again
+        g.nominal_wait = max(g.nominal_wait, b.nominal_steps)
+    if b.nominal_steps > 1:
+        if g.nominal_wait > 0:
+            g.nominal_wait -= 1
+        elif plan_nominal(x, r.u, u_des, f, wsa):
+            return GATE_VERIFIED
+        else:
+            g.nominal_wait = b.nominal_steps
+    g.plan_n = g.plan_at = 0
+    if on_plan:
+        if verify(ws.x, r.u, True, f, g):
+            return GATE_VERIFIED
+        r.u[0], r.u[1], r.u[2] = k0, k1, k2
+        g.plan_steps -= 1
+        return GATE_BACKUP
+    return gate(ws.x, f, g, r.u)
+
+
+@numba.njit(**JIT)
+def filter_state(x: Array, u_des: Array, f: np.void, wsa: NDArray[np.void], r: np.void) -> None:
+    """One whole filter call: state x (19,), desired wheel accelerations u_des (3,) -> result record r;
+    wsa: the filter's workspaces (`new_workspace`)."""
+    ws = wsa[0]
+    if not answer(x, u_des, f, ws, r):
+        return
+    r.gate = gate_call(x, u_des, f, wsa, r)
     finish(ws, r)
 
 
@@ -591,11 +710,12 @@ def filter_state(x: Array, u_des: Array, f: np.void, ws: np.void, r: np.void) ->
 def filter_many(X: Array, U_des: Array, f: NDArray[np.void], ws: NDArray[np.void], R: NDArray[np.void]) -> None:
     """`filter_state` of states X (N, 19) with commands U_des (N, 3) into results R (N,)."""
     for k in range(X.shape[0]):
-        filter_state(X[k], U_des[k], f[0], ws[0], R[k])
+        filter_state(X[k], U_des[k], f[0], ws, R[k])
 
 
 __all__ = [
     "ACTIVE_MULTIPLIER", "BIG", "DISTANCE", "FILTER_DTYPE", "HARD", "MIN_ROW_NORM", "NO_LEVEL", "OFF", "RESULT_DTYPE",
-    "SLACKED", "WORKSPACE_DTYPE", "assemble", "constraint_levels", "extract", "filter_many", "filter_record",
-    "filter_state", "finish", "new_workspace", "prepare", "prioritize", "row_modes", "solve",
+    "SLACKED", "WORKSPACES", "WORKSPACE_DTYPE", "answer", "assemble", "constraint_levels", "extract", "filter_many",
+    "filter_record", "filter_state", "finish", "gate_call", "new_workspace", "plan_nominal", "prepare", "prioritize",
+    "row_modes", "solve",
 ]  # fmt: skip

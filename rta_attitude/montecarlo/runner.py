@@ -42,7 +42,7 @@ from rta_attitude.dynamics.state import STATE_SIZE
 from rta_attitude.errors import RtaError
 from rta_attitude.filter.backup import reset
 from rta_attitude.filter.outcome import FALLBACK, GATE_NAMES, PASS
-from rta_attitude.filter.pipeline import RESULT_DTYPE, WORKSPACE_DTYPE
+from rta_attitude.filter.pipeline import RESULT_DTYPE, WORKSPACE_DTYPE, WORKSPACES
 from rta_attitude.jit import JIT, LEAF
 from rta_attitude.montecarlo import DEFAULT_CHUNK_RUNS
 from rta_attitude.simulation.closed_loop import advance, loop_record
@@ -110,7 +110,7 @@ def run_batch(X0: Array, steps: int, loop: NDArray[np.void], viol_s: NDArray[np.
     p, c = lp.plant, lp.filter.constraints
     S = lp.substeps
     dt = lp.dt_s
-    ws = np.zeros(1, WORKSPACE_DTYPE)
+    ws = np.zeros(WORKSPACES, WORKSPACE_DTYPE)
     ctx = np.zeros(1, CONTEXT_DTYPE)
     r = np.zeros(1, RESULT_DTYPE)
     u_des, u = np.zeros(3), np.empty(3)
@@ -144,7 +144,7 @@ def run_batch(X0: Array, steps: int, loop: NDArray[np.void], viol_s: NDArray[np.
                     min_h[k, i] = h[i]
             _mark(h, t, True, k, viol_s, viol_sub, first)
             measure(x, step, lp.sensors, ins[0], y)
-            advance(x, y, u_des, step, lp, ins[0], ws[0], r[0], u, subs, hs, ctx[0], work)
+            advance(x, y, u_des, step, lp, ins[0], ws, r[0], u, subs, hs, ctx[0], work)
             status = r[0].status
             if status != PASS:
                 qp_steps[k] += 1

@@ -54,7 +54,14 @@ from rta_attitude.dynamics.spacecraft import (
 )
 from rta_attitude.dynamics.state import STATE_SIZE
 from rta_attitude.filter.asif import AsifFilter, FilterResult
-from rta_attitude.filter.pipeline import FILTER_DTYPE, RESULT_DTYPE, WORKSPACE_DTYPE, filter_record, filter_state
+from rta_attitude.filter.pipeline import (
+    FILTER_DTYPE,
+    RESULT_DTYPE,
+    WORKSPACE_DTYPE,
+    WORKSPACES,
+    filter_record,
+    filter_state,
+)
 from rta_attitude.jit import JIT, LEAF
 from rta_attitude.simulation.trajectory import Trajectory, substep_minima
 
@@ -85,7 +92,8 @@ def loop_record(cfg: Config, rta: bool = True, pd: bool = True) -> NDArray[np.vo
 
 
 @numba.njit(**JIT)
-def advance(x: Array, y: Array, u_des: Array, k: int, lp: np.void, ins: np.void, ws: np.void, r: np.void, u: Array,
+def advance(x: Array, y: Array, u_des: Array, k: int, lp: np.void, ins: np.void, ws: NDArray[np.void], r: np.void,
+            u: Array,
             subs: Array, hs: Array, ctx: np.void, work: Array) -> None:
     """Sample k of the loop from the true state x (19,), measured as y (`sensors.measure`), with the
     desired command u_des (3,), already across the torque interface: filter of y (result r) if RTA,
@@ -125,7 +133,7 @@ def run_scenario(x0: Array, steps: int, sched_t: Array, sched_q: Array, loop: ND
     lp = loop[0]
     p = lp.plant
     ins = np.zeros(1, INSTRUMENT_DTYPE)
-    ws = np.zeros(1, WORKSPACE_DTYPE)
+    ws = np.zeros(WORKSPACES, WORKSPACE_DTYPE)
     ctx = np.zeros(1, CONTEXT_DTYPE)
     u_des = np.empty(3)
     A, wd = np.empty((3, 3)), np.empty(3)
@@ -139,7 +147,7 @@ def run_scenario(x0: Array, steps: int, sched_t: Array, sched_q: Array, loop: ND
         measure(X[k], k, lp.sensors, ins[0], Y[k])
         pd_command(Y[k], Q_C[k], lp.controller, u_des)
         torque_round_trip(u_des, p, U_DES[k])
-        advance(X[k], Y[k], U_DES[k], k, lp, ins[0], ws[0], R[k], U[k], subs, Hsub[k], ctx[0], work)
+        advance(X[k], Y[k], U_DES[k], k, lp, ins[0], ws, R[k], U[k], subs, Hsub[k], ctx[0], work)
         attitude_matrix(X[k, 0], X[k, 1], X[k, 2], X[k, 3], A)
         omega_drift(X[k], A, p, wd)
         for a in range(3):
