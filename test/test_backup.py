@@ -71,9 +71,15 @@ def _reset(ga: np.ndarray) -> None:
 
 
 def test_config_choice_and_default() -> None:
+    """The gatekeeper is on by default; the paper's scenarios run the paper's method (no gatekeeper), and
+    `none` turns it off."""
     cfg = config.load()
-    assert cfg.filter.backup_law == "none"
-    assert filter_record(cfg)[0]["backup"]["law"] == 0
+    assert cfg.filter.backup_law == "sun_safe"
+    assert filter_record(cfg)[0]["backup"]["law"] == 1
+    assert filter_record(cfg.with_backup("none"))[0]["backup"]["law"] == 0
+    for name in ("paper_example", "passed_example", "slack_on_exclusion_zone"):
+        assert cfg.for_scenario(cfg.scenario(name)).filter.backup_law == "none"
+    assert cfg.for_scenario(cfg.scenario("battery_vs_temperature")).filter.backup_law == "sun_safe"
     with pytest.raises(ConfigError, match=r"filter\.backup_law"):
         with_backup(cfg, "sideways")
     with pytest.raises(ConfigError, match=r"filter\.backup_horizon_s"):
@@ -209,7 +215,7 @@ def test_recursive_feasibility_on_monte_carlo_runs(cfg: Config, states: Array) -
 def test_filter_result_names_what_the_gate_did(cfg: Config, states: Array) -> None:
     from rta_attitude.filter.asif import AsifFilter
 
-    on, off = AsifFilter(cfg), AsifFilter(config.load())
+    on, off = AsifFilter(cfg), AsifFilter(config.load().with_backup("none"))
     x = states[3]
     assert off.filter(x, np.zeros(3)).gate == "off"
     res = on.filter(x, np.zeros(3))

@@ -23,7 +23,7 @@ from rta_attitude.filter.pipeline import constraint_levels
 from rta_attitude.montecarlo.sampling import sample_initial_states
 from rta_attitude.topics import QP_KEYS
 
-CFG = config.load().with_fallback("prioritize")
+CFG = config.load().with_fallback("prioritize").with_backup("none")  # the ASIF's own answer
 SPLIT = (("exclusion_zone",), ("omega",), ("psi",), ("temperature", "battery", "communication"))
 """Levels that separate the default top level's groups, so that one of them gives way and the others hold."""
 
@@ -236,7 +236,7 @@ def test_gave_way_is_reported_in_the_result_and_filter_status():
 
 def test_other_policies_are_unchanged_by_the_priorities():
     """The soften filter gives the same answers whatever the priorities say."""
-    base = config.load().with_fallback("soften")
+    base = config.load().with_fallback("soften").with_backup("none")
     other = replace(base, filter=replace(base.filter, priorities=SPLIT))
     for x, u_des in _infeasible_states(base, 4):
         a, b = AsifFilter(base).filter(x, u_des), AsifFilter(other).filter(x, u_des)
@@ -274,12 +274,14 @@ def test_conflicting_constraints_scenario_shows_which_level_gives_way() -> None:
     (delta0, delta1) that a short give-way spends without reaching T_max, and the node cools by radiation;
     with temperature above the battery, the battery gives way ~1,700 steps and is lost (the model does
     not cap E, so it drains at P_out). Which level gave way is read from the filter's own report
-    (`gave_way`) at the trajectory's states."""
+    (`gave_way`) at the trajectory's states. The priorities alone (`--backup-law none`): with the gatekeeper
+    (the default) both orders keep every hard constraint."""
     from collections import Counter
 
     from rta_attitude.simulation.closed_loop import ClosedLoop
 
-    cfg = config.load()
+    gated = config.load()
+    cfg = gated.with_backup("none")
     scenario = cfg.scenario("battery-vs-temperature")
     p = cfg.filter.priorities
     assert p[1] == ("battery",) and p[2] == ("temperature",)  # the default order this test describes
@@ -297,4 +299,9 @@ def test_conflicting_constraints_scenario_shows_which_level_gives_way() -> None:
     gave, h = seen["default"]
     assert 0 < gave["temperature"] < 100 and gave["battery"] == 0
     hard = [n for n in traj.names if n != "communication"]
+    assert all(h[n] >= 0 for n in hard), h
+    assert gated.filter.backup_law == "sun_safe"
+    c = replace(gated, filter=replace(gated.filter, priorities=(p[0], p[2], p[1], p[3])))
+    traj = ClosedLoop(c, scenario, rta=True).run()
+    h = dict(zip(traj.names, np.minimum(traj.h.min(axis=0), traj.h_substep_min.min(axis=0))))
     assert all(h[n] >= 0 for n in hard), h

@@ -18,7 +18,7 @@ from rta_attitude.dynamics.state import OMEGA, PSI
 from rta_attitude.filter.asif import AsifFilter
 from rta_attitude.montecarlo.sampling import sample_initial_states
 
-CFG = config.load()
+CFG = config.load().with_backup("none")  # the ASIF's own answer (the gatekeeper: test_backup.py)
 W_MAX = CFG.limits.omega_max_rad_s
 LIMIT = (1 - CFG.filter.zoh_margin) * W_MAX
 DT = CFG.filter.sample_time_s

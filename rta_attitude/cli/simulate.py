@@ -8,7 +8,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from rta_attitude.config.schema import PRESETS, SIMULATORS, SOLVERS
+from rta_attitude.config.schema import BACKUP_LAWS, PRESETS, SIMULATORS, SOLVERS
 from rta_attitude.errors import RtaError
 
 
@@ -25,6 +25,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "needs pip install rta_attitude[basilisk]")
     parser.add_argument("--noise", action="store_true",
                         help="sensor and actuator errors on (the config's sensors: section; docs/noise.md)")
+    parser.add_argument("--backup-law", choices=BACKUP_LAWS, default=None,
+                        help="the gatekeeper's backup law (default: the scenario's, else the config's "
+                             "filter.backup_law; docs/backup.md)")
     parser.add_argument("--out", type=Path, default=Path("out/simulate"), help="output directory")
     parser.add_argument("--no-plot", action="store_true", help="skip the PNG figures (figure.png, skymap.png)")
     parser.add_argument("--config", type=Path, default=None,
@@ -63,12 +66,14 @@ def run(args: argparse.Namespace) -> int:
         cfg = cfg.with_simulator(args.simulator)
     if args.noise:
         cfg = cfg.with_noise()
+    from dataclasses import replace
+
     scenario = cfg.scenario(args.scenario)
+    if args.backup_law is not None:  # the command line over the scenario's
+        scenario = replace(scenario, backup_law=args.backup_law)
     if args.duration is not None:
         if not args.duration > 0:
             raise RtaError(f"--duration must be > 0 s, got {args.duration}")
-        from dataclasses import replace
-
         scenario = replace(scenario, duration_s=float(args.duration))
     out = output_dir(args.out)
     loop = ClosedLoop(cfg, scenario, rta=not args.no_rta)

@@ -214,6 +214,7 @@ def _scenario(name: str, s: _Section) -> Scenario:
         schedule_q=tuple((float(a), float(b), float(c), float(d)) for a, b, c, d in qs),
         slack_weights=slack,
         model=s.text("model") if "model" in s.data else None,
+        backup_law=s.text("backup_law") if "backup_law" in s.data else None,
         epoch_utc=s.text("epoch_utc", DEFAULT_EPOCH_UTC),
     )
     s.done()

@@ -434,12 +434,17 @@ class Scenario:
     figures: `paper`)."""
     epoch_utc: str = DEFAULT_EPOCH_UTC
     """UTC date of t = 0: ROS time stamps (/clock, headers, bag times) are epoch + t."""
+    backup_law: str | None = None
+    """If given (BACKUP_LAWS), the gatekeeper's backup law in this scenario (the paper's figures: `none`,
+    the paper's method has no gatekeeper)."""
 
     def __post_init__(self) -> None:
         where = f"scenarios.{self.name}"
         epoch_ns(f"{where}.epoch_utc", self.epoch_utc)
         if self.model is not None:
             _choice(f"{where}.model", self.model, PLANT_MODELS)
+        if self.backup_law is not None:
+            _choice(f"{where}.backup_law", self.backup_law, BACKUP_LAWS)
         _positive(f"{where}.duration_s", self.duration_s)
         _choice(f"{where}.controller", self.controller, CONTROLLERS)
         if self.schedule_s[0] != 0.0 or any(b <= a for a, b in zip(self.schedule_s, self.schedule_s[1:])):
@@ -570,8 +575,10 @@ class Config:
         return cfg
 
     def for_scenario(self, scenario: Scenario) -> Config:
-        """A copy with the scenario's slack weights and model, where it names them."""
+        """A copy with the scenario's slack weights, model and backup law, where it names them."""
         cfg = self if scenario.model is None else self.with_models(scenario.model, scenario.model)
+        if scenario.backup_law is not None:
+            cfg = cfg.with_backup(scenario.backup_law)
         if scenario.slack_weights is None:
             return cfg
         weights = dict(scenario.slack_weights)

@@ -659,10 +659,10 @@ def gate_call(x: Array, u_des: Array, f: np.void, wsa: NDArray[np.void], r: np.v
     """The gatekeeper at the state x (19,, as received) with the filter's answer r.u (replaced in place by
     the command to apply); returns its GATE_NAMES code. In order: on a committed nominal plan (x and r.u
     are, bit for bit, the state and answer it predicted) -> apply, verified by that plan's rollout; a new
-    nominal plan (`plan_nominal`; after one fails, or its answers were not the ones predicted, not
-    again for nominal_steps calls) -> apply; on the plan but with another answer (u_des changed) -> that
-    answer alone (`backup.verify`), else the plan's own command; otherwise `backup.gate` (the answer held
-    a sample then the backup law, at the normalised state)."""
+    nominal plan (`plan_nominal`; after one fails, or a call is not the one its plan predicted (sensor
+    noise, another u_des), not again for nominal_steps calls) -> apply; on the plan but with another
+    answer (u_des changed) -> that answer alone (`backup.verify`), else the plan's own command; otherwise
+    `backup.gate` (the answer held a sample then the backup law, at the normalised state)."""
     b = f.backup
     if b.law == NO_LAW:
         return GATE_OFF
@@ -676,7 +676,7 @@ def gate_call(x: Array, u_des: Array, f: np.void, wsa: NDArray[np.void], r: np.v
         g.reused += 1
         return GATE_VERIFIED
     k0, k1, k2 = g.plan_u[at, 0], g.plan_u[at, 1], g.plan_u[at, 2]  # the plan's command (a new plan overwrites)
-    if on_plan:  # u_des is not the one the plan held: predicting it so failed, so wait before planning again
+    if at < g.plan_n:  # the plan's prediction failed (another state or u_des): wait before planning again
         g.nominal_wait = max(g.nominal_wait, b.nominal_steps)
     if b.nominal_steps > 1:
         if g.nominal_wait > 0:
