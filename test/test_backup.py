@@ -399,3 +399,39 @@ def test_an_answer_off_the_plan_is_checked_alone_or_replaced_by_the_plans(cfg: C
                 assert res.gate == "backup"
                 np.testing.assert_array_equal(res.u, planned)
     assert len(seen) >= 3
+
+
+def test_in_backup_mode_a_settled_plan_is_followed_without_a_new_rollout(cfg: Config, states: Array) -> None:
+    """Where the candidate fails on the committed plan's predicted state (bit for bit) and the plan reaches
+    the terminal set, the gate applies the plan's next command (its backup law) without a rollout, and
+    predicts the next state as the plant's `integrate` of it; one ulp off the prediction it checks afresh."""
+    f = filter_record(cfg)
+    p = f["plant"]
+    D = cfg.spacecraft.wheel_inertia_kgm2
+    g = np.zeros(1, GATE_DTYPE)
+    x = states[3].copy()
+    assert momentum_rad_s(x, cfg) < 300.0
+    u = backup_command(x, f)
+    assert GATE_NAMES[_gate(x, u.copy(), f, g)] == "verified"
+    assert g[0]["has_next"] and g[0]["plan_settled"]
+
+    def step(y: Array, v: Array) -> Array:
+        return integrate(y, torque_to_wheel_accel(wheel_accel_to_torque(v, D), D), 1.0, p, cfg.substeps)[0]
+
+    x1 = step(x, u)
+    np.testing.assert_array_equal(g[0]["next_x"], x1)
+    bad = np.array([np.nan, 0.0, 0.0])  # a candidate no rollout passes
+    for _ in range(3):
+        before = int(g[0]["reused"])
+        applied = bad.copy()
+        assert GATE_NAMES[_gate(x1, applied, f, g)] == "backup"
+        np.testing.assert_array_equal(applied, backup_command(x1, f))
+        assert int(g[0]["reused"]) == before + 1
+        x1 = step(x1, applied)
+        np.testing.assert_array_equal(g[0]["next_x"], x1)
+    off = x1.copy()
+    off[11] = np.nextafter(off[11], np.inf)
+    before = int(g[0]["reused"])
+    applied = bad.copy()
+    assert GATE_NAMES[_gate(off, applied, f, g)] == "backup"
+    assert int(g[0]["reused"]) == before

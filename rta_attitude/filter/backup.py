@@ -114,7 +114,12 @@ GATE_DTYPE = np.dtype([
     ("plan_x", np.float64, (MAX_NOMINAL_STEPS, STATE_SIZE)),  # its states at the samples (as received)
     ("plan_u", np.float64, (MAX_NOMINAL_STEPS, 3)),           # the filter's answers there (candidates)
     ("nominal_wait", np.int64),          # calls to wait before the next nominal plan is tried
-    ("reused", np.int64),                # calls answered from a committed nominal plan (since reset)
+    ("next_x", np.float64, (STATE_SIZE,)),  # the committed plan's state at the next sample where it applies
+    ("has_next", np.uint8),              # ... next_x is set
+    ("plan_settled", np.uint8),          # the committed plan reaches the terminal set (holds for good)
+    ("first_x", np.float64, (STATE_SIZE,)),  # the last rollout's state after its first sample
+    ("x0", np.float64, (STATE_SIZE,)),   # the state the call's rollouts start from
+    ("reused", np.int64),                # calls answered from a committed plan without a rollout (since reset)
     ("checked", np.int64),               # substeps the last rollout checked
     ("x", np.float64, (STATE_SIZE,)),    # the rollout's state at the samples
     ("u", np.float64, (3,)),             # the command of the rollout's sample
@@ -491,6 +496,8 @@ def rollout(x0: Array, u0: Array, f: np.void, g: np.void, traj: Array, record: b
     g.checked = 0
     if not hold_sample(g.u, f, g, traj, record):
         return FAILED
+    for i in range(STATE_SIZE):
+        g.first_x[i] = g.x[i]
     return backup_tail(f, g, traj, record)
 
 
@@ -501,6 +508,7 @@ def reset(g: np.void) -> None:
     g.plan_law = SUN_SAFE_VARIANT
     g.plan_n = g.plan_at = 0
     g.nominal_wait = 0
+    g.has_next = g.plan_settled = 0
     g.reused = 0
 
 
@@ -525,6 +533,10 @@ def verify(x: Array, u: Array, candidate: bool, f: np.void, g: np.void) -> bool:
             sun_safe_command(x, f.plant, f.constraints, b, g, u)
         found = rollout(x, u, f, g, g.subs, False)
         if found == SETTLED or (found == HORIZON and large):
+            for i in range(STATE_SIZE):
+                g.next_x[i] = g.first_x[i]
+            g.has_next = 1
+            g.plan_settled = found == SETTLED
             g.plan_law = g.law
             g.plan_steps = b.horizon_steps
             return True
@@ -532,15 +544,41 @@ def verify(x: Array, u: Array, candidate: bool, f: np.void, g: np.void) -> bool:
 
 
 @numba.njit(**LEAF)
+def same(a: Array, b: Array) -> bool:
+    """a and b (n,) hold the same floats, bit for bit (a NaN never matches)."""
+    for i in range(a.shape[0]):
+        if not (a[i] == b[i] and math.copysign(1.0, a[i]) == math.copysign(1.0, b[i])):
+            return False
+    return True
+
+
+@numba.njit(**LEAF)
 def gate(x: Array, f: np.void, g: np.void, u: Array) -> int:
-    """The gatekeeper at the (normalised) state x (19,) with the candidate u (3,) (the ASIF's answer,
-    replaced in place by the command to apply). Returns the GATE_NAMES code of what it did; g
-    (GATE_DTYPE) carries the committed plan from call to call."""
+    """The gatekeeper at the state x (19,) with the candidate u (3,) (the ASIF's answer, replaced in place
+    by the command to apply). Returns the GATE_NAMES code of what it did; g (GATE_DTYPE) carries the
+    committed plan from call to call. Where the candidate fails at x, the committed plan reaches the
+    terminal set and x is, bit for bit, its predicted state (next_x: the filter's model is the plant's),
+    the plan's next command (its backup law at x) is applied without a new rollout: its rollout verified
+    it; next_x then becomes one sample of it from x."""
     b = f.backup
     if b.law == NO_LAW:
         return GATE_OFF
     if verify(x, u, True, f, g):
         return GATE_VERIFIED
+    if g.plan_steps > 0 and g.has_next and g.plan_settled and same(x, g.next_x):
+        g.law = g.plan_law
+        sun_safe_command(x, f.plant, f.constraints, b, g, g.u_backup)
+        for i in range(STATE_SIZE):
+            g.x[i] = x[i]
+        g.checked = 0
+        g.has_next = hold_sample(g.u_backup, f, g, g.subs, False)  # (verified: it cannot fail here)
+        for i in range(STATE_SIZE):
+            g.next_x[i] = g.x[i]
+        g.plan_steps -= 1
+        g.reused += 1
+        for a in range(3):
+            u[a] = g.u_backup[a]
+        return GATE_BACKUP
     if g.plan_steps > 0:  # the plan verified earlier: its next command is its backup law's, here
         if verify(x, g.u_backup, False, f, g):  # a fresh plan from here (either variant): extend
             for a in range(3):
@@ -549,6 +587,7 @@ def gate(x: Array, f: np.void, g: np.void, u: Array) -> int:
         g.law = g.plan_law
         sun_safe_command(x, f.plant, f.constraints, b, g, g.u_backup)
         g.plan_steps -= 1
+        g.has_next = 0
         for a in range(3):
             u[a] = g.u_backup[a]
         return GATE_BACKUP
@@ -619,5 +658,6 @@ __all__ = [
     "BACKUP_DTYPE", "FAILED", "GATE_DTYPE", "HORIZON", "MOMENTUM", "NO_LAW", "RATE_LIMIT_FRACTION",
     "RATE_TIME_CONSTANT_S", "SETTLED", "SETTLED_ANGLE_RAD", "SETTLED_RATE_FRACTION", "SUN_SAFE", "SUN_SAFE_VARIANT",
     "VARIANTS", "backup_command", "backup_record", "backup_rollout", "backup_tail", "gate", "hold_sample",
-    "is_settled", "large_momentum", "reset", "rollout", "settled", "sun_safe_command", "sun_safe_error", "verify",
+    "is_settled", "large_momentum", "reset", "rollout", "same", "settled", "sun_safe_command", "sun_safe_error",
+    "verify",
 ]  # fmt: skip
