@@ -1,5 +1,7 @@
 """Which Monte Carlo failures were physically unavoidable: rules that bound what any admissible command
-sequence could do from an initial state (docs/montecarlo.md)."""
+sequence could do from an initial state (docs/montecarlo.md), and for the failed runs the viability
+oracle's `momentum_battery` rule (`viability.rules`: the panel cannot face the sun where the wheels cannot
+hold the total angular momentum)."""
 
 from __future__ import annotations
 
@@ -16,7 +18,12 @@ from rta_attitude.dynamics.state import ENERGY, OMEGA, PSI, TEMP
 Array = NDArray[np.float64]
 
 UNRECOVERABLE_RULES: tuple[str, ...] = ("battery_energy", "temperature_heating", "exclusion_zone_escape",
-                                        "wheel_momentum")
+                                        "wheel_momentum", "momentum_battery")
+"""The rules of `unavoidable`, and the viability oracle's `momentum_battery` (`viability.rules`), applied by
+`classify` to the failed runs only."""
+KEPT_BY_MOMENTUM_BATTERY: tuple[str, ...] = ("battery", "omega_x", "omega_y", "omega_z", "psi_x", "psi_y", "psi_z")
+"""`momentum_battery` proves that no admissible command keeps all of these (the battery, with the rates and
+wheel speeds the bound on the panel's angle assumes)."""
 
 
 CLASSIFY_STEP_S = 0.05
@@ -132,11 +139,22 @@ def classify(x0: Array, violated: NDArray[np.bool_], cfg: Config,
     Returns:
         (unrecoverable (n,) bool, the rules that proved it per run ('' if none, ';'-joined)).
     """
+    from rta_attitude.viability.params import as_oracle_state, default_enforce, from_config
+    from rta_attitude.viability.rules import battery_rule, rules_apply
+
     proofs = unavoidable(x0, cfg, duration_s)  # name -> (n, m) bool
+    model = from_config(cfg)
+    enforced = default_enforce(cfg)
+    momentum = (rules_apply(model) and all(g in enforced for g in ("omega", "psi", "battery"))
+                and math.isfinite(duration_s))
+    kept = np.array([n in KEPT_BY_MOMENTUM_BATTERY for n in CONSTRAINT_NAMES])
     rules: list[str] = []
     out = np.zeros(len(x0), dtype=bool)
     for k in range(len(x0)):
         hit = [name for name, mask in proofs.items() if np.any(mask[k] & violated[k])]
+        if (momentum and np.any(violated[k] & kept)
+                and battery_rule(as_oracle_state(x0[k]), duration_s, model, momentum=True)):
+            hit.append("momentum_battery")
         rules.append(";".join(hit))
         out[k] = bool(hit)
     return out, rules
