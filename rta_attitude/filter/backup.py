@@ -43,7 +43,15 @@ import numpy as np
 from numpy.typing import NDArray
 
 from rta_attitude.config.schema import BACKUP_LAWS, MAX_BACKUP_SUBSTEPS, MAX_NOMINAL_STEPS, Config
-from rta_attitude.constraints.base import N_CONSTRAINTS
+from rta_attitude.constraints.base import (
+    BATTERY,
+    COMMUNICATION,
+    EXCLUSION_ZONE,
+    N_CONSTRAINTS,
+    OMEGA_X,
+    PSI_X,
+    TEMPERATURE,
+)
 from rta_attitude.constraints.geometry import CONTEXT_DTYPE
 from rta_attitude.constraints.rows import safety_values
 from rta_attitude.dynamics.quaternion import attitude_matrix, error_vector, from_matrix
@@ -119,6 +127,7 @@ GATE_DTYPE = np.dtype([
     ("plan_settled", np.uint8),          # the committed plan reaches the terminal set (holds for good)
     ("first_x", np.float64, (STATE_SIZE,)),  # the last rollout's state after its first sample
     ("x0", np.float64, (STATE_SIZE,)),   # the state the call's rollouts start from
+    ("margin", np.float64, (M,)),        # what each h must keep in a rollout (`check_margins`)
     ("reused", np.int64),                # calls answered from a committed plan without a rollout (since reset)
     ("checked", np.int64),               # substeps the last rollout checked
     ("x", np.float64, (STATE_SIZE,)),    # the rollout's state at the samples
@@ -440,12 +449,33 @@ def settled(x: Array, p: np.void, b: np.void, g: np.void) -> bool:
 
 
 @numba.njit(**LEAF)
+def check_margins(p: np.void, c: np.void, out: Array) -> None:
+    """What each constraint's h must keep in a rollout (M,), in h's units: the measurement-robust error
+    bounds of the constraint record (0 without sensor errors: then h >= 0), so that a rollout from the
+    measured state that keeps them keeps the true h >= 0 over the first sample, where the gate checks
+    again. Angles: the attitude error (err_att, with the actuator's drift over a hold); T and E: their
+    errors; a rate (or wheel speed) with error e: w_max^2 - (|w| + e)^2 >= 0 needs h >= 2 w_max e + e^2,
+    e = the gyro's (tachometer's) error plus the actuator's (|G_a| err_u,a dt; err_u,a dt)."""
+    out[EXCLUSION_ZONE] = c.err_att_rad
+    out[COMMUNICATION] = c.err_att_rad
+    out[TEMPERATURE] = c.err_T_K
+    out[BATTERY] = c.err_E_J
+    for a in range(3):
+        e = c.err_omega_axis_rad_s + abs(p.control_gain[a]) * c.err_u_rad_s2[a] * c.dt_s
+        out[OMEGA_X + a] = 2.0 * c.omega_max_rad_s * e + e * e
+        e = c.err_psi_rad_s + c.err_u_rad_s2[a] * c.dt_s
+        out[PSI_X + a] = 2.0 * c.psi_max_rad_s * e + e * e
+
+
+@numba.njit(**LEAF)
 def hold_sample(u: Array, f: np.void, g: np.void, traj: Array, record: bool) -> bool:
     """One sample of a rollout from g.x (19,): u (3,) held (across the torque interface, saturated, as the
     loop applies it), `substeps` RK4 steps of the filter's model, every enabled, non-slacked constraint
-    checked at each substep (h >= 0, NaN fails). g.x becomes the state at the sample's end; g.checked
-    counts the substeps (with record, their states go to traj). Returns False at the first violation."""
+    checked at each substep (h >= its `check_margins`: 0 without sensor errors; NaN fails). g.x becomes
+    the state at the sample's end; g.checked counts the substeps (with record, their states go to traj).
+    Returns False at the first violation."""
     p, c, b = f.plant, f.constraints, f.backup
+    check_margins(p, c, g.margin)
     S = b.substeps
     subs = g.subs[:S]
     x = g.x
@@ -460,7 +490,7 @@ def hold_sample(u: Array, f: np.void, g: np.void, traj: Array, record: bool) -> 
         safety_values(subs[j], p, c, g.ctx, g.h)
         for i in range(M):
             gi = c.gains[i]
-            if gi.enabled != 0 and gi.slack_weight == 0.0 and not g.h[i] >= 0.0:
+            if gi.enabled != 0 and gi.slack_weight == 0.0 and not g.h[i] >= g.margin[i]:
                 return False
     for i in range(STATE_SIZE):
         x[i] = subs[S - 1, i]
@@ -584,10 +614,21 @@ def gate(x: Array, f: np.void, g: np.void, u: Array) -> int:
             for a in range(3):
                 u[a] = g.u_backup[a]
             return GATE_BACKUP
+        if not (g.has_next and same(x, g.next_x)):
+            # off the plan (sensor errors, a model other than the plant's): its command is verified from a
+            # state the spacecraft is not in; the candidate (its rows robust to the errors) instead
+            g.plan_steps = 0
+            g.has_next = 0
+            return GATE_UNVERIFIED
         g.law = g.plan_law
         sun_safe_command(x, f.plant, f.constraints, b, g, g.u_backup)
+        for i in range(STATE_SIZE):  # the plan's next state: one sample of its command
+            g.x[i] = x[i]
+        g.checked = 0
+        g.has_next = hold_sample(g.u_backup, f, g, g.subs, False)
+        for i in range(STATE_SIZE):
+            g.next_x[i] = g.x[i]
         g.plan_steps -= 1
-        g.has_next = 0
         for a in range(3):
             u[a] = g.u_backup[a]
         return GATE_BACKUP
@@ -657,7 +698,7 @@ def backup_rollout(x: Array, u0: Array, f: NDArray[np.void], variant: str = "sun
 __all__ = [
     "BACKUP_DTYPE", "FAILED", "GATE_DTYPE", "HORIZON", "MOMENTUM", "NO_LAW", "RATE_LIMIT_FRACTION",
     "RATE_TIME_CONSTANT_S", "SETTLED", "SETTLED_ANGLE_RAD", "SETTLED_RATE_FRACTION", "SUN_SAFE", "SUN_SAFE_VARIANT",
-    "VARIANTS", "backup_command", "backup_record", "backup_rollout", "backup_tail", "gate", "hold_sample",
-    "is_settled", "large_momentum", "reset", "rollout", "same", "settled", "sun_safe_command", "sun_safe_error",
-    "verify",
+    "VARIANTS", "backup_command", "backup_record", "backup_rollout", "backup_tail", "check_margins", "gate",
+    "hold_sample", "is_settled", "large_momentum", "reset", "rollout", "same", "settled", "sun_safe_command",
+    "sun_safe_error", "verify",
 ]  # fmt: skip
