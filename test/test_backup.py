@@ -23,6 +23,7 @@ from rta_attitude.filter.backup import (
     TILT_WHEEL_MARGIN,
     backup_command,
     backup_rollout,
+    check_margins,
     gate,
     is_settled,
     reset,
@@ -435,3 +436,56 @@ def test_in_backup_mode_a_settled_plan_is_followed_without_a_new_rollout(cfg: Co
     applied = bad.copy()
     assert GATE_NAMES[_gate(off, applied, f, g)] == "backup"
     assert int(g[0]["reused"]) == before
+
+
+@numba.njit
+def _margins(fa: np.ndarray, out: Array) -> None:
+    f = fa[0]
+    check_margins(f.plant, f.constraints, out)
+
+
+def test_rollout_margins_cover_the_measurement_errors(cfg: Config) -> None:
+    """Without sensor errors the rollout keeps h >= 0; with them, each h keeps a margin such that whatever
+    true state lies within the error bounds of the measured one (rates, wheel speeds: sampled here) has
+    h >= 0 wherever the measured one keeps its margin."""
+    from rta_attitude.constraints.base import measurement_errors
+
+    zero = np.empty(len(CONSTRAINT_NAMES))
+    _margins(filter_record(cfg), zero)
+    np.testing.assert_array_equal(zero, 0.0)
+    noisy = cfg.with_noise()
+    m = np.empty(len(CONSTRAINT_NAMES))
+    _margins(filter_record(noisy), m)
+    err = measurement_errors(noisy)
+    col = {n: i for i, n in enumerate(CONSTRAINT_NAMES)}
+    assert m[col["exclusion_zone"]] == err["err_att_rad"] > 0
+    assert m[col["temperature"]] == err["err_T_K"] > 0 and m[col["battery"]] == err["err_E_J"] > 0
+    L, G, dt = noisy.limits, noisy.spacecraft.control_gain, noisy.filter.sample_time_s
+    rng = np.random.default_rng(4)
+    for a in range(3):
+        for name, limit, e in ((f"omega_{'xyz'[a]}", L.omega_max_rad_s,
+                                err["err_omega_axis_rad_s"] + abs(G[a]) * err["err_u_rad_s2"][a] * dt),
+                               (f"psi_{'xyz'[a]}", L.psi_max_rad_s,
+                                err["err_psi_rad_s"] + err["err_u_rad_s2"][a] * dt)):
+            measured = rng.uniform(-limit, limit, 20000)
+            true = measured + rng.uniform(-e, e, measured.size)
+            kept = limit**2 - measured**2 >= m[col[name]]
+            assert kept.any() and np.all(limit**2 - true[kept] ** 2 >= 0.0), name
+
+
+def test_off_its_plan_the_gate_does_not_apply_a_stale_backup_command(cfg: Config, states: Array) -> None:
+    """After a plan was committed, a state that is not the one it predicted (sensor errors, another model),
+    from which neither the candidate nor the backup law verifies, gets the candidate (unverified) and the
+    plan is dropped: its backup command was verified from a state the spacecraft is not in."""
+    f = filter_record(cfg)
+    g = np.zeros(1, GATE_DTYPE)
+    x = states[3].copy()
+    assert GATE_NAMES[_gate(x, backup_command(x, f), f, g)] == "verified"
+    assert g[0]["plan_steps"] > 0
+    off = g[0]["next_x"].copy()
+    off[4] = 1.5 * cfg.limits.omega_max_rad_s  # past the rate limit: no rollout from here passes
+    cand = np.array([0.5, -0.5, 0.25])
+    applied = cand.copy()
+    assert GATE_NAMES[_gate(off, applied, f, g)] == "unverified"
+    np.testing.assert_array_equal(applied, cand)
+    assert g[0]["plan_steps"] == 0
