@@ -110,6 +110,7 @@ BACKUP_DTYPE = np.dtype([
     ("settled_rate_rad_s", np.float64),
     ("omega_max_rad_s", np.float64),
     ("psi_max_rad_s", np.float64),
+    ("psi_limit_rad_s", np.float64),     # the wheel speed the law's targets may use (psi_max; less with sensor errors)
     ("momentum_variant_rad_s", np.float64),  # the MOMENTUM variant only where |J w - s D psi| / D exceeds this
     ("nominal_steps", np.int64),         # samples of the filter's own answers before the backup law (>= 1)
 ])  # fmt: skip
@@ -166,6 +167,7 @@ def backup_record(cfg: Config) -> NDArray[np.void]:
     b["settled_sin_half_angle"] = math.sin(0.5 * SETTLED_ANGLE_RAD)
     b["settled_rate_rad_s"] = SETTLED_RATE_FRACTION * L.omega_max_rad_s
     b["omega_max_rad_s"], b["psi_max_rad_s"] = L.omega_max_rad_s, L.psi_max_rad_s
+    b["psi_limit_rad_s"] = L.psi_max_rad_s
     sc = cfg.spacecraft
     b["momentum_variant_rad_s"] = L.psi_max_rad_s - float(np.max(sc.J)) * L.omega_max_rad_s / sc.wheel_inertia_kgm2
     b["nominal_steps"] = max(1, round(o.backup_nominal_s / o.sample_time_s))
@@ -196,7 +198,7 @@ def _wheel_load(T: Array, Hh: Array, p: np.void, b: np.void) -> float:
         ha = abs(T[a, 0] * Hh[0] + T[a, 1] * Hh[1] + T[a, 2] * Hh[2])
         v = (ha + p.inertia_kgm2[a] * b.omega_max_rad_s) / p.wheel_inertia_kgm2
         worst = max(worst, v)
-    return worst - b.psi_max_rad_s
+    return worst - b.psi_limit_rad_s
 
 
 @numba.njit(**LEAF)
@@ -247,7 +249,7 @@ def _tilted_target(cs: float, sn: float, hb0: float, hb1: float, hb2: float, p: 
     momentum to tilt from or the wheels cannot hold it at any beta."""
     Hh = g.Hh
     hn = math.sqrt(Hh[0] * Hh[0] + Hh[1] * Hh[1] + Hh[2] * Hh[2])
-    top = (1.0 - TILT_WHEEL_MARGIN) * b.psi_max_rad_s * p.wheel_inertia_kgm2  # what each wheel may hold
+    top = (1.0 - TILT_WHEEL_MARGIN) * b.psi_limit_rad_s * p.wheel_inertia_kgm2  # what each wheel may hold
     cap = top - p.inertia_kgm2[2] * b.omega_max_rad_s  # at rest, with the rates' share left over
     c1 = top - p.inertia_kgm2[0] * b.omega_max_rad_s
     c2 = top - p.inertia_kgm2[1] * b.omega_max_rad_s
@@ -643,6 +645,28 @@ def gate(x: Array, f: np.void, g: np.void, u: Array) -> int:
 
 
 @numba.njit(**LEAF)
+def _margins_of(fa: NDArray[np.void], out: Array) -> None:
+    f = fa[0]
+    check_margins(f.plant, f.constraints, out)
+
+
+def apply_measurement_margins(rec: NDArray[np.void]) -> None:
+    """Keep the backup law inside what its rollouts accept where they keep measurement margins
+    (`check_margins`, sensor errors on): its rate command at RATE_LIMIT_FRACTION of the rate the margins
+    leave (sqrt(w_max^2 - margin)), its targets' wheel speeds within the wheel speed they leave. rec: the
+    FILTER_DTYPE record (1,), changed in place; without sensor errors (every margin 0) nothing changes."""
+    m = np.empty(M)
+    _margins_of(rec, m)
+    if not np.any(m > 0.0):
+        return
+    b = rec["backup"]
+    w_max, psi_max = float(b["omega_max_rad_s"][0]), float(b["psi_max_rad_s"][0])
+    w_left = math.sqrt(max(0.0, w_max * w_max - float(np.max(m[OMEGA_X:OMEGA_X + 3]))))
+    b["rate_limit_rad_s"] = min(float(b["rate_limit_rad_s"][0]), RATE_LIMIT_FRACTION * w_left)
+    b["psi_limit_rad_s"] = math.sqrt(max(0.0, psi_max * psi_max - float(np.max(m[PSI_X:PSI_X + 3]))))
+
+
+@numba.njit(**LEAF)
 def _command(x: Array, fa: NDArray[np.void], ga: NDArray[np.void], out: Array) -> None:
     f = fa[0]
     sun_safe_command(x, f.plant, f.constraints, f.backup, ga[0], out)
@@ -698,7 +722,7 @@ def backup_rollout(x: Array, u0: Array, f: NDArray[np.void], variant: str = "sun
 __all__ = [
     "BACKUP_DTYPE", "FAILED", "GATE_DTYPE", "HORIZON", "MOMENTUM", "NO_LAW", "RATE_LIMIT_FRACTION",
     "RATE_TIME_CONSTANT_S", "SETTLED", "SETTLED_ANGLE_RAD", "SETTLED_RATE_FRACTION", "SUN_SAFE", "SUN_SAFE_VARIANT",
-    "VARIANTS", "backup_command", "backup_record", "backup_rollout", "backup_tail", "check_margins", "gate",
-    "hold_sample", "is_settled", "large_momentum", "reset", "rollout", "same", "settled", "sun_safe_command",
-    "sun_safe_error", "verify",
+    "VARIANTS", "apply_measurement_margins", "backup_command", "backup_record", "backup_rollout", "backup_tail",
+    "check_margins", "gate", "hold_sample", "is_settled", "large_momentum", "reset", "rollout", "same", "settled",
+    "sun_safe_command", "sun_safe_error", "verify",
 ]  # fmt: skip

@@ -53,6 +53,7 @@ from rta_attitude.filter.backup import (
     NO_LAW,
     SETTLED,
     SUN_SAFE_VARIANT,
+    apply_measurement_margins,
     backup_record,
     backup_tail,
     gate,
@@ -180,6 +181,7 @@ def filter_record(cfg: Config) -> NDArray[np.void]:
     f["backup"] = backup_record(cfg)[0]
     f["level"] = constraint_levels(cfg.filter.priorities)
     f["n_levels"] = len(cfg.filter.priorities)
+    apply_measurement_margins(rec)  # the backup law inside its rollouts' margins (sensor errors on)
     return rec
 
 
