@@ -489,3 +489,29 @@ def test_off_its_plan_the_gate_does_not_apply_a_stale_backup_command(cfg: Config
     assert GATE_NAMES[_gate(off, applied, f, g)] == "unverified"
     np.testing.assert_array_equal(applied, cand)
     assert g[0]["plan_steps"] == 0
+
+
+def test_with_sensor_errors_the_backup_law_stays_inside_its_rollouts_margins(cfg: Config, states: Array) -> None:
+    """Without sensor errors the backup law is as configured; with them its rate command and its targets'
+    wheel speeds leave the rollouts' measurement margins (`apply_measurement_margins`), so that from calm
+    states its own rollout, which keeps those margins, still reaches the terminal set."""
+    plain = filter_record(cfg)[0]["backup"]
+    assert plain["rate_limit_rad_s"] == RATE_LIMIT_FRACTION * cfg.limits.omega_max_rad_s
+    assert plain["psi_limit_rad_s"] == cfg.limits.psi_max_rad_s
+    noisy_cfg = cfg.with_noise()
+    f = filter_record(noisy_cfg)
+    m = np.empty(len(CONSTRAINT_NAMES))
+    _margins(f, m)
+    b = f[0]["backup"]
+    w_max, psi_max = cfg.limits.omega_max_rad_s, cfg.limits.psi_max_rad_s
+    omega = [CONSTRAINT_NAMES.index(f"omega_{a}") for a in "xyz"]
+    psi = [CONSTRAINT_NAMES.index(f"psi_{a}") for a in "xyz"]
+    assert b["rate_limit_rad_s"] ** 2 < w_max**2 - m[omega].max()
+    assert b["psi_limit_rad_s"] ** 2 == pytest.approx(psi_max**2 - m[psi].max(), rel=1e-12)
+    settled = 0
+    for x in states[:12]:
+        if momentum_rad_s(x, cfg) > 400.0:
+            continue
+        found, _ = backup_rollout(x, backup_command(x, f), f)
+        settled += found == "settled"
+    assert settled >= 3
