@@ -221,8 +221,8 @@ class AsifFilter:
         """Forget the gatekeeper's committed plan (a new run starts; nothing else carries over)."""
         g = self._ws[0]["gate"]
         g["plan_steps"] = g["plan_n"] = g["plan_at"] = g["nominal_wait"] = 0
-        g["reused"] = 0
-        g["plan_law"] = SUN_SAFE_VARIANT
+        g["reused"] = g["has_next"] = g["plan_settled"] = 0
+        g["plan_law"] = SUN_SAFE_VARIANT  # as backup.reset
 
     def filter(self, x: Array, u_des: Array) -> FilterResult:
         """Filter one desired command.
