@@ -147,6 +147,11 @@ class SceneNode(RtaNode):
         self.builder = convert.SceneBuilder(L.exclusion_fov_rad, L.exclusion_angle_rad, L.comm_angle_rad,
                                             math.radians(self.knobs["scene_warn_deg"]))
         self.counts.update(state_rejected=0, drawn=0, drawn_without_status=0)
+        # compiled kernels loaded (compiled on a cold cache, ~20-40 s) before any reader or writer exists: the
+        # plant starts stepping once this node reads `state`, so it must be able to draw by then (a fresh
+        # clone's CI run found a scene that subscribed first, compiled while the 300-step run went by, and
+        # drew after the recorder had closed the bag)
+        scene_of_states([0.0], self.scenario.x0, self.cfg, self.constraints)
         self.outs = {}
         for topic in topics.SCENE_TOPICS:
             spec = topics.TOPICS[topic]
@@ -162,7 +167,6 @@ class SceneNode(RtaNode):
                 continue
             spec = topics.TOPICS[topic]
             self.create_subscription(interface.msg_class(spec.type_name), spec.name, callback, view, raw=True)
-        scene_of_states([0.0], self.scenario.x0, self.cfg, self.constraints)  # compiled kernels loaded before we draw
         self.get_logger().info(f"drawing {self.resolve_topic_name(source)} every {self.every} step(s)"
                                + (" with the filter's status" if self.rta else "")
                                + (", hosted by the recorder" if hosted is not None else ""))
