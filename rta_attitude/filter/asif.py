@@ -21,6 +21,7 @@ import logging
 import time
 from dataclasses import dataclass, field
 
+import numba
 import numpy as np
 from numpy.typing import NDArray
 
@@ -29,13 +30,14 @@ from rta_attitude.constraints import ConstraintSet
 from rta_attitude.dynamics.state import STATE_SIZE
 from rta_attitude.errors import SolverError
 from rta_attitude.filter import outcome
-from rta_attitude.filter.backup import SUN_SAFE_VARIANT
+from rta_attitude.filter.backup import reset
 from rta_attitude.filter.pipeline import (
     RESULT_DTYPE,
     filter_many,
     filter_record,
     new_workspace,
 )
+from rta_attitude.jit import LEAF
 from rta_attitude.kernel_cache import drop_stale_caches
 
 Array = NDArray[np.float64]
@@ -193,6 +195,11 @@ class FilterCounters:
                 self.by_status[name] = self.by_status.get(name, 0) + n
 
 
+@numba.njit(**LEAF)
+def _reset_gate(ws: NDArray[np.void]) -> None:
+    reset(ws[0].gate)  # the gatekeeper's one reset (backup.reset)
+
+
 class AsifFilter:
     """The ASIF safety filter of one configuration; call `filter(x, u_des)` or `filter_batch(X, U)`.
 
@@ -219,10 +226,7 @@ class AsifFilter:
 
     def reset(self) -> None:
         """Forget the gatekeeper's committed plan (a new run starts; nothing else carries over)."""
-        g = self._ws[0]["gate"]
-        g["plan_steps"] = g["plan_n"] = g["plan_at"] = g["nominal_wait"] = 0
-        g["reused"] = g["has_next"] = g["plan_settled"] = 0
-        g["plan_law"] = SUN_SAFE_VARIANT  # as backup.reset
+        _reset_gate(self._ws)
 
     def filter(self, x: Array, u_des: Array) -> FilterResult:
         """Filter one desired command.
@@ -301,6 +305,7 @@ def compile_kernels(cfg: Config) -> float:
     rec = filter_record(cfg)
     ws, out = new_workspace(), np.zeros(1, RESULT_DTYPE)
     filter_many(x[None], np.zeros((1, 3)), rec, ws, out)
+    _reset_gate(ws)
     return time.perf_counter() - t0
 
 

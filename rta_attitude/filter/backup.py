@@ -113,6 +113,7 @@ BACKUP_DTYPE = np.dtype([
     ("psi_limit_rad_s", np.float64),     # the wheel speed the law's targets may use (psi_max; less with sensor errors)
     ("momentum_variant_rad_s", np.float64),  # the MOMENTUM variant only where |J w - s D psi| / D exceeds this
     ("nominal_steps", np.int64),         # samples of the filter's own answers before the backup law (>= 1)
+    ("margin", np.float64, (M,)),        # what each h must keep in a rollout (`check_margins`; 0 without sensor errors)
 ])  # fmt: skip
 """The gatekeeper's parameters (a field of the filter's record)."""
 
@@ -128,7 +129,6 @@ GATE_DTYPE = np.dtype([
     ("plan_settled", np.uint8),          # the committed plan reaches the terminal set (holds for good)
     ("first_x", np.float64, (STATE_SIZE,)),  # the last rollout's state after its first sample
     ("x0", np.float64, (STATE_SIZE,)),   # the state the call's rollouts start from
-    ("margin", np.float64, (M,)),        # what each h must keep in a rollout (`check_margins`)
     ("reused", np.int64),                # calls answered from a committed plan without a rollout (since reset)
     ("checked", np.int64),               # substeps the last rollout checked
     ("x", np.float64, (STATE_SIZE,)),    # the rollout's state at the samples
@@ -473,11 +473,10 @@ def check_margins(p: np.void, c: np.void, out: Array) -> None:
 def hold_sample(u: Array, f: np.void, g: np.void, traj: Array, record: bool) -> bool:
     """One sample of a rollout from g.x (19,): u (3,) held (across the torque interface, saturated, as the
     loop applies it), `substeps` RK4 steps of the filter's model, every enabled, non-slacked constraint
-    checked at each substep (h >= its `check_margins`: 0 without sensor errors; NaN fails). g.x becomes
+    checked at each substep (h >= b.margin, `check_margins`: 0 without sensor errors; NaN fails). g.x becomes
     the state at the sample's end; g.checked counts the substeps (with record, their states go to traj).
     Returns False at the first violation."""
     p, c, b = f.plant, f.constraints, f.backup
-    check_margins(p, c, g.margin)
     S = b.substeps
     subs = g.subs[:S]
     x = g.x
@@ -492,7 +491,7 @@ def hold_sample(u: Array, f: np.void, g: np.void, traj: Array, record: bool) -> 
         safety_values(subs[j], p, c, g.ctx, g.h)
         for i in range(M):
             gi = c.gains[i]
-            if gi.enabled != 0 and gi.slack_weight == 0.0 and not g.h[i] >= g.margin[i]:
+            if gi.enabled != 0 and gi.slack_weight == 0.0 and not g.h[i] >= b.margin[i]:
                 return False
     for i in range(STATE_SIZE):
         x[i] = subs[S - 1, i]
@@ -585,6 +584,23 @@ def same(a: Array, b: Array) -> bool:
 
 
 @numba.njit(**LEAF)
+def _follow_plan(x: Array, f: np.void, g: np.void, u: Array) -> None:
+    """The committed plan's next command at x (its backup law) into u, and next_x := one sample of it from x
+    (the state the plan predicts at the next call)."""
+    g.law = g.plan_law
+    sun_safe_command(x, f.plant, f.constraints, f.backup, g, g.u_backup)
+    for i in range(STATE_SIZE):
+        g.x[i] = x[i]
+    g.checked = 0
+    g.has_next = hold_sample(g.u_backup, f, g, g.subs, False)
+    for i in range(STATE_SIZE):
+        g.next_x[i] = g.x[i]
+    g.plan_steps -= 1
+    for a in range(3):
+        u[a] = g.u_backup[a]
+
+
+@numba.njit(**LEAF)
 def gate(x: Array, f: np.void, g: np.void, u: Array) -> int:
     """The gatekeeper at the state x (19,) with the candidate u (3,) (the ASIF's answer, replaced in place
     by the command to apply). Returns the GATE_NAMES code of what it did; g (GATE_DTYPE) carries the
@@ -597,42 +613,22 @@ def gate(x: Array, f: np.void, g: np.void, u: Array) -> int:
         return GATE_OFF
     if verify(x, u, True, f, g):
         return GATE_VERIFIED
-    if g.plan_steps > 0 and g.has_next and g.plan_settled and same(x, g.next_x):
-        g.law = g.plan_law
-        sun_safe_command(x, f.plant, f.constraints, b, g, g.u_backup)
-        for i in range(STATE_SIZE):
-            g.x[i] = x[i]
-        g.checked = 0
-        g.has_next = hold_sample(g.u_backup, f, g, g.subs, False)  # (verified: it cannot fail here)
-        for i in range(STATE_SIZE):
-            g.next_x[i] = g.x[i]
-        g.plan_steps -= 1
-        g.reused += 1
-        for a in range(3):
-            u[a] = g.u_backup[a]
-        return GATE_BACKUP
     if g.plan_steps > 0:  # the plan verified earlier: its next command is its backup law's, here
-        if verify(x, g.u_backup, False, f, g):  # a fresh plan from here (either variant): extend
+        on_plan = g.has_next and same(x, g.next_x)
+        # a settled plan holds for good on its own trajectory; else a fresh plan from here (either variant)
+        if not (on_plan and g.plan_settled) and verify(x, g.u_backup, False, f, g):
             for a in range(3):
                 u[a] = g.u_backup[a]
             return GATE_BACKUP
-        if not (g.has_next and same(x, g.next_x)):
+        if not on_plan:
             # off the plan (sensor errors, a model other than the plant's): its command is verified from a
             # state the spacecraft is not in; the candidate (its rows robust to the errors) instead
             g.plan_steps = 0
             g.has_next = 0
             return GATE_UNVERIFIED
-        g.law = g.plan_law
-        sun_safe_command(x, f.plant, f.constraints, b, g, g.u_backup)
-        for i in range(STATE_SIZE):  # the plan's next state: one sample of its command
-            g.x[i] = x[i]
-        g.checked = 0
-        g.has_next = hold_sample(g.u_backup, f, g, g.subs, False)
-        for i in range(STATE_SIZE):
-            g.next_x[i] = g.x[i]
-        g.plan_steps -= 1
-        for a in range(3):
-            u[a] = g.u_backup[a]
+        if g.plan_settled:
+            g.reused += 1
+        _follow_plan(x, f, g, u)
         return GATE_BACKUP
     if not verify(x, g.u_backup, False, f, g):
         return GATE_UNVERIFIED
@@ -651,15 +647,17 @@ def _margins_of(fa: NDArray[np.void], out: Array) -> None:
 
 
 def apply_measurement_margins(rec: NDArray[np.void]) -> None:
-    """Keep the backup law inside what its rollouts accept where they keep measurement margins
-    (`check_margins`, sensor errors on): its rate command at RATE_LIMIT_FRACTION of the rate the margins
-    leave (sqrt(w_max^2 - margin)), its targets' wheel speeds within the wheel speed they leave. rec: the
-    FILTER_DTYPE record (1,), changed in place; without sensor errors (every margin 0) nothing changes."""
+    """The rollouts' measurement margins (`check_margins`, once: they depend on the record only) into the
+    backup record, and the backup law kept inside what the rollouts then accept (sensor errors on): its rate
+    command at RATE_LIMIT_FRACTION of the rate the margins leave (sqrt(w_max^2 - margin)), its targets'
+    wheel speeds within the wheel speed they leave. rec: the FILTER_DTYPE record (1,), changed in place;
+    without sensor errors (every margin 0) the law is unchanged."""
     m = np.empty(M)
     _margins_of(rec, m)
+    b = rec["backup"]
+    b["margin"][0] = m
     if not np.any(m > 0.0):
         return
-    b = rec["backup"]
     w_max, psi_max = float(b["omega_max_rad_s"][0]), float(b["psi_max_rad_s"][0])
     w_left = math.sqrt(max(0.0, w_max * w_max - float(np.max(m[OMEGA_X:OMEGA_X + 3]))))
     b["rate_limit_rad_s"] = min(float(b["rate_limit_rad_s"][0]), RATE_LIMIT_FRACTION * w_left)

@@ -679,9 +679,10 @@ def gate_call(x: Array, u_des: Array, f: np.void, wsa: NDArray[np.void], r: np.v
     ws = wsa[0]
     g = ws.gate
     n2 = x[0] * x[0] + x[1] * x[1] + x[2] * x[2] + x[3] * x[3]
-    xs = g.x0  # where the rollouts start (UNIT_TOLERANCE)
+    raw = abs(n2 - 1.0) <= UNIT_TOLERANCE  # where the rollouts start (UNIT_TOLERANCE)
+    xs = g.x0  # (a copy: numba cannot pick between the two arrays, x read-only and ws.x)
     for i in range(STATE_SIZE):
-        xs[i] = x[i] if abs(n2 - 1.0) <= UNIT_TOLERANCE else ws.x[i]
+        xs[i] = x[i] if raw else ws.x[i]
     at = g.plan_at
     on_plan = at < g.plan_n and same(x, g.plan_x[at])
     if on_plan:
@@ -693,11 +694,9 @@ def gate_call(x: Array, u_des: Array, f: np.void, wsa: NDArray[np.void], r: np.v
         # u_des is not the one the plan held: no new nominal plan for a while; the answer alone, else the
         # plan's own answer (its rows are intact: no nominal plan was tried)
         g.nominal_wait = max(g.nominal_wait, b.nominal_steps)
-        n_plan = g.plan_n
         if verify(xs, r.u, True, f, g):
             g.plan_n = g.plan_at = 0
             return GATE_VERIFIED
-        g.plan_n = n_plan
         for a in range(3):
             r.u[a] = g.plan_u[at, a]
         g.plan_at += 1
