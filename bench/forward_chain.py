@@ -3,12 +3,12 @@ only forward (no physics, no filter, no bag). bench_dds.py runs it beside the re
 
     python bench/forward_chain.py ROLE --steps N [--result FILE]      (ROLE: plant controller filter recorder)
 
-- plant: waits until every topic it writes has the run's readers, then publishes state(t_0); on each
-  torque_cmd(t_k) publishes state(t_k+1), /clock, torque_applied and the four inspection topics (the
-  real plant's set with inspection_every = 1); after the last step run_status `done`. It writes the wall
+- plant: waits until every topic it writes has the run's readers, then publishes the state of t_0; on each
+  torque_cmd(t_k) publishes /clock, the five state messages (topics.STATE_INPUTS), the packed `state` and
+  torque_applied, the real plant's set; after the last step run_status `done`. It writes the wall
   time from its first state to the last command to --result (the real plant's `wall_time_s`).
-- controller: on each state, publishes torque_des with the state's stamp.
-- filter: on state and torque_des of the same stamp, publishes torque_cmd and filter_status.
+- controller: on each odometry, publishes torque_des with its stamp.
+- filter: on the five state messages and torque_des of the same stamp, publishes torque_cmd and filter_status.
 - recorder: subscribes raw to every recorded topic and counts; exits on run_status `done`.
 
 Controller, filter and recorder run with use_sim_time (so they subscribe to /clock), as the launcher starts
@@ -34,7 +34,7 @@ from rclpy.parameter import Parameter
 from rclpy.signals import SignalHandlerOptions
 
 from rta_attitude import config, topics
-from rta_attitude.dynamics.spacecraft import plant_record
+from rta_attitude.dynamics.sensors import message_fields, sensors_record
 from rta_attitude.filter.asif import AsifFilter
 from rta_attitude.ros import convert, interface
 
@@ -62,27 +62,27 @@ class Forwarder(Node):
         x = np.asarray(scen.x0, dtype=float)
         self.msgs: dict[str, Any] = {}
         if role == topics.PLANT:
-            p = plant_record(cfg)
-            self.msgs = {
-                topics.STATE: convert.state_msg(x, 0), topics.TORQUE_APPLIED: convert.torque_msg(np.zeros(3), 0),
-                topics.ODOMETRY: convert.odometry_msg(x, 0), topics.TEMPERATURE: convert.temperature_msg(x, 0),
-                topics.BATTERY: convert.battery_msg(x, 0, p, 8.0), topics.SUN_VECTOR: convert.sun_vector_msg(x, 0),
-            }  # fmt: skip
+            fields = message_fields(x, sensors_record(cfg))
+            self.msgs = convert.state_messages(fields, 0, cfg.power.bus_voltage_V, -1.0, np.zeros(3))
+            self.msgs[topics.STATE] = convert.state_msg(x, 0)
+            self.msgs[topics.TORQUE_APPLIED] = convert.torque_msg(np.zeros(3), 0)
             self.sub(topics.TORQUE_CMD, self.on_command)
             self.k, self.t0 = 0, 0.0
             self.gate = self.create_timer(0.005, self.start)
         elif role == topics.CONTROLLER:
             self.msgs = {topics.TORQUE_DES: convert.torque_msg(np.ones(3) * 1e-5, 0)}
-            self.sub(topics.STATE, self.on_state_controller)
+            self.sub(topics.ODOMETRY, self.on_state_controller)
         elif role == topics.FILTER:
             f = AsifFilter(cfg)
             res = f.filter(x, np.zeros(3))
             self.msgs = {topics.TORQUE_CMD: convert.torque_msg(np.ones(3) * 1e-5, 0),
                          topics.FILTER_STATUS: convert.filter_status_msg(res, 0, f.counters, "robust",
                                                                          ["communication"])}
+            self.parts: dict[int, int] = {}
             self.states: set[int] = set()
             self.desired: set[int] = set()
-            self.sub(topics.STATE, self.on_state_filter)
+            for name in topics.STATE_INPUTS:
+                self.sub(name, self.on_state_filter)
             self.sub(topics.TORQUE_DES, self.on_desired)
         else:
             self.count = 0
@@ -117,10 +117,10 @@ class Forwarder(Node):
         self.sample(0)
 
     def sample(self, t_ns: int) -> None:
-        self.publish(topics.STATE, t_ns)
         self.publish(topics.CLOCK, t_ns)
-        for name in topics.INSPECTION_TOPICS:
+        for name in topics.STATE_INPUTS:
             self.publish(name, t_ns)
+        self.publish(topics.STATE, t_ns)
 
     def on_command(self, msg: Any) -> None:
         t_ns = convert.stamp_ns(msg.header.stamp)
@@ -148,8 +148,12 @@ class Forwarder(Node):
 
     # filter
     def on_state_filter(self, msg: Any) -> None:
-        self.states.add(convert.stamp_ns(msg.header.stamp))
-        self.answer()
+        t_ns = convert.stamp_ns(msg.header.stamp)
+        self.parts[t_ns] = self.parts.get(t_ns, 0) + 1
+        if self.parts[t_ns] == len(topics.STATE_INPUTS):
+            del self.parts[t_ns]
+            self.states.add(t_ns)
+            self.answer()
 
     def on_desired(self, msg: Any) -> None:
         self.desired.add(convert.stamp_ns(msg.header.stamp))

@@ -49,6 +49,8 @@ BODY_FRAME = "body"
 """frame_id of body-frame vectors (torques) and Odometry.child_frame_id."""
 HILL_FRAME = "hill"
 """frame_id of Hill-frame quantities (Odometry pose, sun vector)."""
+WHEEL_JOINTS: tuple[str, ...] = ("wheel_x", "wheel_y", "wheel_z")
+"""JointState.name of the reaction wheels on `joint_states` (the wheels on the body's x, y, z axes)."""
 
 # ----------------------------------------------------------------------------- QoS
 
@@ -70,10 +72,10 @@ class QosSpec:
 STREAM_QOS = QosSpec()
 """Lockstep and recorded data: reliable, keep all, volatile."""
 STATE_QOS = QosSpec(liveliness=True)
-"""`state`: as STREAM_QOS, plus automatic liveliness with the run's lease, so that controller, filter and
-recorder learn within the lease that the plant died. Only `state` has it: a reader that requests a lease
-does not match a writer without one, and torque_des must match any primary controller's writer (the
-filter covers a dead controller with `desired_timeout_s`)."""
+"""`odometry` and `state`: as STREAM_QOS, plus automatic liveliness with the run's lease, so that controller,
+filter (odometry), recorder and scene (state) learn within the lease that the plant died. Only these two
+have it: a reader that requests a lease does not match a writer without one, and torque_des must match any
+primary controller's writer (the filter covers a dead controller with `desired_timeout_s`)."""
 STATUS_QOS = QosSpec(durability="transient_local", history="keep_last", depth=10)
 """run_status: late joiners get the latest statuses."""
 COMMAND_QOS = QosSpec(history="keep_last", depth=10)
@@ -124,6 +126,7 @@ TORQUE_CMD = "torque_cmd"
 FILTER_STATUS = "filter_status"
 TORQUE_APPLIED = "torque_applied"
 ODOMETRY = "odometry"
+WHEELS = "joint_states"
 TEMPERATURE = "temperature"
 BATTERY = "battery"
 SUN_VECTOR = "sun_vector"
@@ -137,10 +140,10 @@ TOPICS: dict[str, TopicSpec] = {
     for t in (
         TopicSpec(CLOCK, "rosgraph_msgs/msg/Clock", STREAM_QOS, PLANT, _ALL,
                   "simulation time t_k, one per step (nodes run with use_sim_time)"),
-        TopicSpec(STATE, "sensor_msgs/msg/JointState", STATE_QOS, PLANT,
-                  ((CONTROLLER, False, False), (FILTER, True, False), (SCENE, False, False), *_ALL),
-                  "the whole state: name = STATE_NAMES, position = values (model units), stamp = t_k; "
-                  "as measured (sensors: on, docs/noise.md)"),
+        TopicSpec(STATE, "sensor_msgs/msg/JointState", STATE_QOS, PLANT, ((SCENE, False, False), *_ALL),
+                  "record and debug: the whole state packed, name = STATE_NAMES, position = values (model units, "
+                  "full precision), stamp = t_k; as measured (sensors: on, docs/noise.md). The loop reads the "
+                  "STATE_INPUTS"),
         TopicSpec(STATE_TRUE, "sensor_msgs/msg/JointState", STREAM_QOS, PLANT, _ALL,
                   "the true state, as `state` (published and recorded only with sensors: on)"),
         TopicSpec(ATTITUDE_COMMAND, "geometry_msgs/msg/QuaternionStamped", COMMAND_QOS, "",
@@ -157,14 +160,19 @@ TOPICS: dict[str, TopicSpec] = {
                   "per constraint h, Psi, BC, slack, intervening; QP status, fallback, solve time"),
         TopicSpec(TORQUE_APPLIED, "geometry_msgs/msg/Vector3Stamped", STREAM_QOS, PLANT, _ALL,
                   "torque the plant held over [t_k, t_k + dt) before saturation (ZOH, deadline fallback)"),
-        TopicSpec(ODOMETRY, "nav_msgs/msg/Odometry", STREAM_QOS, PLANT, _ALL,
-                  "inspection: attitude (body in Hill), body rates, CW position/velocity"),
-        TopicSpec(TEMPERATURE, "sensor_msgs/msg/Temperature", STREAM_QOS, PLANT, _ALL,
-                  "inspection: -j_B face temperature [degC]"),
-        TopicSpec(BATTERY, "sensor_msgs/msg/BatteryState", STREAM_QOS, PLANT, _ALL,
-                  "inspection: battery energy as charge [Ah] at the nominal voltage"),
-        TopicSpec(SUN_VECTOR, "geometry_msgs/msg/Vector3Stamped", STREAM_QOS, PLANT, _ALL,
-                  "inspection: unit vector to the sun, frame hill"),
+        TopicSpec(ODOMETRY, "nav_msgs/msg/Odometry", STATE_QOS, PLANT,
+                  ((CONTROLLER, False, False), (FILTER, True, False), *_ALL),
+                  "attitude (body in Hill: frame hill, child body), body rates, CW position (Hill) and velocity "
+                  "(body), as measured; stamp = t_k"),
+        TopicSpec(WHEELS, "sensor_msgs/msg/JointState", STREAM_QOS, PLANT, ((FILTER, True, False), *_ALL),
+                  "reaction wheels: name = WHEEL_JOINTS, velocity = rotor speed [rad/s] as measured, effort = "
+                  "motor torque of the last hold [N m]"),
+        TopicSpec(TEMPERATURE, "sensor_msgs/msg/Temperature", STREAM_QOS, PLANT, ((FILTER, True, False), *_ALL),
+                  "-j_B face temperature [degC], as measured"),
+        TopicSpec(BATTERY, "sensor_msgs/msg/BatteryState", STREAM_QOS, PLANT, ((FILTER, True, False), *_ALL),
+                  "battery energy as charge [Ah, float32] at power.bus_voltage_V, as measured"),
+        TopicSpec(SUN_VECTOR, "geometry_msgs/msg/Vector3Stamped", STREAM_QOS, PLANT, ((FILTER, True, False), *_ALL),
+                  "unit vector to the sun, frame hill (ephemeris)"),
         TopicSpec(RUN_STATUS, "diagnostic_msgs/msg/DiagnosticArray", STATUS_QOS, PLANT, _ALL,
                   "run state (running, done, failed), step counts, deadline misses, expected counts"),
         TopicSpec(SCENE_TRANSFORM, "geometry_msgs/msg/TransformStamped", STREAM_QOS, SCENE, _ALL,
@@ -176,7 +184,11 @@ TOPICS: dict[str, TopicSpec] = {
 }  # fmt: skip
 """Every topic of a run, by (relative) name."""
 
-INSPECTION_TOPICS: tuple[str, ...] = (ODOMETRY, TEMPERATURE, BATTERY, SUN_VECTOR)
+STATE_INPUTS: tuple[str, ...] = (ODOMETRY, WHEELS, TEMPERATURE, BATTERY, SUN_VECTOR)
+"""The state as the flight software receives it, one message each per sample, all stamped t_k: the filter
+reads all five and pairs them by exact stamp; the controller reads odometry. Their fields are
+`dynamics.sensors.encode`'s, so a reader rebuilds exactly the state `simulate` gives its filter."""
+CONTROLLER_INPUTS: tuple[str, ...] = (ODOMETRY,)
 PER_STEP_ANSWERS: tuple[str, ...] = (TORQUE_DES, TORQUE_CMD, FILTER_STATUS)
 """The chain's answers to each state: one message per state in a run without faults (the recorder
 waits for them at the end while their writers are there)."""
@@ -386,9 +398,6 @@ KNOBS: tuple[Knob, ...] = (
          ("hold", "zero")),
     Knob("hold_max_steps", 1, (PLANT,),
          "deadline_fallback hold: consecutive misses for which the last torque is held; zero after that"),
-    Knob("inspection_every", 1, (PLANT,), "publish the inspection topics every n-th step", minimum=1),
-    Knob("battery_voltage_V", 8.0, (PLANT,), "nominal bus voltage for BatteryState (display only) [V]",
-         positive=True),
     Knob("exit_when_done", True, (PLANT, RECORDER), "exit after the run ends (plant) / the bag is closed"),
     Knob("bag_path", "", (RECORDER,), "MCAP file to write (default: rta_attitude_YYYY_MM_DD-HH_MM_SS.mcap)"),
     Knob("bag_overwrite", False, (RECORDER,), "replace an existing bag file"),
@@ -441,7 +450,8 @@ __all__ = [
     "ATTITUDE_COMMAND", "BATTERY", "BODY_FRAME", "CLOCK", "COMMAND_QOS", "CONFIG_SECTIONS", "CONSTRAINT_KEYS",
     "CONSTRAINT_STATUS_PREFIX", "CONTROLLER", "DEFAULT_NAMESPACE",
     "DIAGNOSTICS", "DIAGNOSTICS_QOS", "EXECUTABLES", "EXPECTED_PREFIX", "FILTER",
-    "FILTER_STATUS", "HILL_FRAME", "INPUT_COUNTERS", "INPUT_SOURCE_KEY", "INSPECTION_TOPICS", "KNOBS",
+    "FILTER_STATUS", "HILL_FRAME", "INPUT_COUNTERS", "INPUT_SOURCE_KEY", "STATE_INPUTS", "CONTROLLER_INPUTS",
+    "WHEELS", "WHEEL_JOINTS", "KNOBS",
     "LIVE_PARAMETERS", "MODULES",
     "NODE_NAMES", "NO_FALLBACK", "ODOMETRY", "PACKAGE", "PER_STEP_ANSWERS", "PLANT", "PLANT_COUNTERS", "QP_KEYS",
     "QP_STATUS_NAME",

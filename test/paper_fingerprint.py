@@ -1,9 +1,9 @@
 """Fingerprint of the paper configuration (the paper's model in plant and filter): sha256 of the
 trajectory and command arrays of `simulate` of the paper's scenarios and of Monte Carlo runs.
 
-`python test/paper_fingerprint.py OUT.json` writes them; test/data/paper_fingerprint.json was written
-at commit f163328 (before the gyrostat became the default), and test_paper_fingerprint checks that
-the paper configuration still gives those bytes.
+`python test/paper_fingerprint.py OUT.json LABEL` writes them; test/data/paper_fingerprint.json was written
+at b39a96d + the message interface (test_paper_fingerprint's docstring says why again), and
+test_paper_fingerprint checks that the paper configuration still gives those bytes.
 """
 
 from __future__ import annotations
@@ -53,10 +53,15 @@ def fingerprint(cfg: Config) -> dict[str, str]:
     return out
 
 
-if __name__ == "__main__":
+def paper_configuration() -> Config:
+    """The paper's model in plant and filter and the paper's method (no backup): what is fingerprinted."""
     from rta_attitude import config
 
-    result = {"commit": sys.argv[2] if len(sys.argv) > 2 else "?", "fingerprint": fingerprint(config.load())}
+    return config.load().with_models("paper", "paper").with_backup("none")
+
+
+if __name__ == "__main__":
+    result = {"commit": sys.argv[2] if len(sys.argv) > 2 else "?", "fingerprint": fingerprint(paper_configuration())}
     with open(sys.argv[1], "w") as fh:
         json.dump(result, fh, indent=1, sort_keys=True)
         fh.write("\n")

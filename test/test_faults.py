@@ -36,7 +36,7 @@ from rclpy.serialization import deserialize_message, serialize_message
 
 from rta_attitude import config, topics
 from rta_attitude.cli import launch, launcher
-from rta_attitude.dynamics.state import STATE_NAMES
+from rta_attitude.dynamics.sensors import message_fields, sensors_record
 from rta_attitude.errors import MessageError
 from rta_attitude.ros import convert, interface
 from rta_attitude.ros.faults import FaultLog, StampOrder
@@ -50,6 +50,7 @@ U_MAX = CFG.u_max_rad_s2  # the filter's box U (rad/s^2, per axis)
 NS = topics.DEFAULT_NAMESPACE
 X0 = CFG.scenario("paper_example").x0
 S = convert.NS_PER_S
+REC = sensors_record(CFG)
 
 
 # ----------------------------------------------------------------------------- helpers
@@ -101,6 +102,8 @@ def _reset(node: FilterNode, gone: bool = False, **knobs: Any) -> dict[str, Coll
     """Fresh pairing state, counters and collectors (hypothesis reuses the node across examples). No controller runs
     here: `gone` says whether the node is to take it as gone (after it was heard) or as alive."""
     node.states.clear()
+    node.inputs.clear()
+    node.refused.clear()
     node.desired.clear()
     node.state_order, node.desired_order = StampOrder(), StampOrder()
     node.answered_ns = -1
@@ -115,12 +118,28 @@ def _reset(node: FilterNode, gone: bool = False, **knobs: Any) -> dict[str, Coll
     return node.out
 
 
-def _state(t_ns: int, x: np.ndarray | list[float] = X0, names: list[str] | None = None) -> Any:
-    msg = convert.state_msg(np.zeros(19), 0)
-    msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(t_ns, S) if t_ns >= 0 else (-1, 0)
-    msg.position = [float(v) for v in x]
-    msg.name = list(STATE_NAMES) if names is None else names
-    return msg
+def _state(t_ns: int, x: np.ndarray | list[float] = X0, kind: str = "good") -> list[tuple[str, Any]]:
+    """The STATE_INPUTS messages (topic, message) of state x at stamp t_ns (< 0: an invalid stamp), as the
+    plant builds them; kind spoils them: `names` (wheel joints reversed), `short` (two wheel velocities),
+    `frame` (odometry in the body frame), `partial` (the battery missing)."""
+    x = np.asarray(x, dtype=float)
+    msgs = convert.state_messages(message_fields(x, REC), 0, CFG.power.bus_voltage_V, 0.0, np.zeros(3))
+    for msg in msgs.values():
+        msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(t_ns, S) if t_ns >= 0 else (-1, 0)
+    if kind == "names":
+        msgs[topics.WHEELS].name = list(reversed(topics.WHEEL_JOINTS))
+    elif kind == "short":
+        msgs[topics.WHEELS].velocity = msgs[topics.WHEELS].velocity[:2]
+    elif kind == "frame":
+        msgs[topics.ODOMETRY].header.frame_id = topics.BODY_FRAME
+    elif kind == "partial":
+        del msgs[topics.BATTERY]
+    return list(msgs.items())
+
+
+def _feed(node: FilterNode, msgs: list[tuple[str, Any]]) -> None:
+    for topic, msg in msgs:
+        node._on_input(topic, msg)
 
 
 def _torque(t_ns: int, tau: np.ndarray | list[float], frame: str = topics.BODY_FRAME) -> Any:
@@ -154,18 +173,16 @@ STAMPS = st.one_of(st.integers(-1, 40).map(lambda k: k * S if k >= 0 else -1), s
 
 
 @st.composite
-def _state_messages(draw: Any) -> Any:
+def _state_messages(draw: Any) -> list[tuple[str, Any]]:
     t_ns = draw(STAMPS)
-    kind = draw(st.sampled_from(["good", "values", "quaternion", "short", "names"]))
+    kind = draw(st.sampled_from(["good", "values", "quaternion", "short", "names", "frame", "partial"]))
     x = X0.copy()
     if kind == "values":
         x = np.array(draw(st.lists(FLOATS, min_size=19, max_size=19)))
     elif kind == "quaternion":
         x[0:4] *= draw(st.floats(0.0, 3.0))
-    elif kind == "short":
-        x = x[: draw(st.integers(0, 18))]
-    names = None if kind != "names" else list(reversed(STATE_NAMES))
-    return _state(t_ns, x, names)
+    msgs = _state(t_ns, x, kind)
+    return draw(st.permutations(msgs))  # any arrival order
 
 
 @st.composite
@@ -186,9 +203,15 @@ def test_filter_node_answers_any_input_with_a_finite_command_inside_U(filter_nod
     node = filter_node
     out = _reset(node, gone=gone)
     fed: dict[str, set[int]] = {"state": set(), "torque_des": set()}
-    for topic, msg in stream:
-        (node._on_state if topic == "state" else node._on_desired)(msg)
-        if msg.header.stamp.sec >= 0:
+    for topic, item in stream:
+        if topic == "state":
+            _feed(node, item)
+            msg = item[0][1]
+            whole = len(item) == len(topics.STATE_INPUTS)
+        else:
+            node._on_desired(item)
+            msg, whole = item, True
+        if msg.header.stamp.sec >= 0 and whole:
             fed[topic].add(msg.header.stamp.sec * S + msg.header.stamp.nanosec)
     stamps = _check_outputs(out)
     # every answer pairs a state and a torque_des (or, with the controller gone, answers a state alone)
@@ -197,7 +220,7 @@ def test_filter_node_answers_any_input_with_a_finite_command_inside_U(filter_nod
     seen = [[convert.diagnostic_values(m)[topics.QP_STATUS_NAME][k] for k in topics.INPUT_COUNTERS]
             for m in out[topics.FILTER_STATUS].msgs] + [[node.counts[k] for k in topics.INPUT_COUNTERS]]
     assert all(a <= b for row, nxt in itertools.pairwise(seen) for a, b in zip(row, nxt))
-    assert len(node.states) <= 64 and len(node.desired) <= 64
+    assert len(node.states) <= 64 and len(node.desired) <= 64 and len(node.inputs) <= 64
 
 
 def test_filter_node_counts_and_logs_each_fault_once_per_episode(filter_node: Any) -> None:
@@ -206,12 +229,12 @@ def test_filter_node_counts_and_logs_each_fault_once_per_episode(filter_node: An
     nan = X0.copy()
     nan[5] = math.nan
     for k in range(50):  # 50 NaN states, each answered with the invalid-state fallback
-        node._on_state(_state(k * S, nan))
+        _feed(node, _state(k * S, nan))
         node._on_desired(_torque(k * S, [1e-4, 0.0, 0.0]))
-    node._on_state(_state(50 * S))  # a good one ends the episode
+    _feed(node, _state(50 * S))  # a good one ends the episode
     node._on_desired(_torque(50 * S, [1e-4, 0.0, 0.0]))
     for k in range(51, 61):  # a second episode
-        node._on_state(_state(k * S, nan))
+        _feed(node, _state(k * S, nan))
         node._on_desired(_torque(k * S, [0.0, 0.0, 0.0]))
     stamps = _check_outputs(out)
     assert stamps == [k * S for k in range(61)]
@@ -223,8 +246,8 @@ def test_filter_node_counts_and_logs_each_fault_once_per_episode(filter_node: An
     assert last["state_rejected"] == 60 and last["invalid_states"] >= 60
 
     # duplicates, out-of-order and late messages are dropped, counted, logged once
-    node._on_state(_state(60 * S))
-    node._on_state(_state(59 * S))
+    _feed(node, _state(60 * S))
+    _feed(node, _state(59 * S))
     node._on_desired(_torque(60 * S, [0.0, 0.0, 0.0]))
     node._on_desired(_torque(60 * S, [0.0, 0.0, 0.0]))
     node._on_desired(_torque(58 * S, [0.0, 0.0, 0.0]))
@@ -232,17 +255,17 @@ def test_filter_node_counts_and_logs_each_fault_once_per_episode(filter_node: An
     assert (node.counts["torque_des_duplicate"], node.counts["torque_des_out_of_order"]) == (2, 1)
     assert node.faults.episodes["torque_des_duplicate"] == 1  # two in a row: one line
     # a NaN torque_des with a valid stamp: the core's non-finite-u_des fallback answers it
-    node._on_state(_state(61 * S))
+    _feed(node, _state(61 * S))
     node._on_desired(_torque(61 * S, [math.nan, 0.0, 0.0]))
     rec = convert.filter_record(out[topics.FILTER_STATUS].msgs[-1], node.filter.names)
     assert rec["fallback"] == "non_finite_u_des" and node.counts["torque_des_rejected"] == 1
     # a quaternion slightly off unit is renormalised (counted), far off rejected (invalid state, u = 0)
     x = X0.copy()
     x[0:4] *= 1.005
-    node._on_state(_state(62 * S, x))
+    _feed(node, _state(62 * S, x))
     node._on_desired(_torque(62 * S, [0.0, 0.0, 0.0]))
     x[0:4] *= 1.1
-    node._on_state(_state(63 * S, x))
+    _feed(node, _state(63 * S, x))
     node._on_desired(_torque(63 * S, [0.0, 0.0, 0.0]))
     assert node.counts["state_renormalised"] == 1 and node.counts["state_rejected"] == 61
     recs = [convert.filter_record(m, node.filter.names) for m in out[topics.FILTER_STATUS].msgs[-2:]]
@@ -255,12 +278,12 @@ def test_filter_node_answers_a_state_without_torque_des_with_u_des_zero(filter_n
     and its late arrival is dropped and counted."""
     node = filter_node
     out = _reset(node, desired_timeout_s=0.05)
-    node._on_state(_state(0))
+    _feed(node, _state(0))
     time.sleep(0.08)
     node._expire()
     assert out[topics.TORQUE_CMD].msgs == []  # not armed yet: the controller may still be starting
     node._on_desired(_torque(0, [1e-4, 0.0, 0.0]))
-    node._on_state(_state(1 * S))
+    _feed(node, _state(1 * S))
     node._expire()
     assert len(out[topics.TORQUE_CMD].msgs) == 1  # within the timeout: still waiting
     time.sleep(0.08)
@@ -288,7 +311,7 @@ def test_output_guard_replaces_an_invalid_filter_output_with_zero(filter_node: A
     for bad in (np.array([math.nan, 0.0, 0.0]), 2.0 * U_MAX):
         monkeypatch.setattr(node.filter, "filter", lambda x, u, bad=bad: corrupted(x, u, bad))
         t_ns = (node.answered_ns // S + 1) * S
-        node._on_state(_state(t_ns))
+        _feed(node, _state(t_ns))
         node._on_desired(_torque(t_ns, [0.0, 0.0, 0.0]))
     _check_outputs(out)
     recs = [convert.filter_record(m, node.filter.names) for m in out[topics.FILTER_STATUS].msgs]
@@ -315,8 +338,8 @@ def test_stale_states_are_dropped_against_the_sim_clock(filter_node: Any) -> Non
             assert time.monotonic() < deadline, "no /clock"
             pub.publish(convert.clock_msg(100 * S))
             executor.spin_once(timeout_sec=0.05)
-        node._on_state(_state(97 * S))  # 3 s old: stale
-        node._on_state(_state(99 * S))  # 1 s old: taken
+        _feed(node, _state(97 * S))  # 3 s old: stale
+        _feed(node, _state(99 * S))  # 1 s old: taken
         node._on_desired(_torque(99 * S, [0.0, 0.0, 0.0]))
     finally:
         executor.remove_node(node)
@@ -413,7 +436,7 @@ def test_plant_waits_for_the_first_command_bounded(writer: bool) -> None:
         "rta": False, "record": False, "startup_timeout_s": 0.3, "stop_timeout_s": 0.5}.items()])
     stub = rclpy.create_node("silent_filter", namespace=NS, context=context)
     states: list[Any] = []
-    spec = topics.TOPICS[topics.STATE]
+    spec = topics.TOPICS[topics.ODOMETRY]  # what a controller reads
     stub.create_subscription(interface.msg_class(spec.type_name), spec.name, states.append,
                              interface.qos_profile(spec.qos))
     if writer:
@@ -448,7 +471,7 @@ def test_plant_checks_commands_and_times_out_in_lockstep(tmp_path: Path) -> None
         "hold_max_steps": 1, "scenarios.paper_example.duration_s": 4.0}.items()])
     stub = rclpy.create_node("filter_stub", namespace=NS, context=context)
     states: list[Any] = []
-    spec = topics.TOPICS[topics.STATE]
+    spec = topics.TOPICS[topics.ODOMETRY]  # what a controller reads
     stub.create_subscription(interface.msg_class(spec.type_name), spec.name, states.append,
                              interface.qos_profile(spec.qos))
     spec = topics.TOPICS[topics.TORQUE_CMD]
@@ -514,8 +537,9 @@ def test_clock_jumping_back_resets_the_stamp_screens_once(tmp_path: Path) -> Non
     lease = next(k.default for k in topics.KNOBS if k.name == "liveliness_lease_s")  # the nodes request it
     clock = node.create_publisher(interface.msg_class("rosgraph_msgs/msg/Clock"), "/clock",
                                   interface.qos_profile(topics.STREAM_QOS))
-    state = node.create_publisher(interface.msg_class(topics.TOPICS[topics.STATE].type_name), topics.STATE,
-                                  interface.qos_profile(topics.STATE_QOS, lease))
+    state = {name: node.create_publisher(interface.msg_class(topics.TOPICS[name].type_name), name,
+                                         interface.qos_profile(topics.TOPICS[name].qos, lease))
+             for name in topics.STATE_INPUTS}
     answered: list[int] = []
     spec = topics.TOPICS[topics.TORQUE_CMD]
     node.create_subscription(interface.msg_class(spec.type_name), spec.name,
@@ -532,7 +556,9 @@ def test_clock_jumping_back_resets_the_stamp_screens_once(tmp_path: Path) -> Non
 
     x = CFG.scenario("paper-example").x0
     try:
-        spin_until(lambda: state.get_subscription_count() >= 2 and clock.get_subscription_count() >= 2
+        spin_until(lambda: state[topics.ODOMETRY].get_subscription_count() >= 2
+                   and all(pub.get_subscription_count() >= 1 for pub in state.values())
+                   and clock.get_subscription_count() >= 2
                    and node.count_publishers(f"{NS}/{topics.TORQUE_CMD}") >= 1, "controller and filter matched")
         for lap in range(2):
             for k in range(5):
@@ -540,7 +566,8 @@ def test_clock_jumping_back_resets_the_stamp_screens_once(tmp_path: Path) -> Non
                 if lap == 1 and k == 0:
                     spin_until(lambda: all("jumped back" in p.read_text() for p in logs.values()),
                                "both nodes notice the jump")
-                state.publish(convert.state_msg(x, k * S))
+                for name, msg in _state(k * S, x):
+                    state[name].publish(msg)
                 spin_until(lambda lap=lap, k=k: len(answered) == 5 * lap + k + 1, f"the answer to t = {k} s")
     finally:
         executor.shutdown()

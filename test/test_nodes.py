@@ -25,8 +25,9 @@ from helpers import integrate, saturate, to_wheel_accel
 from rclpy.parameter import Parameter
 
 from rta_attitude import config, topics
-from rta_attitude.dynamics.spacecraft import plant_record
-from rta_attitude.dynamics.state import STATE_NAMES
+from rta_attitude.constraints import ConstraintSet
+from rta_attitude.dynamics.sensors import ENERGY_RELATIVE_ERROR, Instruments, message_fields, sensors_record
+from rta_attitude.dynamics.state import ENERGY, STATE_NAMES
 from rta_attitude.errors import ConfigError, MessageError
 from rta_attitude.filter.asif import AsifFilter
 from rta_attitude.ros import convert, interface
@@ -72,9 +73,9 @@ def run_nodes(tmp_path: Path, *, rta: bool = True, roles: tuple[str, ...] = tupl
                          if k in knob_names or "." in k]
             nodes[role] = NODE_CLASSES[role](context=context, namespace=NS, parameter_overrides=overrides)
             executor.add_node(nodes[role])
-        if probe_state:  # a silent stand-in for the controller: it reads state and never answers
+        if probe_state:  # a silent stand-in for the controller: it reads odometry and never answers
             probe = rclpy.create_node("probe", namespace=NS, context=context)
-            spec = topics.TOPICS[topics.STATE]
+            spec = topics.TOPICS[topics.ODOMETRY]
             probe.create_subscription(interface.msg_class(spec.type_name), spec.name, lambda m: None,
                                       interface.qos_profile(spec.qos))
             executor.add_node(probe)
@@ -126,7 +127,7 @@ def test_lockstep_run_over_dds_equals_in_process_run(rta: bool, tmp_path: Path, 
         msgs.setdefault(m.channel.topic, []).append(m)
     counts = {t: len(v) for t, v in msgs.items()}
     expected = {_topic(t): n + 1 for t in (topics.CLOCK, topics.STATE, topics.TORQUE_DES, topics.TORQUE_CMD,
-                                             *topics.INSPECTION_TOPICS)}
+                                             *topics.STATE_INPUTS)}
     expected[_topic(topics.TORQUE_APPLIED)] = n
     expected[_topic(topics.RUN_STATUS)] = 2
     if rta:
@@ -154,7 +155,13 @@ def test_lockstep_run_over_dds_equals_in_process_run(rta: bool, tmp_path: Path, 
         assert np.array_equal(np.array([r["box_active"] for r in recs]), ref.box_active)
         assert np.max(np.abs(np.array([r["slack"] for r in recs]) - ref.slack)) <= 1e-9
         assert np.max(np.abs(np.array([r["bc"] for r in recs]) - ref.bc)) <= 1e-9 * max(1.0, np.abs(ref.bc).max())
-        assert np.allclose([r["h"] for r in recs], ref.h[:-1], rtol=1e-12, atol=1e-12)
+        # the filter's h is of the state it reads: across the message interface (the battery's float32 charge)
+        read = Instruments(CFG)
+        h_read = ConstraintSet(CFG).safety_values(np.array([read.deliver(x) for x in ref.x[:-1]]))
+        assert np.allclose([r["h"] for r in recs], h_read, rtol=1e-12, atol=1e-12)
+        battery = ref.names.index("battery")
+        error = np.abs(h_read[:, battery] - ref.h[:-1, battery])
+        assert error.max() > 0 and np.all(error <= ENERGY_RELATIVE_ERROR * ref.x[:-1, ENERGY])
         assert all(r["preset"] == CFG.filter.preset for r in recs)
         assert [n_ for n_, s in zip(ref.names, recs[0]["slacked"]) if s] == ["communication"]
     status = convert.run_status_from_msg(msgs[_topic(topics.RUN_STATUS)][-1].ros_msg)
@@ -288,9 +295,8 @@ def test_cdr_stamp_matches_serialized_messages() -> None:
 
     x = CFG.scenario("paper_example").x0
     t = 123 * convert.NS_PER_S + 456
-    for msg in (convert.state_msg(x, t), convert.clock_msg(t), convert.odometry_msg(x, t),
-                convert.battery_msg(x, t, plant_record(CFG), 8.0), convert.temperature_msg(x, t),
-                convert.sun_vector_msg(x, t)):
+    views = convert.state_messages(message_fields(x, sensors_record(CFG)), t, 8.0, -1.0, np.zeros(3))
+    for msg in (convert.state_msg(x, t), convert.clock_msg(t), *views.values()):
         assert convert.cdr_stamp_ns(serialize_message(msg)) == t
     with pytest.raises(MessageError):
         convert.cdr_stamp_ns(b"\x00\x01\x00\x00")
@@ -316,8 +322,12 @@ def test_filter_status_round_trips_every_field_exactly() -> None:
 
 
 def test_wiring_counts_every_reader_of_the_run() -> None:
-    assert topics.expected_readers(topics.STATE, rta=True, record=True) == 3
-    assert topics.expected_readers(topics.STATE, rta=False, record=True) == 2
+    # the loop reads the state on its STATE_INPUTS (controller: odometry; filter: all five); `state` is the record's
+    assert topics.expected_readers(topics.ODOMETRY, rta=True, record=True) == 3
+    assert topics.expected_readers(topics.ODOMETRY, rta=False, record=True) == 2
+    assert topics.expected_readers(topics.WHEELS, rta=True, record=False) == 1
+    assert topics.expected_readers(topics.BATTERY, rta=False, record=False) == 0
+    assert topics.expected_readers(topics.STATE, rta=True, record=True) == 1
     assert topics.expected_readers(topics.TORQUE_DES, rta=False, record=False) == 1
     assert topics.expected_readers(topics.TORQUE_CMD, rta=True, record=True) == 2
     assert topics.expected_readers(topics.CLOCK, rta=True, record=False) == 0
@@ -330,12 +340,12 @@ def test_wiring_counts_every_reader_of_the_run() -> None:
     assert {t.name for t in topics.recorded(True, truth=True, scene=hosted)} == set(topics.TOPICS)
     # a scene node of its own is waited for at start-up on what it reads (state, filter_status with RTA), and
     # waits for the recorder; one hosted by the recorder reads nothing and nobody reads its topics over DDS
-    assert topics.expected_readers(topics.STATE, rta=True, record=True, scene=node) == 4
+    assert topics.expected_readers(topics.STATE, rta=True, record=True, scene=node) == 2
     assert topics.expected_readers(topics.FILTER_STATUS, rta=True, record=True, scene=node) == 2
     assert topics.expected_readers(topics.FILTER_STATUS, rta=True, record=True) == 1
     assert topics.expected_readers(topics.SCENE_MARKERS, rta=False, record=True, scene=node) == 1
     assert topics.expected_readers(topics.SCENE_MARKERS, rta=False, record=False, scene=node) == 0
-    assert topics.expected_readers(topics.STATE, rta=True, record=True, scene=hosted) == 3
+    assert topics.expected_readers(topics.STATE, rta=True, record=True, scene=hosted) == 1
     assert topics.expected_readers(topics.FILTER_STATUS, rta=True, record=True, scene=hosted) == 1
     assert topics.expected_readers(topics.SCENE_MARKERS, rta=True, record=True, scene=hosted) == 0
     assert topics.expected_readers(topics.STATE_TRUE, rta=True, record=True) == 0
@@ -516,7 +526,7 @@ def test_parameters_describe_themselves_and_are_read_only() -> None:
     rtf, stepping = described["real_time_factor"], described["stepping"]
     assert rtf.floating_point_range[0].from_value == 0.0 and rtf.type == ParameterType.PARAMETER_DOUBLE
     assert "lockstep" in stepping.additional_constraints and "realtime" in stepping.additional_constraints
-    assert described["inspection_every"].integer_range[0].from_value == 1
+    assert described["hold_max_steps"].integer_range[0].from_value == 0
     assert "config/rta_attitude.yaml" in described["spacecraft.model"].description
     with pytest.raises(ConfigError, match=r"^parameter real_time_factor must be"):
         _node(topics.PLANT, {"real_time_factor": -2.0})

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import dataclasses as dc
 import math
+import struct
 
 import numpy as np
 import pytest
@@ -14,7 +15,15 @@ from scipy import integrate, stats
 from rta_attitude import config
 from rta_attitude.constraints import ConstraintSet
 from rta_attitude.constraints.base import EXCLUSION_ZONE, angle_rate_error, constraint_record, measurement_errors
-from rta_attitude.dynamics.sensors import Instruments, normals
+from rta_attitude.dynamics.sensors import (
+    FIELD_SIZE,
+    Instruments,
+    interface_energy_error,
+    message_fields,
+    normals,
+    sensors_record,
+    state_from_fields,
+)
 from rta_attitude.dynamics.state import make_state
 from rta_attitude.montecarlo.runner import run_runs, run_runs_stepped
 from rta_attitude.simulation.closed_loop import simulate
@@ -119,9 +128,12 @@ def test_actuator_lag_delivers_the_exact_lag_response(cfg: config.Config) -> Non
 
 
 def test_robust_margins_are_zero_without_sensor_errors(cfg: config.Config) -> None:
+    """Without sensor errors the only margin is the battery's float32 interface (robust preset only)."""
     rec = constraint_record(cfg)[0]
     names = [n for n in rec.dtype.names if n.startswith("err_")]
-    assert names and all(np.all(rec[n] == 0) for n in names)
+    assert names and all(np.all(rec[n] == 0) for n in names if n != "err_E_J")
+    assert rec["err_E_J"] == interface_energy_error(cfg) and 0 < rec["err_E_J"] < 1e-3
+    assert np.all(constraint_record(cfg.with_preset("paper"))[0]["err_E_J"] == 0)
     on = constraint_record(cfg.with_noise())[0]
     assert all(np.all(on[n] > 0) for n in names)
     assert np.all(constraint_record(cfg.with_noise().with_preset("paper"))[0]["err_att_rad"] == 0)
@@ -217,3 +229,52 @@ def test_measurement_errors_follow_the_parameters(cfg: config.Config) -> None:
     x = make_state([0.1, 0.2, 0.3, 0.9])
     assert np.array_equal(cs.safety_values(x), ConstraintSet(cfg).safety_values(x))
     assert cs.safety_values(x)[EXCLUSION_ZONE] == ConstraintSet(cfg).safety_values(x)[EXCLUSION_ZONE]
+
+
+# ----------------------------------------------------------------------------- the message interface
+
+
+def _f32(v: float) -> float:
+    """v rounded to float32 the way a serialized float32 field carries it (IEEE binary32, little endian)."""
+    return struct.unpack("<f", struct.pack("<f", v))[0]
+
+
+def test_interface_fields_against_an_independent_encoding(cfg: config.Config) -> None:
+    """encode / decode against numpy, struct's float32 and the attitude matrix written out here: the exact
+    entries come back exactly, E to its float32 bound, theta_S through atan2 (wrapped into (-pi, pi])."""
+    rec = sensors_record(cfg)
+    V, s = cfg.power.bus_voltage_V, cfg.spacecraft.torque_sign
+    rng = np.random.default_rng(5)
+    for _ in range(200):
+        q = rng.normal(size=4)
+        q /= np.linalg.norm(q)
+        x = np.concatenate([q, rng.normal(0, 0.02, 3), rng.uniform(-576, 576, 3), [rng.uniform(150, 400),
+                            rng.uniform(0, 2e4), rng.uniform(-20, 20)], rng.normal(0, 100, 3), rng.normal(0, 1, 3)])
+        f = message_fields(x, rec)
+        A = _attitude_matrix(q)
+        expect = np.concatenate([q, x[4:7], x[13:16], A @ x[16:19], -s * x[7:10], [x[10] - 273.15,
+                                 _f32(x[11] / (V * 3600.0)), math.cos(x[12]), math.sin(x[12]), 0.0]])
+        assert f.shape == (FIELD_SIZE,)
+        np.testing.assert_allclose(f, expect, rtol=1e-15, atol=1e-15)
+        assert f[17] == _f32(x[11] / (V * 3600.0))  # the charge is exactly a float32
+        y = state_from_fields(f, rec)
+        assert np.array_equal(y[:10], x[:10]) and np.array_equal(y[13:16], x[13:16])
+        assert y[10] == x[10]  # degC and back is exact here (Sterbenz: 136.6-546.3 K)
+        assert abs(y[11] - x[11]) <= 2.0**-24 * 1.0001 * abs(x[11])
+        assert abs(math.remainder(y[12] - x[12], 2 * math.pi)) <= 4 * np.spacing(math.pi)
+        assert -math.pi < y[12] <= math.pi
+        np.testing.assert_allclose(y[16:19], x[16:19], rtol=0, atol=1e-14)
+
+
+def test_interface_energy_bound_holds_below_the_limit(cfg: config.Config) -> None:
+    """Where a battery violation could hide (E < E_min), the read E exceeds E_min + bound never; the bound is
+    within 2.1x of the largest error seen (it is not loose)."""
+    rec = sensors_record(cfg)
+    e_min, bound = cfg.limits.energy_min_J, interface_energy_error(cfg)
+    worst = 0.0
+    for E in np.linspace(e_min * (1 - 1e-6), e_min, 20001):
+        x = make_state([0.0, 0.0, 0.0, 1.0], E_J=float(E))
+        read = state_from_fields(message_fields(x, rec), rec)[11]
+        assert read < e_min + bound
+        worst = max(worst, abs(read - E))
+    assert bound / 2.1 <= worst <= bound  # half a float32 ulp is 2^-25..2^-24 of the value

@@ -244,7 +244,7 @@ def from_parameters(params: Mapping[str, Any], source: str = "<memory>") -> Conf
     th.done()
     pw = root.section("power")
     power = Power(pw.number("ideal_W_m2"), pw.number("degradation"), pw.number("panel_area_m2"),
-                  pw.number("load_W"))
+                  pw.number("load_W"), pw.number("bus_voltage_V", 8.0))
     pw.done()
     li = root.section("limits")
     limits = Limits(

@@ -234,9 +234,12 @@ class Power:
     degradation: float
     panel_area_m2: float
     load_W: float
+    bus_voltage_V: float = 8.0
+    """Nominal bus voltage: the battery's energy E crosses the flight software's interface as
+    sensor_msgs/BatteryState.charge = E / (V 3600) Ah, a float32 (`dynamics.sensors.encode`)."""
 
     def __post_init__(self) -> None:
-        for name in ("ideal_W_m2", "panel_area_m2"):
+        for name in ("ideal_W_m2", "panel_area_m2", "bus_voltage_V"):
             _positive(f"power.{name}", getattr(self, name))
         _nonneg("power.load_W", self.load_W)
         if not 0 < self.degradation <= 1:

@@ -28,6 +28,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from rta_attitude.config.schema import CONSTRAINT_NAMES, Config
+from rta_attitude.dynamics.sensors import interface_energy_error
 from rta_attitude.jit import LEAF
 
 Array = NDArray[np.float64]
@@ -124,6 +125,8 @@ def constraint_record(cfg: Config) -> NDArray[np.void]:
     if robust and cfg.sensors.enabled:
         for key, value in measurement_errors(cfg).items():
             c[key] = value
+    if robust:  # the battery's reading crosses the interface as a float32 (`dynamics.sensors.encode`)
+        c["err_E_J"] += interface_energy_error(cfg)
     return rec
 
 

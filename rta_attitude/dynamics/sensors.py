@@ -35,8 +35,9 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
+from rta_attitude.config.loader import CELSIUS_OFFSET_K
 from rta_attitude.config.schema import Config
-from rta_attitude.dynamics.quaternion import product
+from rta_attitude.dynamics.quaternion import attitude_matrix, product
 from rta_attitude.dynamics.state import STATE_SIZE
 from rta_attitude.jit import LEAF
 
@@ -56,6 +57,8 @@ SENSORS_DTYPE = np.dtype([
     ("energy_noise_J", np.float64),
     ("torque_noise_rad_s2", np.float64),   # on the wheel acceleration (torque / D)
     ("actuator_lag_s", np.float64),
+    ("bus_voltage_V", np.float64),         # BatteryState.charge = E / (V 3600) (`encode`)
+    ("wheel_sign", np.float64),            # spacecraft.torque_sign s: the rotors spin at -s psi
 ])  # fmt: skip
 
 INSTRUMENT_DTYPE = np.dtype([
@@ -63,6 +66,8 @@ INSTRUMENT_DTYPE = np.dtype([
     ("u_end", np.float64, (3,)),           # the actuator's output at the end of the last hold, rad/s^2
     ("started", np.uint8),                 # bias drawn
     ("dq", np.float64, (4,)),              # scratch: the attitude error's quaternion
+    ("A", np.float64, (3, 3)),             # scratch: A(q) of `deliver`
+    ("fields", np.float64, (21,)),         # scratch: the message fields of `deliver`
 ])  # fmt: skip
 """What the sensors and the actuator carry from one sample to the next."""
 
@@ -84,6 +89,7 @@ def sensors_record(cfg: Config, stream: int = 0) -> NDArray[np.void]:
                  "wheel_speed_noise_rad_s", "temperature_noise_K", "energy_noise_J", "torque_noise_rad_s2",
                  "actuator_lag_s"):
         r[name] = getattr(s, name)
+    r["bus_voltage_V"], r["wheel_sign"] = cfg.power.bus_voltage_V, cfg.spacecraft.torque_sign
     return rec
 
 
@@ -180,6 +186,110 @@ def actuate(u_cmd: Array, k: int, s: np.void, ins: np.void, out: Array) -> None:
         out[a] = cmd + (start - cmd) * mean_gain + s.torque_noise_rad_s2 * normal(s.seed, s.stream, k, CH_TORQUE + a)
 
 
+# ----------------------------------------------------------------------------- the interface
+# What crosses the flight software's interface: the fields of the standard messages that carry a measured
+# state (docs/ros_interface.md), in this order. `encode` writes them, `decode` rebuilds the state a reader
+# gets from them; the plant node publishes `encode`'s fields, the controller and filter nodes `decode` what
+# they receive, and the in-process loops hand the controller and the filter `deliver(y) = decode(encode(y))`,
+# so that a run over DDS equals `simulate` bit for bit. Not the identity: the charge is a float32 (E back to
+# |E| 2^-24, ~4.4e-4 J at 7,300 J), theta_S comes back through atan2 (in (-pi, pi], to an ulp), the CW
+# velocity through A(q) and back; T through degC and back (exact for 136.6-546.3 K).
+F_Q, F_OMEGA, F_POS, F_VEL_BODY, F_WHEEL, F_TEMP_C, F_CHARGE_AH, F_SUN = 0, 4, 7, 10, 13, 16, 17, 18
+FIELD_SIZE = 21
+FIELD_MESSAGES: dict[str, tuple[int, int]] = {
+    "Odometry.pose.pose.orientation (x y z w)": (F_Q, 4), "Odometry.twist.twist.angular [rad/s]": (F_OMEGA, 3),
+    "Odometry.pose.pose.position (Hill) [m]": (F_POS, 3), "Odometry.twist.twist.linear (body) [m/s]": (F_VEL_BODY, 3),
+    "JointState.velocity (rotor speeds, -s psi) [rad/s]": (F_WHEEL, 3), "Temperature.temperature [degC]": (F_TEMP_C, 1),
+    "BatteryState.charge (float32) [Ah]": (F_CHARGE_AH, 1), "Vector3Stamped.vector (sun, Hill)": (F_SUN, 3),
+}  # fmt: skip
+"""Where each message field sits in the FIELD_SIZE vector (first index, length)."""
+SECONDS_PER_HOUR = 3600.0
+ENERGY_RELATIVE_ERROR = 2.0**-24 + 2.0**-51
+"""|E(read) - E| <= this |E|: the float32 charge (half an ulp, 2^-24 relative) and the double roundings of
+the division and the product (2^-53 each, with room)."""
+
+
+def interface_energy_error(cfg: Config) -> float:
+    """Bound on |E(read) - E(measured)| wherever E < E_min (where a battery violation can hide): a filter
+    that keeps the read E >= E_min + this keeps the measured E >= E_min (if E < E_min, E(read) <= E (1 +
+    rel) < E_min + rel E_min)."""
+    return ENERGY_RELATIVE_ERROR * abs(cfg.limits.energy_min_J)
+
+
+@numba.njit(**LEAF)
+def encode(y: Array, s: np.void, A: Array, out: Array) -> None:
+    """The message fields (FIELD_SIZE,) of the state y (19,) into out; A: a (3, 3) scratch."""
+    for i in range(4):
+        out[F_Q + i] = y[i]
+    attitude_matrix(y[0], y[1], y[2], y[3], A)
+    for a in range(3):
+        out[F_OMEGA + a] = y[4 + a]
+        out[F_POS + a] = y[13 + a]
+        out[F_VEL_BODY + a] = A[a, 0] * y[16] + A[a, 1] * y[17] + A[a, 2] * y[18]
+        out[F_WHEEL + a] = -s.wheel_sign * y[7 + a]
+    out[F_TEMP_C] = y[10] - CELSIUS_OFFSET_K
+    out[F_CHARGE_AH] = np.float32(y[11] / (s.bus_voltage_V * SECONDS_PER_HOUR))
+    out[F_SUN] = math.cos(y[12])
+    out[F_SUN + 1] = math.sin(y[12])
+    out[F_SUN + 2] = 0.0
+
+
+@numba.njit(**LEAF)
+def decode(f: Array, s: np.void, A: Array, out: Array) -> None:
+    """The state (19,) a reader rebuilds from the message fields f (FIELD_SIZE,) into out; A: a (3, 3)
+    scratch. The CW velocity comes back through the received attitude (A(q)^T)."""
+    for i in range(4):
+        out[i] = f[F_Q + i]
+    attitude_matrix(f[F_Q], f[F_Q + 1], f[F_Q + 2], f[F_Q + 3], A)
+    for a in range(3):
+        out[4 + a] = f[F_OMEGA + a]
+        out[7 + a] = -s.wheel_sign * f[F_WHEEL + a]
+        out[13 + a] = f[F_POS + a]
+        out[16 + a] = A[0, a] * f[F_VEL_BODY] + A[1, a] * f[F_VEL_BODY + 1] + A[2, a] * f[F_VEL_BODY + 2]
+    out[10] = f[F_TEMP_C] + CELSIUS_OFFSET_K
+    out[11] = f[F_CHARGE_AH] * (s.bus_voltage_V * SECONDS_PER_HOUR)
+    out[12] = math.atan2(f[F_SUN + 1], f[F_SUN])
+
+
+@numba.njit(**LEAF)
+def deliver(y: Array, s: np.void, ins: np.void, out: Array) -> None:
+    """The state the controller and the filter get for the measured y (19,): decode(encode(y)), into out."""
+    encode(y, s, ins.A, ins.fields)
+    decode(ins.fields, s, ins.A, out)
+
+
+@numba.njit(**LEAF)
+def read(x: Array, k: int, s: np.void, ins: np.void, y: Array, out: Array) -> None:
+    """Sample k as the flight software reads it: the measured state y (`measure`) and what crosses the
+    interface into out (`deliver`)."""
+    measure(x, k, s, ins, y)
+    deliver(y, s, ins, out)
+
+
+@numba.njit(**LEAF)
+def _encode(y: Array, s: NDArray[np.void], A: Array, out: Array) -> None:
+    encode(y, s[0], A, out)
+
+
+@numba.njit(**LEAF)
+def _decode(f: Array, s: NDArray[np.void], A: Array, out: Array) -> None:
+    decode(f, s[0], A, out)
+
+
+def message_fields(y: Array, record: NDArray[np.void]) -> Array:
+    """`encode` of one state (19,) with a SENSORS_DTYPE record (1,): the fields (FIELD_SIZE,)."""
+    out = np.empty(FIELD_SIZE)
+    _encode(np.ascontiguousarray(y, dtype=float), record, np.empty((3, 3)), out)
+    return out
+
+
+def state_from_fields(f: Array, record: NDArray[np.void]) -> Array:
+    """`decode` of one field vector (FIELD_SIZE,) with a SENSORS_DTYPE record (1,): the state (19,)."""
+    out = np.empty(STATE_SIZE)
+    _decode(np.ascontiguousarray(f, dtype=float), record, np.empty((3, 3)), out)
+    return out
+
+
 class Instruments:
     """The sensors and the actuator of one run, stepped from Python (the plant node, the stepped loop):
     `measure(x, k)` then `actuate(u, k)` at each sample k, as the compiled loop calls them."""
@@ -192,6 +302,12 @@ class Instruments:
         """The measured state of sample k (19,) (advances the gyro bias: call once per sample)."""
         out = np.empty(STATE_SIZE)
         measure(np.ascontiguousarray(x, dtype=float), k, self.record[0], self.state[0], out)
+        return out
+
+    def deliver(self, y: Array) -> Array:
+        """What the controller and the filter get for the measured state y (19,) (`deliver`)."""
+        out = np.empty(STATE_SIZE)
+        deliver(np.ascontiguousarray(y, dtype=float), self.record[0], self.state[0], out)
         return out
 
     def actuate(self, u_cmd: Array, k: int) -> Array:
@@ -214,5 +330,9 @@ def normals(seed: int, stream: int, n: int, channel: int = 0) -> Array:
     return out
 
 
-__all__ = ["INSTRUMENT_DTYPE", "SENSORS_DTYPE", "Instruments", "actuate", "measure", "new_instruments", "normal",
-           "normals", "reset_instruments", "sensors_record"]
+__all__ = ["ENERGY_RELATIVE_ERROR", "FIELD_MESSAGES", "FIELD_SIZE", "F_CHARGE_AH", "F_OMEGA", "F_POS", "F_Q", "F_SUN",
+           "F_TEMP_C",
+           "F_VEL_BODY", "F_WHEEL", "INSTRUMENT_DTYPE", "SENSORS_DTYPE", "Instruments", "actuate", "decode",
+           "deliver", "encode", "interface_energy_error", "measure", "message_fields", "new_instruments",
+           "normal", "normals", "read",
+           "reset_instruments", "sensors_record", "state_from_fields"]

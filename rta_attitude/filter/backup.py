@@ -651,17 +651,18 @@ def apply_measurement_margins(rec: NDArray[np.void]) -> None:
     backup record, and the backup law kept inside what the rollouts then accept (sensor errors on): its rate
     command at RATE_LIMIT_FRACTION of the rate the margins leave (sqrt(w_max^2 - margin)), its targets'
     wheel speeds within the wheel speed they leave. rec: the FILTER_DTYPE record (1,), changed in place;
-    without sensor errors (every margin 0) the law is unchanged."""
+    without rate and wheel-speed errors (their margins 0: no sensor errors) the law is unchanged."""
     m = np.empty(M)
     _margins_of(rec, m)
     b = rec["backup"]
     b["margin"][0] = m
-    if not np.any(m > 0.0):
-        return
     w_max, psi_max = float(b["omega_max_rad_s"][0]), float(b["psi_max_rad_s"][0])
-    w_left = math.sqrt(max(0.0, w_max * w_max - float(np.max(m[OMEGA_X:OMEGA_X + 3]))))
-    b["rate_limit_rad_s"] = min(float(b["rate_limit_rad_s"][0]), RATE_LIMIT_FRACTION * w_left)
-    b["psi_limit_rad_s"] = math.sqrt(max(0.0, psi_max * psi_max - float(np.max(m[PSI_X:PSI_X + 3]))))
+    rate_margin, speed_margin = float(np.max(m[OMEGA_X:OMEGA_X + 3])), float(np.max(m[PSI_X:PSI_X + 3]))
+    if rate_margin > 0.0:
+        w_left = math.sqrt(max(0.0, w_max * w_max - rate_margin))
+        b["rate_limit_rad_s"] = min(float(b["rate_limit_rad_s"][0]), RATE_LIMIT_FRACTION * w_left)
+    if speed_margin > 0.0:
+        b["psi_limit_rad_s"] = math.sqrt(max(0.0, psi_max * psi_max - speed_margin))
 
 
 @numba.njit(**LEAF)

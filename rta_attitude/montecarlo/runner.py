@@ -36,7 +36,7 @@ from rta_attitude.constraints.base import N_CONSTRAINTS
 from rta_attitude.constraints.geometry import CONTEXT_DTYPE
 from rta_attitude.constraints.rows import safety_values
 from rta_attitude.dynamics.plant import Plant
-from rta_attitude.dynamics.sensors import INSTRUMENT_DTYPE, measure, reset_instruments
+from rta_attitude.dynamics.sensors import INSTRUMENT_DTYPE, read, reset_instruments
 from rta_attitude.dynamics.spacecraft import RK4_WORK_ROWS
 from rta_attitude.dynamics.state import STATE_SIZE
 from rta_attitude.errors import RtaError
@@ -114,7 +114,7 @@ def run_batch(X0: Array, steps: int, loop: NDArray[np.void], viol_s: NDArray[np.
     ctx = np.zeros(1, CONTEXT_DTYPE)
     r = np.zeros(1, RESULT_DTYPE)
     u_des, u = np.zeros(3), np.empty(3)
-    y = np.empty(STATE_SIZE)
+    y, yd = np.empty(STATE_SIZE), np.empty(STATE_SIZE)
     ins = np.zeros(1, INSTRUMENT_DTYPE)
     subs = np.empty((S, STATE_SIZE))
     work = np.zeros((RK4_WORK_ROWS, STATE_SIZE))
@@ -143,8 +143,8 @@ def run_batch(X0: Array, steps: int, loop: NDArray[np.void], viol_s: NDArray[np.
                 if h[i] < min_h[k, i]:
                     min_h[k, i] = h[i]
             _mark(h, t, True, k, viol_s, viol_sub, first)
-            measure(x, step, lp.sensors, ins[0], y)
-            advance(x, y, u_des, step, lp, ins[0], ws, r[0], u, subs, hs, ctx[0], work)
+            read(x, step, lp.sensors, ins[0], y, yd)
+            advance(x, yd, u_des, step, lp, ins[0], ws, r[0], u, subs, hs, ctx[0], work)
             status = r[0].status
             if status != PASS:
                 qp_steps[k] += 1

@@ -2,9 +2,10 @@
 
 Thin adapters over the core (validate, convert, one core call, convert back, publish):
 
-- plant_node (`plant_node`): dynamics.spacecraft.integrate stepping, /clock, state, inspection topics;
-- controller_node (`pd_controller_node`): controller.pd_command;
-- filter_node (`asif_filter_node`): asif.AsifFilter.filter;
+- plant_node (`plant_node`): dynamics.spacecraft.integrate stepping, /clock, the state messages
+  (odometry, joint_states, temperature, battery, sun_vector; dynamics.sensors.encode) and the packed state;
+- controller_node (`pd_controller_node`): odometry -> controller.pd_command;
+- filter_node (`asif_filter_node`): the five state messages (dynamics.sensors.decode) -> asif.AsifFilter.filter;
 - recorder_node (`bag_recorder_node`): bag.BagWriter.
 
 Shared pieces: interface (QoS profiles and message classes of rta_attitude.topics' vocabulary),

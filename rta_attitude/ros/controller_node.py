@@ -1,4 +1,5 @@
-"""pd_controller_node: state -> torque_des, the paper's primary controller (controller.pd_command).
+"""pd_controller_node: odometry -> torque_des, the paper's primary controller (controller.pd_command),
+which reads the attitude and the body rates only.
 
 Reference q_c: the scenario's command schedule (from the parameter file, evaluated at the state's
 stamp, as ClosedLoop does), unless an `attitude_command` arrived: an operator command is in force
@@ -32,7 +33,9 @@ import numpy as np
 
 from rta_attitude import topics
 from rta_attitude.dynamics.controller import controller_record, desired_command
+from rta_attitude.dynamics.sensors import F_OMEGA, F_Q, FIELD_SIZE
 from rta_attitude.dynamics.spacecraft import wheel_accel_to_torque
+from rta_attitude.dynamics.state import OMEGA, STATE_SIZE, Q
 from rta_attitude.errors import MessageError
 from rta_attitude.ros import convert, interface, spin
 from rta_attitude.ros.faults import StampOrder
@@ -54,7 +57,7 @@ class ControllerNode(RtaNode):
         spec = topics.TOPICS[topics.TORQUE_DES]
         pub = self.create_publisher(interface.msg_class(spec.type_name), spec.name, self.qos(topics.TORQUE_DES))
         self.out = self.gate(topics.TORQUE_DES, pub)
-        self.subscribe(topics.STATE, self._on_state, peer=topics.PLANT)
+        self.subscribe(topics.ODOMETRY, self._on_state, peer=topics.PLANT)
         self.subscribe(topics.ATTITUDE_COMMAND, self._on_command)
         self.get_logger().info(f"scenario {self.scenario.name}: controller {self.scenario.controller}")
 
@@ -83,13 +86,18 @@ class ControllerNode(RtaNode):
         self.get_logger().info(f"attitude command {np.round(q, 4).tolist()} from t = {self.sim_s(t_ns):g} s")
 
     def _on_state(self, msg: Any) -> None:
+        """odometry(t_k): the attitude and the rates are all the PD law reads (`pd_command`)."""
         if self.stopping:
             return
         t_ns = self.message_stamp(msg, "state_rejected")
         if t_ns is None or not self.admit_state_stamp(t_ns, self.order):
             return
         try:
-            x = self.unit_state(msg, t_ns)
+            f = np.zeros(FIELD_SIZE)
+            convert.odometry_fields(msg, f)
+            x = np.zeros(STATE_SIZE)
+            x[Q], x[OMEGA] = f[F_Q:F_Q + 4], f[F_OMEGA:F_OMEGA + 3]
+            x = self.unit_state(x, t_ns)
         except MessageError as exc:
             self.faults.fault("state_rejected", f"{exc}; answered with zero torque")
             self.out.publish(convert.torque_msg(np.zeros(3), t_ns))

@@ -32,10 +32,20 @@ from std_msgs.msg import ColorRGBA
 from visualization_msgs.msg import Marker, MarkerArray
 
 from rta_attitude import topics
-from rta_attitude.config.loader import CELSIUS_OFFSET_K
-from rta_attitude.dynamics import quaternion as quat
 from rta_attitude.dynamics import spacecraft
-from rta_attitude.dynamics.state import AXES, CW, ENERGY, OMEGA, STATE_NAMES, STATE_SIZE, TEMP, THETA_S, Q
+from rta_attitude.dynamics.sensors import (
+    F_CHARGE_AH,
+    F_OMEGA,
+    F_POS,
+    F_Q,
+    F_SUN,
+    F_TEMP_C,
+    F_VEL_BODY,
+    F_WHEEL,
+    FIELD_MESSAGES,
+    FIELD_SIZE,
+)
+from rta_attitude.dynamics.state import AXES, STATE_NAMES, STATE_SIZE, Q
 from rta_attitude.errors import MessageError
 from rta_attitude.filter.asif import FilterCounters, FilterResult
 from rta_attitude.recording.scene import Scene, margin_level
@@ -183,56 +193,125 @@ def clock_msg(t_ns: int) -> Clock:
     return Clock(clock=stamp(t_ns))
 
 
-def odometry_msg(x: Array, t_ns: int) -> Odometry:
-    """Attitude (body in Hill: the same x y z w as q), body rates, CW position (Hill) and velocity
-    (rotated into the body frame, as Odometry's twist is in child_frame_id)."""
+def _header(msg: Any, t_ns: int, frame_id: str) -> None:
+    msg.header.stamp = stamp(t_ns)
+    msg.header.frame_id = frame_id
+
+
+def odometry_msg(f: Array, t_ns: int) -> Odometry:
+    """Attitude (body in Hill: the same x y z w as q), body rates, CW position (Hill) and velocity (body
+    frame, as Odometry's twist is in child_frame_id) of the message fields f (`sensors.encode`)."""
     msg = Odometry()
-    msg.header.stamp = stamp(t_ns)
-    msg.header.frame_id = topics.HILL_FRAME
+    _header(msg, t_ns, topics.HILL_FRAME)
     msg.child_frame_id = topics.BODY_FRAME
-    q, w, cw = x[Q], x[OMEGA], x[CW]
     p, o = msg.pose.pose.position, msg.pose.pose.orientation
-    p.x, p.y, p.z = (float(c) for c in cw[:3])
-    o.x, o.y, o.z, o.w = (float(c) for c in q)
-    v_body = quat.attitude_matrices(q) @ cw[3:]
+    o.x, o.y, o.z, o.w = (float(c) for c in f[F_Q:F_Q + 4])
+    p.x, p.y, p.z = (float(c) for c in f[F_POS:F_POS + 3])
     lin, ang = msg.twist.twist.linear, msg.twist.twist.angular
-    lin.x, lin.y, lin.z = (float(c) for c in v_body)
-    ang.x, ang.y, ang.z = (float(c) for c in w)
+    lin.x, lin.y, lin.z = (float(c) for c in f[F_VEL_BODY:F_VEL_BODY + 3])
+    ang.x, ang.y, ang.z = (float(c) for c in f[F_OMEGA:F_OMEGA + 3])
     return msg
 
 
-def temperature_msg(x: Array, t_ns: int) -> Temperature:
-    """The -j_B face temperature in degC."""
+def wheels_msg(f: Array, t_ns: int, effort_Nm: Array) -> JointState:
+    """The reaction wheels as joints (`topics.WHEEL_JOINTS`): velocity = rotor speed [rad/s] (fields f),
+    effort = the motor torque on each rotor over the hold that ended at t [N m]; no position (the rotors'
+    angles are not modelled)."""
+    msg = JointState()
+    _header(msg, t_ns, topics.BODY_FRAME)
+    msg.name = list(topics.WHEEL_JOINTS)
+    msg.velocity = [float(c) for c in f[F_WHEEL:F_WHEEL + 3]]
+    msg.effort = [float(c) for c in effort_Nm]
+    return msg
+
+
+def temperature_msg(f: Array, t_ns: int) -> Temperature:
+    """The -j_B face temperature in degC (fields f); variance 0 (unknown)."""
     msg = Temperature()
-    msg.header.stamp = stamp(t_ns)
-    msg.header.frame_id = topics.BODY_FRAME
-    msg.temperature = float(x[TEMP] - CELSIUS_OFFSET_K)
+    _header(msg, t_ns, topics.BODY_FRAME)
+    msg.temperature = float(f[F_TEMP_C])
     return msg
 
 
-def battery_msg(x: Array, t_ns: int, plant: NDArray[np.void], voltage_V: float) -> BatteryState:
-    """Battery energy E as charge = E / (V 3600) [Ah] at a nominal voltage; current = net power / V
-    (the model's panel power minus load). Capacity and percentage are unknown (NaN): the paper
+def battery_msg(f: Array, t_ns: int, voltage_V: float, current_A: float) -> BatteryState:
+    """Battery energy as charge = E / (V 3600) [Ah] at the nominal voltage (fields f; exact: the field is
+    already a float32); current = net power / V. Capacity and percentage are unknown (NaN): the paper
     gives no capacity."""
     msg = BatteryState()
-    msg.header.stamp = stamp(t_ns)
-    msg.header.frame_id = topics.BODY_FRAME
+    _header(msg, t_ns, topics.BODY_FRAME)
     msg.voltage = float(voltage_V)
-    msg.charge = float(x[ENERGY] / (voltage_V * 3600.0))
-    msg.current = float(spacecraft.state_derivative(x, np.zeros(3), plant)[ENERGY] / voltage_V)
+    msg.charge = float(f[F_CHARGE_AH])
+    msg.current = float(current_A)
     msg.capacity = msg.design_capacity = msg.percentage = math.nan
     msg.temperature = math.nan
     msg.present = True
     msg.power_supply_technology = BatteryState.POWER_SUPPLY_TECHNOLOGY_UNKNOWN
-    msg.power_supply_status = (BatteryState.POWER_SUPPLY_STATUS_CHARGING if msg.current > 0
+    msg.power_supply_status = (BatteryState.POWER_SUPPLY_STATUS_CHARGING if current_A > 0
                                else BatteryState.POWER_SUPPLY_STATUS_DISCHARGING)
     return msg
 
 
-def sun_vector_msg(x: Array, t_ns: int) -> Vector3Stamped:
-    """Unit vector to the sun in Hill ([cos, sin, 0] of theta_S, `spacecraft.sun_hill`)."""
-    cs, sn = spacecraft.sun_hill(float(x[THETA_S]))
-    return vector_msg(np.array([cs, sn, 0.0]), t_ns, topics.HILL_FRAME)
+def sun_vector_msg(f: Array, t_ns: int) -> Vector3Stamped:
+    """Unit vector to the sun in Hill (fields f: [cos, sin, 0] of theta_S)."""
+    return vector_msg(f[F_SUN:F_SUN + 3], t_ns, topics.HILL_FRAME)
+
+
+def state_messages(f: Array, t_ns: int, voltage_V: float, current_A: float, effort_Nm: Array) -> dict[str, Any]:
+    """The messages of `topics.STATE_INPUTS` that carry one state's fields f (`sensors.encode`), by topic."""
+    return {topics.ODOMETRY: odometry_msg(f, t_ns), topics.WHEELS: wheels_msg(f, t_ns, effort_Nm),
+            topics.TEMPERATURE: temperature_msg(f, t_ns), topics.BATTERY: battery_msg(f, t_ns, voltage_V, current_A),
+            topics.SUN_VECTOR: sun_vector_msg(f, t_ns)}
+
+
+def _frame(msg: Any, what: str, frame_id: str) -> None:
+    if msg.header.frame_id != frame_id:
+        raise MessageError(f"{what} frame_id must be {frame_id!r}, got {msg.header.frame_id!r}")
+
+
+def odometry_fields(msg: Any, out: Array) -> None:
+    """Attitude, rates, CW position and velocity of an Odometry into the fields out (`sensors.decode`'s
+    layout); MessageError if its frames are not hill -> body."""
+    _frame(msg, "odometry", topics.HILL_FRAME)
+    if msg.child_frame_id != topics.BODY_FRAME:
+        raise MessageError(f"odometry child_frame_id must be {topics.BODY_FRAME!r}, got {msg.child_frame_id!r}")
+    p, o = msg.pose.pose.position, msg.pose.pose.orientation
+    lin, ang = msg.twist.twist.linear, msg.twist.twist.angular
+    out[F_Q:F_Q + 4] = (o.x, o.y, o.z, o.w)
+    out[F_POS:F_POS + 3] = (p.x, p.y, p.z)
+    out[F_VEL_BODY:F_VEL_BODY + 3] = (lin.x, lin.y, lin.z)
+    out[F_OMEGA:F_OMEGA + 3] = (ang.x, ang.y, ang.z)
+    for name in ("Odometry.pose.pose.orientation (x y z w)", "Odometry.twist.twist.angular [rad/s]",
+                 "Odometry.pose.pose.position (Hill) [m]", "Odometry.twist.twist.linear (body) [m/s]"):
+        i, k = FIELD_MESSAGES[name]
+        if not np.all(np.isfinite(out[i:i + k])):
+            raise MessageError(f"{name} is not finite")
+
+
+def state_fields(msgs: Mapping[str, Any]) -> Array:
+    """The message fields (FIELD_SIZE,) of one state from its `topics.STATE_INPUTS` messages (by topic),
+    for `sensors.decode`. MessageError (one line) if a frame, a joint name or a size is wrong, or a value
+    is not finite."""
+    f = np.empty(FIELD_SIZE)
+    odometry_fields(msgs[topics.ODOMETRY], f)
+    wheels = msgs[topics.WHEELS]
+    _frame(wheels, "wheels", topics.BODY_FRAME)
+    if list(wheels.name) != list(topics.WHEEL_JOINTS) or len(wheels.velocity) != 3:
+        raise MessageError(f"wheels must be joints {topics.WHEEL_JOINTS} with a velocity each, got "
+                           f"{tuple(wheels.name)} with {len(wheels.velocity)} velocities")
+    f[F_WHEEL:F_WHEEL + 3] = wheels.velocity
+    temperature = msgs[topics.TEMPERATURE]
+    _frame(temperature, "temperature", topics.BODY_FRAME)
+    f[F_TEMP_C] = temperature.temperature
+    battery = msgs[topics.BATTERY]
+    _frame(battery, "battery", topics.BODY_FRAME)
+    f[F_CHARGE_AH] = battery.charge
+    sun = msgs[topics.SUN_VECTOR]
+    _frame(sun, "sun vector", topics.HILL_FRAME)
+    f[F_SUN:F_SUN + 3] = (sun.vector.x, sun.vector.y, sun.vector.z)
+    if not np.all(np.isfinite(f)):
+        names = [n for n, (i, k) in FIELD_MESSAGES.items() if not np.all(np.isfinite(f[i:i + k]))]
+        raise MessageError(f"{names[0]} is not finite")
+    return f
 
 
 # ----------------------------------------------------------------------------- diagnostics
@@ -605,7 +684,8 @@ __all__ = [
     "NS_PER_S", "SCENE_IDS", "SCENE_NS", "STAMP_OFFSETS", "UNIT_NORM_EPS", "FilterStatusBuilder", "SceneBuilder",
     "cone_points",
     "x_to", "battery_msg", "cdr_stamp_ns", "clock_msg",
-    "diagnostic_values", "filter_record", "filter_status_msg", "odometry_msg", "quaternion_from_msg",
+    "diagnostic_values", "filter_record", "filter_status_msg", "odometry_fields", "odometry_msg",
+    "quaternion_from_msg", "state_fields", "state_messages", "wheels_msg",
     "run_status_from_msg", "run_status_msg",
     "seconds_to_ns", "stamp", "stamp_ns", "state_from_msg", "state_msg", "sun_vector_msg", "temperature_msg",
     "torque_from_msg", "torque_msg", "unit_attitude", "unit_quaternion", "vector_msg",

@@ -1,22 +1,27 @@
-"""asif_filter_node: state + torque_des -> torque_cmd + filter_status, one AsifFilter.filter call
-per step. With `rta:=false` it passes torque_des through unchanged (same bytes of float, same
-stamp) and publishes no filter_status: the plant always takes torque_cmd, and a run without RTA
-has the same topics and the same number of hops as one with it.
+"""asif_filter_node: the state (odometry, joint_states, temperature, battery, sun_vector:
+`topics.STATE_INPUTS`, paired by exact stamp and rebuilt by `dynamics.sensors.decode`) + torque_des ->
+torque_cmd + filter_status, one AsifFilter.filter call per step. With `rta:=false` it passes
+torque_des through unchanged (same bytes of float, same stamp) and publishes no filter_status: the
+plant always takes torque_cmd, and a run without RTA has the same topics and the same number of hops
+as one with it.
 
 The state and the desired torque of a step travel on different topics (plant -> filter and plant ->
-controller -> filter), so the node pairs them by stamp: whichever arrives second triggers the call,
-and the pairing does not depend on arrival order. torque_cmd is published before filter_status
+controller -> filter), so the node pairs them by stamp: whichever arrives last triggers the call,
+and the pairing does not depend on arrival order (a state is whole when its five messages are there;
+at most MAX_PENDING stamps wait, older ones are dropped and counted). torque_cmd is published before filter_status
 (the plant waits on it). With fallback `raise` a failed QP stops the node with one error line.
 
 Bad, late or missing input (counted in filter_status, topics.INPUT_COUNTERS; each kind logged once
 per episode, faults.FaultLog):
 
-- a state or torque_des whose stamp is invalid is dropped; one whose stamp is a duplicate or older
-  than the newest of its stream is dropped; a state older than the /clock time by more than
-  `max_state_age_s` (use_sim_time) is stale and dropped. The plant then misses that command and
-  applies its own deadline fallback;
-- a state whose values are unusable (NaN/inf, wrong length or names, quaternion norm off by more
-  than `quaternion_tolerance`) is filtered as an invalid state: the core answers with its counted
+- a state message or torque_des whose stamp is invalid is dropped (counted per message); a state or
+  torque_des whose stamp is a duplicate or older than the newest of its stream is dropped (a state's
+  messages counted once); a state older than the /clock time by more than `max_state_age_s`
+  (use_sim_time) is stale and dropped. The plant then misses that command and applies its own
+  deadline fallback;
+- a state whose values are unusable (a value not finite, a frame other than hill / body as its topic
+  says, wheel joints other than `topics.WHEEL_JOINTS`, quaternion norm off by more than
+  `quaternion_tolerance`) is filtered as an invalid state: the core answers with its counted
   `invalid_state` fallback, u = 0. A quaternion off by less is renormalised (and counted);
 - a torque_des that is not finite or not in the body frame is filtered as non-finite u_des (the
   core's counted `non_finite_u_des` fallback: u_des taken as 0);
@@ -32,12 +37,15 @@ per episode, faults.FaultLog):
 from __future__ import annotations
 
 import time
+from collections import deque
 from collections.abc import Sequence
+from functools import partial
 from typing import Any
 
 import numpy as np
 
 from rta_attitude import topics
+from rta_attitude.dynamics.sensors import sensors_record, state_from_fields
 from rta_attitude.dynamics.spacecraft import torque_to_wheel_accel, wheel_accel_to_torque
 from rta_attitude.dynamics.state import STATE_SIZE
 from rta_attitude.errors import MessageError
@@ -73,6 +81,10 @@ class FilterNode(RtaNode):
         self.slacked = tuple(n for n, s in zip(self.filter.names, self.filter.slacked) if s)
         self.status_builder = convert.FilterStatusBuilder(self.filter.names)
         self.diagnostics = DiagnosticsPublisher(self, "filter")
+        self.interface = sensors_record(self.cfg)  # what decode needs: the bus voltage, the wheels' sign
+        self.inputs: dict[int, dict[str, Any]] = {}  # stamp -> the STATE_INPUTS messages of it received so far
+        self.refused: deque[int] = deque(maxlen=len(topics.STATE_INPUTS))
+        """Stamps lately dropped as duplicate or out of order: their other messages are dropped uncounted."""
         self.states: dict[int, tuple[np.ndarray, float]] = {}  # stamp -> (state, wall time of arrival)
         self.desired: dict[int, np.ndarray] = {}
         self.state_order, self.desired_order = StampOrder(), StampOrder()
@@ -84,11 +96,13 @@ class FilterNode(RtaNode):
         for spec in topics.published(topics.FILTER, self.rta):
             pub = self.create_publisher(interface.msg_class(spec.type_name), spec.name, self.qos(spec.name))
             self.out[spec.name] = self.gate(spec.name, pub)
-        callbacks = {topics.STATE: (self._on_state, topics.PLANT), topics.TORQUE_DES: (self._on_desired, "")}
         self.subs: dict[str, Any] = {}
         for spec in topics.subscribed(topics.FILTER, self.rta):
-            callback, peer = callbacks[spec.name]
-            self.subs[spec.name] = self.subscribe(spec.name, callback, peer=peer)
+            if spec.name == topics.TORQUE_DES:
+                self.subs[spec.name] = self.subscribe(spec.name, self._on_desired)
+            else:
+                peer = topics.PLANT if spec.name == topics.ODOMETRY else ""
+                self.subs[spec.name] = self.subscribe(spec.name, partial(self._on_input, spec.name), peer=peer)
         if self.rta:
             self.wall_timer(min(EXPIRY_POLL_S, self.knobs["desired_timeout_s"] / 4), self._expire)
             self.get_logger().info(f"filter preset {self.cfg.filter.preset}, fallback {self.cfg.filter.fallback}, "
@@ -97,14 +111,32 @@ class FilterNode(RtaNode):
             self.get_logger().info("rta off: passing torque_des through to torque_cmd")
 
     # ------------------------------------------------------------------ inputs
-    def _on_state(self, msg: Any) -> None:
+    def _on_input(self, topic: str, msg: Any) -> None:
+        """One of the state's messages (`topics.STATE_INPUTS`): kept by stamp until all of them are there."""
         if self.stopping:
             return
         t_ns = self.message_stamp(msg, "state_rejected")
-        if t_ns is None or not self.admit_state_stamp(t_ns, self.state_order):
+        if t_ns is None:
+            return
+        if self.state_order.check(t_ns):  # a duplicate or an old state: dropped, counted once per stamp
+            if t_ns not in self.refused:
+                self.refused.append(t_ns)
+                self.admit_state_stamp(t_ns, self.state_order)
+            return
+        parts = self.inputs.setdefault(t_ns, {})
+        parts[topic] = msg
+        if len(parts) == len(topics.STATE_INPUTS):
+            self._on_state(t_ns, self.inputs.pop(t_ns))
+        while len(self.inputs) > MAX_PENDING:
+            del self.inputs[min(self.inputs)]
+            self.counts["unpaired_dropped"] += 1
+
+    def _on_state(self, t_ns: int, msgs: dict[str, Any]) -> None:
+        """A whole state (its STATE_INPUTS messages of stamp t_k), rebuilt as `simulate` hands it to its filter."""
+        if not self.admit_state_stamp(t_ns, self.state_order):
             return
         try:
-            x = self.unit_state(msg, t_ns)
+            x = self.unit_state(state_from_fields(convert.state_fields(msgs), self.interface), t_ns)
         except MessageError as exc:
             self.faults.fault("state_rejected", f"{exc}; answered as an invalid state (u = 0)")
             x = np.full(STATE_SIZE, np.nan)  # the core's invalid-state fallback answers it
@@ -160,16 +192,18 @@ class FilterNode(RtaNode):
 
     def on_peer_lost(self, peer: str) -> None:
         if peer == topics.PLANT:  # no command for a dead plant: what waits for torque_des is dropped
-            self.counts["unpaired_dropped"] += len(self.states)
+            self.counts["unpaired_dropped"] += len(self.states) + len(self.inputs)
             self.states.clear()
+            self.inputs.clear()
             self.desired.clear()
 
     def on_clock_jump(self) -> None:
         """A replay started over: every stamp is new again; what waited for a partner is of the old pass."""
         self.state_order.reset()
         self.desired_order.reset()
-        self.counts["unpaired_dropped"] += len(self.states) + len(self.desired)
+        self.counts["unpaired_dropped"] += len(self.states) + len(self.desired) + len(self.inputs)
         self.states.clear()
+        self.inputs.clear()
         self.desired.clear()
         self.answered_ns = -1
 

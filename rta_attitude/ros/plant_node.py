@@ -1,4 +1,6 @@
-"""plant_node: the spacecraft simulator. Publishes /clock, `state` and the inspection topics,
+"""plant_node: the spacecraft simulator. Publishes /clock, the state as the flight software receives it
+(`topics.STATE_INPUTS`: odometry, joint_states, temperature, battery, sun_vector; their fields from
+`dynamics.sensors.encode`) and the packed `state` the recorder and the scene read,
 takes body torques and integrates the core model (`dynamics.spacecraft.integrate`) one sample at a time,
 or Basilisk with `plant.simulator:=basilisk` (`dynamics.plant.make_plant`; the same step interface).
 
@@ -42,7 +44,8 @@ import numpy as np
 from rta_attitude import topics
 from rta_attitude.dynamics import spacecraft
 from rta_attitude.dynamics.plant import make_plant
-from rta_attitude.dynamics.sensors import Instruments
+from rta_attitude.dynamics.sensors import Instruments, message_fields
+from rta_attitude.dynamics.state import ENERGY
 from rta_attitude.errors import MessageError
 from rta_attitude.kernel_cache import drop_stale_caches
 from rta_attitude.ros import convert, interface, spin
@@ -91,6 +94,9 @@ class PlantNode(RtaNode):
         self.get_logger().info(f"plant integrator ({self.cfg.plant.simulator}) ready in "
                                f"{self.wall_now_s() - t0:.2f} s")
         self.held_tau = np.zeros(3)
+        self.u_limit = self.cfg.limits.wheel_accel_max_rad_s2
+        self.wheel_effort_Nm = np.zeros(3)
+        """The motor torque on each rotor over the last hold (-s D u, saturated): joint_states' effort."""
         self.misses_in_a_row = 0
         self.last_command_ns = -1
         self.pending: tuple[int, np.ndarray] | None = None
@@ -180,18 +186,19 @@ class PlantNode(RtaNode):
         errors on) and the inspection views (measured)."""
         t_ns = self._t_ns(self.k)
         x = self.instruments.measure(self.x, self.k) if self.truth else self.x
+        fields = message_fields(x, self.instruments.record)
+        V = self.cfg.power.bus_voltage_V
+        current_A = float(spacecraft.state_derivative(x, np.zeros(3), self.plant)[ENERGY]) / V
+        inputs = convert.state_messages(fields, t_ns, V, current_A, self.wheel_effort_Nm)
         self._publish(topics.CLOCK, convert.clock_msg(t_ns))
         self._diagnose(topics.RUN_RUNNING)
         self._sent_s = self.wall_now_s()
         self._progress_s = self._sent_s
+        for name in topics.STATE_INPUTS:
+            self._publish(name, inputs[name])
         self._publish(topics.STATE, convert.state_msg(x, t_ns))
         if self.truth:
             self._publish(topics.STATE_TRUE, convert.state_msg(self.x, t_ns))
-        if self.k % max(self.knobs["inspection_every"], 1) == 0 or self.k == self.steps:
-            self._publish(topics.ODOMETRY, convert.odometry_msg(x, t_ns))
-            self._publish(topics.TEMPERATURE, convert.temperature_msg(x, t_ns))
-            self._publish(topics.BATTERY, convert.battery_msg(x, t_ns, self.plant, self.knobs["battery_voltage_V"]))
-            self._publish(topics.SUN_VECTOR, convert.sun_vector_msg(x, t_ns))
 
     def _step(self, tau_Nm: np.ndarray) -> None:
         """Hold tau over [t_k, t_k+1) through the actuator (the core saturates and integrates), publish the
@@ -201,6 +208,8 @@ class PlantNode(RtaNode):
         if self.truth:
             u = self.instruments.actuate(u, self.k)
             tau_Nm = spacecraft.wheel_accel_to_torque(u, self.D)
+        u_held = np.clip(u, -self.u_limit, self.u_limit)
+        self.wheel_effort_Nm = -self.cfg.spacecraft.torque_sign * spacecraft.wheel_accel_to_torque(u_held, self.D)
         x_next, _ = self.simulator.step(u)
         t_ns = self._t_ns(self.k)
         self.k += 1

@@ -203,14 +203,13 @@ class RtaNode(Node):
             self.faults.fault(kind, f"{exc}; dropped")
             return None
 
-    def unit_state(self, msg: Any, t_ns: int) -> np.ndarray:
-        """The state (19,) of a state message, its quaternion renormalised within
-        `quaternion_tolerance` (fault `state_renormalised` raised or cleared).
+    def unit_state(self, x: np.ndarray, t_ns: int) -> np.ndarray:
+        """A received state (19,), its quaternion renormalised within `quaternion_tolerance` (fault
+        `state_renormalised` raised or cleared).
 
         Raises:
-            MessageError: the message holds no usable state.
+            MessageError: the quaternion is not finite or off by more than the tolerance.
         """
-        _, x = convert.state_from_msg(msg)
         x, renormalised = convert.unit_attitude(x, self.knobs["quaternion_tolerance"])
         if renormalised:
             self.faults.fault("state_renormalised", f"state quaternion of t = {self.sim_s(t_ns):g} s "

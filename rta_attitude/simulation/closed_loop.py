@@ -36,7 +36,7 @@ from rta_attitude.dynamics.sensors import (
     SENSORS_DTYPE,
     Instruments,
     actuate,
-    measure,
+    read,
     sensors_record,
 )
 from rta_attitude.dynamics.spacecraft import (
@@ -95,7 +95,8 @@ def loop_record(cfg: Config, rta: bool = True, pd: bool = True) -> NDArray[np.vo
 def advance(x: Array, y: Array, u_des: Array, k: int, lp: np.void, ins: np.void, ws: NDArray[np.void], r: np.void,
             u: Array,
             subs: Array, hs: Array, ctx: np.void, work: Array) -> None:
-    """Sample k of the loop from the true state x (19,), measured as y (`sensors.measure`), with the
+    """Sample k of the loop from the true state x (19,), read as y (`sensors.read`: measured, then across
+    the message interface), with the
     desired command u_des (3,), already across the torque interface: filter of y (result r) if RTA,
     torque interface, the actuator (`sensors.actuate`, instruments ins) and its saturation (u), RK4 hold
     of x (subs (substeps, 19): the states after each substep, the last is x(t + dt)) and the safety
@@ -135,7 +136,7 @@ def run_scenario(x0: Array, steps: int, sched_t: Array, sched_q: Array, loop: ND
     ins = np.zeros(1, INSTRUMENT_DTYPE)
     ws = np.zeros(WORKSPACES, WORKSPACE_DTYPE)
     ctx = np.zeros(1, CONTEXT_DTYPE)
-    u_des = np.empty(3)
+    u_des, yd = np.empty(3), np.empty(STATE_SIZE)
     A, wd = np.empty((3, 3)), np.empty(3)
     subs = np.empty((lp.substeps, STATE_SIZE))
     work = np.zeros((RK4_WORK_ROWS, STATE_SIZE))
@@ -144,10 +145,10 @@ def run_scenario(x0: Array, steps: int, sched_t: Array, sched_q: Array, loop: ND
     for k in range(steps):
         t = k * lp.dt_s
         Q_C[k] = sched_q[_command_at(sched_t, t)]
-        measure(X[k], k, lp.sensors, ins[0], Y[k])
-        pd_command(Y[k], Q_C[k], lp.controller, u_des)
+        read(X[k], k, lp.sensors, ins[0], Y[k], yd)
+        pd_command(yd, Q_C[k], lp.controller, u_des)
         torque_round_trip(u_des, p, U_DES[k])
-        advance(X[k], Y[k], U_DES[k], k, lp, ins[0], ws, R[k], U[k], subs, Hsub[k], ctx[0], work)
+        advance(X[k], yd, U_DES[k], k, lp, ins[0], ws, R[k], U[k], subs, Hsub[k], ctx[0], work)
         attitude_matrix(X[k, 0], X[k, 1], X[k, 2], X[k, 3], A)
         omega_drift(X[k], A, p, wd)
         for a in range(3):
@@ -225,7 +226,8 @@ class StepArrays:
 
     Attributes:
         x: true states at the samples (N + 1, 19); h: safety values there (N + 1, m).
-        y: the measured states the controller and the filter read (N, 19) (= x[:-1] without sensor errors).
+        y: the measured states (N, 19) (= x[:-1] without sensor errors); the controller and the filter
+            read them across the message interface (`sensors.deliver`).
         h_sub: safety values after each substep (N, S, m) (the last is the next sample).
         q_c (N, 4), u_des, u, omega_dot (N, 3): command, desired and applied wheel accelerations
             (u after saturation), body angular acceleration at each step's start (the plant's model).
@@ -281,7 +283,8 @@ def run_stepped(cfg: Config, scenario: Scenario, steps: int, plant: Plant, filt:
     run.h[0] = constraints.safety_values(plant.x)
     for k in range(steps):
         x = run.x[k]
-        y = run.y[k] = instruments.measure(x, k)
+        run.y[k] = instruments.measure(x, k)
+        y = instruments.deliver(run.y[k])
         run.q_c[k] = sched_q[_command_at(sched_t, k * plant.dt_s)]
         run.u_des[k] = torque_to_wheel_accel(wheel_accel_to_torque(desired_command(y, run.q_c[k], ctrl), D), D)
         if filt is not None:

@@ -18,6 +18,9 @@ from oracles.model import PANEL_NORMAL_BODY, net_power
 from rta_attitude.config.schema import BarrierGains, Config
 from rta_attitude.dynamics.state import ENERGY
 
+FLOAT32_HALF_ULP = 2.0**-24
+"""Largest relative rounding error of a float32 (round to nearest)."""
+
 
 @dataclass(frozen=True)
 class Battery:
@@ -27,14 +30,16 @@ class Battery:
     delta2_J_rad: float
     E_min_J: float
     margin_J: float = 0.0
-    """Sampled-data margin kept by the barrier (robust preset), J."""
+    """Margin kept by the barrier (robust preset): sampled-data, plus the read energy's error (BatteryState's
+    charge is a float32: half an ulp, at most 2^-24 of E, where E is below E_min), J."""
     name: str = "battery"
     relative_degree: int = 2
 
     @classmethod
     def from_config(cls, cfg: Config) -> Battery:
+        read = FLOAT32_HALF_ULP * cfg.limits.energy_min_J if cfg.filter.preset == "robust" else 0.0
         return cls(cfg.barriers["battery"], cfg.augmentation.delta2_J_rad, cfg.limits.energy_min_J,
-                   sampled_data_margin(cfg, "battery"))
+                   sampled_data_margin(cfg, "battery") + read)
 
     def safety_value(self, ctx: Context) -> Array:
         return ctx.x[..., ENERGY] - self.E_min_J
