@@ -14,7 +14,7 @@ from helpers import best_panel_cos
 from rta_attitude import config
 from rta_attitude.config.schema import CONSTRAINT_NAMES, Config
 from rta_attitude.constraints import ConstraintSet
-from rta_attitude.dynamics.sensors import interface_energy_error
+from rta_attitude.dynamics.sensors import Instruments, interface_energy_error
 from rta_attitude.dynamics.spacecraft import integrate, torque_to_wheel_accel, wheel_accel_to_torque
 from rta_attitude.errors import ConfigError
 from rta_attitude.filter.backup import (
@@ -30,6 +30,7 @@ from rta_attitude.filter.backup import (
     reset,
     sun_safe_error,
 )
+from rta_attitude.filter.backup import predicted as backup_predicted
 from rta_attitude.filter.outcome import GATE_BACKUP, GATE_NAMES, GATE_OFF, GATE_UNVERIFIED, GATE_VERIFIED
 from rta_attitude.filter.pipeline import filter_record
 from rta_attitude.montecarlo.runner import run_runs
@@ -312,11 +313,13 @@ def test_a_nominal_plan_holds_what_it_claims(cfg: Config, states: Array) -> None
     its commands, its answers are those of a filter without a gatekeeper at those states, every substep
     of its nominal part keeps every hard constraint and the backup law from its end settles safely.
     Fed those states in order, the filter applies the plan's answers without a new rollout; a state one
-    ulp off the plan is checked afresh."""
+    ulp off the plan (a rate: rates cross the message interface exactly) is checked afresh; one float32 step
+    of the battery's reading off it (the interface's rounding) is not."""
     from rta_attitude.filter.asif import AsifFilter
 
     assert cfg.filter.backup_nominal_s > cfg.filter.sample_time_s
     on, alone = AsifFilter(cfg), AsifFilter(cfg.with_backup("none"))
+    read = Instruments(cfg)
     cs = ConstraintSet.from_config(cfg)
     hard = np.array([n not in cfg.slacked_constraints for n in CONSTRAINT_NAMES])
     p = filter_record(cfg)["plant"]
@@ -341,9 +344,9 @@ def test_a_nominal_plan_holds_what_it_claims(cfg: Config, states: Array) -> None
         np.testing.assert_array_equal(plan_u[0], res.u)
         y, subs_all = x1, []
         for j in range(n):
-            if j > 0:
-                np.testing.assert_array_equal(plan_x[j], y)
-                np.testing.assert_array_equal(plan_u[j], alone.filter(y, u_des).u)
+            if j > 0:  # the predicted state as the filter will receive it (the message interface)
+                np.testing.assert_array_equal(plan_x[j], read.deliver(y))
+                np.testing.assert_array_equal(plan_u[j], alone.filter(read.deliver(y), u_des).u)
             y, subs = integrate(y, torque_to_wheel_accel(wheel_accel_to_torque(plan_u[j], D), D), 1.0, p,
                                 cfg.substeps)
             subs_all.append(subs)
@@ -362,12 +365,17 @@ def test_a_nominal_plan_holds_what_it_claims(cfg: Config, states: Array) -> None
                 second_x = plan_x[j + 1].copy()
                 break
         assert second_x is not None
-        second_x[10] = np.nextafter(second_x[10], np.inf)  # one ulp off the plan: a fresh check
+        battery = second_x.copy()
+        charge = np.float32(battery[11] / (cfg.power.bus_voltage_V * 3600.0))
+        battery[11] = float(np.nextafter(charge, np.float32(np.inf))) * (cfg.power.bus_voltage_V * 3600.0)
+        second_x[4] = np.nextafter(second_x[4], np.inf)  # one ulp off the plan's rate: a fresh check
         before = int(on._ws[0]["gate"]["reused"])
         on.filter(second_x, u_des)
         assert int(on._ws[0]["gate"]["reused"]) == before
         checked += 1
     assert checked >= 2
+    # the battery's reading one float32 step from the prediction is still on the plan, the rate's ulp is not
+    assert backup_predicted(battery, plan_x[4]) and not backup_predicted(second_x, plan_x[4])
 
 
 def test_an_answer_off_the_plan_is_checked_alone_or_replaced_by_the_plans(cfg: Config, states: Array) -> None:
@@ -406,7 +414,9 @@ def test_an_answer_off_the_plan_is_checked_alone_or_replaced_by_the_plans(cfg: C
 def test_in_backup_mode_a_settled_plan_is_followed_without_a_new_rollout(cfg: Config, states: Array) -> None:
     """Where the candidate fails on the committed plan's predicted state (bit for bit) and the plan reaches
     the terminal set, the gate applies the plan's next command (its backup law) without a rollout, and
-    predicts the next state as the plant's `integrate` of it; one ulp off the prediction it checks afresh."""
+    predicts the next state as the plant's `integrate` of it, as the filter will receive it (the message
+    interface: `Instruments.deliver`); one ulp off the prediction's rate it checks afresh."""
+    read = Instruments(cfg)
     f = filter_record(cfg)
     p = f["plant"]
     D = cfg.spacecraft.wheel_inertia_kgm2
@@ -420,7 +430,7 @@ def test_in_backup_mode_a_settled_plan_is_followed_without_a_new_rollout(cfg: Co
     def step(y: Array, v: Array) -> Array:
         return integrate(y, torque_to_wheel_accel(wheel_accel_to_torque(v, D), D), 1.0, p, cfg.substeps)[0]
 
-    x1 = step(x, u)
+    x1 = read.deliver(step(x, u))
     np.testing.assert_array_equal(g[0]["next_x"], x1)
     bad = np.array([np.nan, 0.0, 0.0])  # a candidate no rollout passes
     for _ in range(3):
@@ -429,10 +439,10 @@ def test_in_backup_mode_a_settled_plan_is_followed_without_a_new_rollout(cfg: Co
         assert GATE_NAMES[_gate(x1, applied, f, g)] == "backup"
         np.testing.assert_array_equal(applied, backup_command(x1, f))
         assert int(g[0]["reused"]) == before + 1
-        x1 = step(x1, applied)
+        x1 = read.deliver(step(x1, applied))
         np.testing.assert_array_equal(g[0]["next_x"], x1)
     off = x1.copy()
-    off[11] = np.nextafter(off[11], np.inf)
+    off[4] = np.nextafter(off[4], np.inf)
     before = int(g[0]["reused"])
     applied = bad.copy()
     assert GATE_NAMES[_gate(off, applied, f, g)] == "backup"

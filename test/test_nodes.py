@@ -174,11 +174,21 @@ def test_lockstep_run_over_dds_equals_in_process_run(rta: bool, tmp_path: Path, 
                   if c.topic == _topic(topics.STATE)]
         odom = [reader.deserialize(raw, c.msgtype) for c, _, raw in reader.messages()
                 if c.topic == _topic(topics.ODOMETRY)]
+        wheels = [reader.deserialize(raw, c.msgtype) for c, _, raw in reader.messages()
+                  if c.topic == _topic(topics.WHEELS)]
+        battery = [reader.deserialize(raw, c.msgtype) for c, _, raw in reader.messages()
+                   if c.topic == _topic(topics.BATTERY)]
     assert [list(s.name) for s in states[:1]] == [list(STATE_NAMES)]
     assert np.array_equal(np.array([s.position for s in states]), x)
     q_odom = np.array([[o.pose.pose.orientation.x, o.pose.pose.orientation.y, o.pose.pose.orientation.z,
                         o.pose.pose.orientation.w] for o in odom])
     assert np.array_equal(q_odom, ref.x[:, :4])
+    # the wheels as a real JointState (rotor speed = -psi with the paper's sign), the charge a float32 of E / (V h)
+    assert {tuple(w.name) for w in wheels} == {("wheel_x", "wheel_y", "wheel_z")} and len(wheels) == n + 1
+    assert all(w.header.frame_id == "body" and len(w.position) == 0 for w in wheels)
+    assert np.array_equal(np.array([w.velocity for w in wheels]), -CFG.spacecraft.torque_sign * ref.x[:, 7:10])
+    charge = (ref.x[:, 11] / (CFG.power.bus_voltage_V * 3600.0)).astype(np.float32)
+    assert np.array_equal(np.array([b.charge for b in battery], dtype=np.float32), charge)
 
 
 @pytest.mark.slow

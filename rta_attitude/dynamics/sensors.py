@@ -252,10 +252,11 @@ def decode(f: Array, s: np.void, A: Array, out: Array) -> None:
 
 
 @numba.njit(**LEAF)
-def deliver(y: Array, s: np.void, ins: np.void, out: Array) -> None:
-    """The state the controller and the filter get for the measured y (19,): decode(encode(y)), into out."""
-    encode(y, s, ins.A, ins.fields)
-    decode(ins.fields, s, ins.A, out)
+def deliver(y: Array, s: np.void, A: Array, fields: Array, out: Array) -> None:
+    """The state the controller and the filter get for the measured y (19,): decode(encode(y)), into out
+    (A (3, 3), fields (FIELD_SIZE,): scratch)."""
+    encode(y, s, A, fields)
+    decode(fields, s, A, out)
 
 
 @numba.njit(**LEAF)
@@ -263,7 +264,7 @@ def read(x: Array, k: int, s: np.void, ins: np.void, y: Array, out: Array) -> No
     """Sample k as the flight software reads it: the measured state y (`measure`) and what crosses the
     interface into out (`deliver`)."""
     measure(x, k, s, ins, y)
-    deliver(y, s, ins, out)
+    deliver(y, s, ins.A, ins.fields, out)
 
 
 @numba.njit(**LEAF)
@@ -307,7 +308,8 @@ class Instruments:
     def deliver(self, y: Array) -> Array:
         """What the controller and the filter get for the measured state y (19,) (`deliver`)."""
         out = np.empty(STATE_SIZE)
-        deliver(np.ascontiguousarray(y, dtype=float), self.record[0], self.state[0], out)
+        ins = self.state[0]
+        deliver(np.ascontiguousarray(y, dtype=float), self.record[0], ins["A"], ins["fields"], out)
         return out
 
     def actuate(self, u_cmd: Array, k: int) -> Array:

@@ -55,6 +55,7 @@ from rta_attitude.constraints.base import (
 from rta_attitude.constraints.geometry import CONTEXT_DTYPE
 from rta_attitude.constraints.rows import safety_values
 from rta_attitude.dynamics.quaternion import attitude_matrix, error_vector, from_matrix
+from rta_attitude.dynamics.sensors import ENERGY_RELATIVE_ERROR, FIELD_SIZE, SENSORS_DTYPE, deliver, sensors_record
 from rta_attitude.dynamics.spacecraft import (
     EARTH_HILL,
     RK4_WORK_ROWS,
@@ -64,7 +65,7 @@ from rta_attitude.dynamics.spacecraft import (
     sun_hill,
     torque_round_trip,
 )
-from rta_attitude.dynamics.state import STATE_SIZE
+from rta_attitude.dynamics.state import ENERGY, STATE_SIZE, TEMP, THETA_S
 from rta_attitude.filter.outcome import GATE_BACKUP, GATE_OFF, GATE_UNVERIFIED, GATE_VERIFIED
 from rta_attitude.jit import LEAF
 
@@ -114,6 +115,7 @@ BACKUP_DTYPE = np.dtype([
     ("momentum_variant_rad_s", np.float64),  # the MOMENTUM variant only where |J w - s D psi| / D exceeds this
     ("nominal_steps", np.int64),         # samples of the filter's own answers before the backup law (>= 1)
     ("margin", np.float64, (M,)),        # what each h must keep in a rollout (`check_margins`; 0 without sensor errors)
+    ("interface", SENSORS_DTYPE),        # how the filter receives a state (`sensors.deliver`): plans predict that
 ])  # fmt: skip
 """The gatekeeper's parameters (a field of the filter's record)."""
 
@@ -124,7 +126,8 @@ GATE_DTYPE = np.dtype([
     ("plan_x", np.float64, (MAX_NOMINAL_STEPS, STATE_SIZE)),  # its states at the samples (as received)
     ("plan_u", np.float64, (MAX_NOMINAL_STEPS, 3)),           # the filter's answers there (candidates)
     ("nominal_wait", np.int64),          # calls to wait before the next nominal plan is tried
-    ("next_x", np.float64, (STATE_SIZE,)),  # the committed plan's state at the next sample where it applies
+    ("next_x", np.float64, (STATE_SIZE,)),  # the committed plan's state at the next sample, as the filter will
+    # receive it (`sensors.deliver` of the prediction)
     ("has_next", np.uint8),              # ... next_x is set
     ("plan_settled", np.uint8),          # the committed plan reaches the terminal set (holds for good)
     ("first_x", np.float64, (STATE_SIZE,)),  # the last rollout's state after its first sample
@@ -140,6 +143,7 @@ GATE_DTYPE = np.dtype([
     ("work", np.float64, (RK4_WORK_ROWS, STATE_SIZE)),
     ("ctx", CONTEXT_DTYPE),
     ("A", np.float64, (3, 3)),
+    ("fields", np.float64, (FIELD_SIZE,)),  # scratch of `sensors.deliver`
     ("target", np.float64, (3, 3)),      # the sun-safe attitude, rows i_B, j_B, k_B in Hill
     ("Hh", np.float64, (3,)),            # the body's angular momentum J w - s D psi in Hill, N m s
     ("load", np.float64),                # `_wheel_load` of the sun-safe target
@@ -171,6 +175,7 @@ def backup_record(cfg: Config) -> NDArray[np.void]:
     sc = cfg.spacecraft
     b["momentum_variant_rad_s"] = L.psi_max_rad_s - float(np.max(sc.J)) * L.omega_max_rad_s / sc.wheel_inertia_kgm2
     b["nominal_steps"] = max(1, round(o.backup_nominal_s / o.sample_time_s))
+    b["interface"] = sensors_record(cfg)[0]
     return rec
 
 
@@ -564,14 +569,67 @@ def verify(x: Array, u: Array, candidate: bool, f: np.void, g: np.void) -> bool:
             sun_safe_command(x, f.plant, f.constraints, b, g, u)
         found = rollout(x, u, f, g, g.subs, False)
         if found == SETTLED or (found == HORIZON and large):
-            for i in range(STATE_SIZE):
-                g.next_x[i] = g.first_x[i]
+            predict(g.first_x, b, g, g.next_x)
             g.has_next = 1
             g.plan_settled = found == SETTLED
             g.plan_law = g.law
             g.plan_steps = b.horizon_steps
             return True
     return False
+
+
+@numba.njit(**LEAF)
+def predict(x: Array, b: np.void, g: np.void, out: Array) -> None:
+    """A predicted state x (19,) as the filter will receive it (`sensors.deliver`) into out: what a later
+    call's state is compared with, bit for bit."""
+    deliver(x, b.interface, g.A, g.fields, out)
+
+
+PREDICTION_RTOL = 1e-13
+"""How far a received T, theta_S or CW entry may be from the plan's prediction (relative; theta_S: rad, modulo
+2 pi) and still be on the plan: the interface's roundings (theta_S through atan2, a few ulps; the CW velocity
+through A(q) and back) reach the prediction, which starts from a received state, and the true state's
+reading, by different paths; measured differences are ulps (1e-16 relative), this is 1,000x that and far
+below anything a barrier resolves. The attitude, rates and wheel speeds cross exactly and must match bit for
+bit; E within two float32 ulps (`predicted`)."""
+ANSWER_RTOL = 1e-12
+"""How far (relative to the actuator limit) the filter's answer may be from the plan's answer for the same
+sample and still be the plan's: the same ulp-level roundings reach the answer through the rows of the sun's
+and the battery's constraints. The plan's own, verified answer is then applied (`pipeline.gate_call`)."""
+
+
+@numba.njit(**LEAF)
+def predicted(x: Array, pred: Array) -> bool:
+    """The received state x (19,) is the plan's prediction pred (`predict`): the attitude, rates and wheel
+    speeds bit for bit; the energy, which crosses the interface as a float32 (`sensors.encode`), the same
+    float32 or the next one either side; T, theta_S (modulo 2 pi) and CW to PREDICTION_RTOL. A prediction
+    starts from a received state, so it carries that reading's roundings (E: at most `interface_energy_error`
+    where it matters, which the rollouts keep as the battery's margin; E's dynamics do not depend on E, so the
+    offset stays what it was), and a reading on the other side of a rounding boundary is no departure from
+    the plan."""
+    for i in range(STATE_SIZE):
+        d = x[i] - pred[i]
+        if i == ENERGY:
+            if not abs(d) <= 2.0 * ENERGY_RELATIVE_ERROR * abs(pred[i]):
+                return False
+        elif i == THETA_S:
+            if not abs(d - 2.0 * math.pi * round(d / (2.0 * math.pi))) <= PREDICTION_RTOL:
+                return False
+        elif i >= TEMP:
+            if not abs(d) <= PREDICTION_RTOL * (1.0 + abs(pred[i])):
+                return False
+        elif not (x[i] == pred[i] and math.copysign(1.0, x[i]) == math.copysign(1.0, pred[i])):
+            return False
+    return True
+
+
+@numba.njit(**LEAF)
+def same_answer(u: Array, v: Array, u_max: Array) -> bool:
+    """u and v (3,) are the same answer to ANSWER_RTOL of the box u_max (3,) (NaN never)."""
+    for a in range(3):
+        if not abs(u[a] - v[a]) <= ANSWER_RTOL * u_max[a]:
+            return False
+    return True
 
 
 @numba.njit(**LEAF)
@@ -593,8 +651,7 @@ def _follow_plan(x: Array, f: np.void, g: np.void, u: Array) -> None:
         g.x[i] = x[i]
     g.checked = 0
     g.has_next = hold_sample(g.u_backup, f, g, g.subs, False)
-    for i in range(STATE_SIZE):
-        g.next_x[i] = g.x[i]
+    predict(g.x, f.backup, g, g.next_x)
     g.plan_steps -= 1
     for a in range(3):
         u[a] = g.u_backup[a]
@@ -614,7 +671,7 @@ def gate(x: Array, f: np.void, g: np.void, u: Array) -> int:
     if verify(x, u, True, f, g):
         return GATE_VERIFIED
     if g.plan_steps > 0:  # the plan verified earlier: its next command is its backup law's, here
-        on_plan = g.has_next and same(x, g.next_x)
+        on_plan = g.has_next and predicted(x, g.next_x)
         # a settled plan holds for good on its own trajectory; else a fresh plan from here (either variant)
         if not (on_plan and g.plan_settled) and verify(x, g.u_backup, False, f, g):
             for a in range(3):
@@ -719,9 +776,10 @@ def backup_rollout(x: Array, u0: Array, f: NDArray[np.void], variant: str = "sun
 
 
 __all__ = [
-    "BACKUP_DTYPE", "FAILED", "GATE_DTYPE", "HORIZON", "MOMENTUM", "NO_LAW", "RATE_LIMIT_FRACTION",
-    "RATE_TIME_CONSTANT_S", "SETTLED", "SETTLED_ANGLE_RAD", "SETTLED_RATE_FRACTION", "SUN_SAFE", "SUN_SAFE_VARIANT",
-    "VARIANTS", "apply_measurement_margins", "backup_command", "backup_record", "backup_rollout", "backup_tail",
-    "check_margins", "gate", "hold_sample", "is_settled", "large_momentum", "reset", "rollout", "same", "settled",
-    "sun_safe_command", "sun_safe_error", "verify",
+    "ANSWER_RTOL", "BACKUP_DTYPE", "FAILED", "GATE_DTYPE", "HORIZON", "MOMENTUM", "NO_LAW", "PREDICTION_RTOL",
+    "RATE_LIMIT_FRACTION", "RATE_TIME_CONSTANT_S", "SETTLED", "SETTLED_ANGLE_RAD", "SETTLED_RATE_FRACTION",
+    "SUN_SAFE", "SUN_SAFE_VARIANT", "VARIANTS", "apply_measurement_margins", "backup_command", "backup_record",
+    "backup_rollout", "backup_tail", "check_margins", "gate", "hold_sample", "is_settled", "large_momentum",
+    "predict", "predicted", "reset", "rollout", "same", "same_answer", "settled", "sun_safe_command",
+    "sun_safe_error", "verify",
 ]  # fmt: skip

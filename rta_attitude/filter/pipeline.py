@@ -59,7 +59,9 @@ from rta_attitude.filter.backup import (
     gate,
     hold_sample,
     large_momentum,
-    same,
+    predict,
+    predicted,
+    same_answer,
     verify,
 )
 from rta_attitude.filter.outcome import (
@@ -626,13 +628,14 @@ def plan_nominal(x: Array, u: Array, u_des: Array, N: int, f: np.void, wsa: NDAr
         g.x[i] = x[i]
     g.checked = 0
     for j in range(N):
-        for i in range(STATE_SIZE):
-            g.plan_x[j, i] = g.x[i]
         if j == 0:
+            for i in range(STATE_SIZE):
+                g.plan_x[0, i] = g.x[i]
             for a in range(3):
                 g.plan_u[0, a] = u[a]
-        else:
-            if not answer(g.x, u_des, f, inner, inner.result):
+        else:  # the filter's answer to the predicted state as it will receive it
+            predict(g.x, b, g, g.plan_x[j])
+            if not answer(g.plan_x[j], u_des, f, inner, inner.result):
                 return False
             for a in range(3):
                 g.plan_u[j, a] = inner.result.u[a]
@@ -647,8 +650,7 @@ def plan_nominal(x: Array, u: Array, u_des: Array, N: int, f: np.void, wsa: NDAr
     g.plan_steps = b.horizon_steps + N - 1
     g.plan_n = N
     g.plan_at = 1
-    for i in range(STATE_SIZE):
-        g.next_x[i] = g.first_x[i]
+    predict(g.first_x, b, g, g.next_x)
     g.has_next = 1
     g.plan_settled = found == SETTLED
     return True
@@ -665,8 +667,9 @@ def gate_call(x: Array, u_des: Array, f: np.void, wsa: NDArray[np.void], r: np.v
     """The gatekeeper at the state x (19,, as received) with the filter's answer r.u (replaced in place by
     the command to apply); returns its GATE_NAMES code. In order:
 
-    - on a committed nominal plan (x and r.u are, bit for bit, the state and answer it predicted for this
-      sample) -> apply, verified by that plan's rollout;
+    - on a committed nominal plan (x and r.u are the state and answer it predicted for this sample:
+      `backup.predicted`, `backup.same_answer`, bit for bit but for the interface's roundings) -> apply the
+      plan's answer, verified by that plan's rollout;
     - a new nominal plan (`plan_nominal`, nominal_steps samples; after one fails, or after a call that was
       not the one its plan predicted (sensor noise, another u_des), not tried again for nominal_steps
       calls: halving the plan after a failure saved 10 % of the CPU and lost one more of 1,000 runs);
@@ -684,9 +687,11 @@ def gate_call(x: Array, u_des: Array, f: np.void, wsa: NDArray[np.void], r: np.v
     for i in range(STATE_SIZE):
         xs[i] = x[i] if raw else ws.x[i]
     at = g.plan_at
-    on_plan = at < g.plan_n and same(x, g.plan_x[at])
+    on_plan = at < g.plan_n and predicted(x, g.plan_x[at])
     if on_plan:
-        if same(r.u, g.plan_u[at]):
+        if same_answer(r.u, g.plan_u[at], f.constraints.u_max_rad_s2):  # the plan's, verified, answer
+            for a in range(3):
+                r.u[a] = g.plan_u[at, a]
             g.plan_at += 1
             g.plan_steps -= 1
             g.reused += 1
