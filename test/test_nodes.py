@@ -228,15 +228,13 @@ def test_lockstep_with_sensor_errors_publishes_measured_and_true_states(tmp_path
 @pytest.mark.parametrize("fallback", ["hold", "zero"])
 def test_realtime_missing_commands_are_counted_deadline_misses(fallback: str, tmp_path: Path) -> None:
     """No controller answers: every step is a deadline miss, the fallback applies, no stall."""
-    steps = 12
-    t0 = time.monotonic()
+    steps = 12  # a stall fails run_nodes' deadline (30 s for 12 steps at 200x real time)
     out = run_nodes(tmp_path, rta=False, roles=(topics.PLANT,), probe_state=True, timeout_s=30, params={
         "stepping": "realtime", "real_time_factor": 200.0, "deadline_fallback": fallback,
         "scenarios.paper_example.duration_s": float(steps)})
     plant = out["plant"]
     assert plant.exit_code == 0 and plant.k == steps
     assert plant.counts["deadline_misses"] == steps
-    assert time.monotonic() - t0 < 20
     x = CFG.scenario("paper_example").x0
     for _ in range(steps):  # both fallbacks apply zero torque here: nothing was ever received
         x, _subs = integrate(x, np.zeros(3), 1.0, CFG)
