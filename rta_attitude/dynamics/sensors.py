@@ -61,13 +61,17 @@ SENSORS_DTYPE = np.dtype([
     ("wheel_sign", np.float64),            # spacecraft.torque_sign s: the rotors spin at -s psi
 ])  # fmt: skip
 
+# the fields of the message interface (see "the interface" below), in their order
+F_Q, F_OMEGA, F_POS, F_VEL_BODY, F_WHEEL, F_TEMP_C, F_CHARGE_AH, F_SUN = 0, 4, 7, 10, 13, 16, 17, 18
+FIELD_SIZE = 21
+
 INSTRUMENT_DTYPE = np.dtype([
     ("bias", np.float64, (3,)),            # the gyro bias now, rad/s
     ("u_end", np.float64, (3,)),           # the actuator's output at the end of the last hold, rad/s^2
     ("started", np.uint8),                 # bias drawn
     ("dq", np.float64, (4,)),              # scratch: the attitude error's quaternion
     ("A", np.float64, (3, 3)),             # scratch: A(q) of `deliver`
-    ("fields", np.float64, (21,)),         # scratch: the message fields of `deliver`
+    ("fields", np.float64, (FIELD_SIZE,)),  # scratch: the message fields of `deliver`
 ])  # fmt: skip
 """What the sensors and the actuator carry from one sample to the next."""
 
@@ -194,8 +198,6 @@ def actuate(u_cmd: Array, k: int, s: np.void, ins: np.void, out: Array) -> None:
 # so that a run over DDS equals `simulate` bit for bit. Not the identity: the charge is a float32 (E back to
 # |E| 2^-24, ~4.4e-4 J at 7,300 J), theta_S comes back through atan2 (in (-pi, pi], to an ulp), the CW
 # velocity through A(q) and back; T through degC and back (exact for 136.6-546.3 K).
-F_Q, F_OMEGA, F_POS, F_VEL_BODY, F_WHEEL, F_TEMP_C, F_CHARGE_AH, F_SUN = 0, 4, 7, 10, 13, 16, 17, 18
-FIELD_SIZE = 21
 FIELD_MESSAGES: dict[str, tuple[int, int]] = {
     "Odometry.pose.pose.orientation (x y z w)": (F_Q, 4), "Odometry.twist.twist.angular [rad/s]": (F_OMEGA, 3),
     "Odometry.pose.pose.position (Hill) [m]": (F_POS, 3), "Odometry.twist.twist.linear (body) [m/s]": (F_VEL_BODY, 3),

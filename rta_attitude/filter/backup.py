@@ -581,7 +581,7 @@ def verify(x: Array, u: Array, candidate: bool, f: np.void, g: np.void) -> bool:
 @numba.njit(**LEAF)
 def predict(x: Array, b: np.void, g: np.void, out: Array) -> None:
     """A predicted state x (19,) as the filter will receive it (`sensors.deliver`) into out: what a later
-    call's state is compared with, bit for bit."""
+    call's state is compared with (`predicted`)."""
     deliver(x, b.interface, g.A, g.fields, out)
 
 
@@ -633,15 +633,6 @@ def same_answer(u: Array, v: Array, u_max: Array) -> bool:
 
 
 @numba.njit(**LEAF)
-def same(a: Array, b: Array) -> bool:
-    """a and b (n,) hold the same floats, bit for bit (a NaN never matches)."""
-    for i in range(a.shape[0]):
-        if not (a[i] == b[i] and math.copysign(1.0, a[i]) == math.copysign(1.0, b[i])):
-            return False
-    return True
-
-
-@numba.njit(**LEAF)
 def _follow_plan(x: Array, f: np.void, g: np.void, u: Array) -> None:
     """The committed plan's next command at x (its backup law) into u, and next_x := one sample of it from x
     (the state the plan predicts at the next call)."""
@@ -662,7 +653,7 @@ def gate(x: Array, f: np.void, g: np.void, u: Array) -> int:
     """The gatekeeper at the state x (19,) with the candidate u (3,) (the ASIF's answer, replaced in place
     by the command to apply). Returns the GATE_NAMES code of what it did; g (GATE_DTYPE) carries the
     committed plan from call to call. Where the candidate fails at x, the committed plan reaches the
-    terminal set and x is, bit for bit, its predicted state (next_x: the filter's model is the plant's),
+    terminal set and x is its predicted state (`predicted`, next_x: the filter's model is the plant's),
     the plan's next command (its backup law at x) is applied without a new rollout: its rollout verified
     it; next_x then becomes one sample of it from x."""
     b = f.backup
@@ -780,6 +771,6 @@ __all__ = [
     "RATE_LIMIT_FRACTION", "RATE_TIME_CONSTANT_S", "SETTLED", "SETTLED_ANGLE_RAD", "SETTLED_RATE_FRACTION",
     "SUN_SAFE", "SUN_SAFE_VARIANT", "VARIANTS", "apply_measurement_margins", "backup_command", "backup_record",
     "backup_rollout", "backup_tail", "check_margins", "gate", "hold_sample", "is_settled", "large_momentum",
-    "predict", "predicted", "reset", "rollout", "same", "same_answer", "settled", "sun_safe_command",
+    "predict", "predicted", "reset", "rollout", "same_answer", "settled", "sun_safe_command",
     "sun_safe_error", "verify",
 ]  # fmt: skip

@@ -141,11 +141,15 @@ def torque_msg(tau_Nm: Array, t_ns: int) -> Vector3Stamped:
     return vector_msg(tau_Nm, t_ns, topics.BODY_FRAME)
 
 
+def _frame(msg: Any, what: str, frame_id: str) -> None:
+    if msg.header.frame_id != frame_id:
+        raise MessageError(f"{what} frame_id must be {frame_id!r}, got {msg.header.frame_id!r}")
+
+
 def torque_from_msg(msg: Any) -> tuple[int, Array]:
     """(stamp [ns], torque (3,) [N m]) of a Vector3Stamped; frame must be `body`, values finite."""
     t_ns = stamp_ns(msg.header.stamp)
-    if msg.header.frame_id != topics.BODY_FRAME:
-        raise MessageError(f"torque frame_id must be {topics.BODY_FRAME!r}, got {msg.header.frame_id!r}")
+    _frame(msg, "torque", topics.BODY_FRAME)
     tau = np.array([msg.vector.x, msg.vector.y, msg.vector.z], dtype=float)
     if not np.all(np.isfinite(tau)):
         raise MessageError(f"torque is not finite: {tau.tolist()}")
@@ -263,9 +267,8 @@ def state_messages(f: Array, t_ns: int, voltage_V: float, current_A: float, effo
             topics.SUN_VECTOR: sun_vector_msg(f, t_ns)}
 
 
-def _frame(msg: Any, what: str, frame_id: str) -> None:
-    if msg.header.frame_id != frame_id:
-        raise MessageError(f"{what} frame_id must be {frame_id!r}, got {msg.header.frame_id!r}")
+ODOMETRY_FIELDS = tuple(name for name in FIELD_MESSAGES if name.startswith("Odometry."))
+"""The fields an Odometry carries (`odometry_fields` checks them)."""
 
 
 def odometry_fields(msg: Any, out: Array) -> None:
@@ -280,8 +283,7 @@ def odometry_fields(msg: Any, out: Array) -> None:
     out[F_POS:F_POS + 3] = (p.x, p.y, p.z)
     out[F_VEL_BODY:F_VEL_BODY + 3] = (lin.x, lin.y, lin.z)
     out[F_OMEGA:F_OMEGA + 3] = (ang.x, ang.y, ang.z)
-    for name in ("Odometry.pose.pose.orientation (x y z w)", "Odometry.twist.twist.angular [rad/s]",
-                 "Odometry.pose.pose.position (Hill) [m]", "Odometry.twist.twist.linear (body) [m/s]"):
+    for name in ODOMETRY_FIELDS:
         i, k = FIELD_MESSAGES[name]
         if not np.all(np.isfinite(out[i:i + k])):
             raise MessageError(f"{name} is not finite")
