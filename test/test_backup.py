@@ -22,9 +22,11 @@ from rta_attitude.filter.backup import (
     GATE_DTYPE,
     RATE_LIMIT_FRACTION,
     TILT_WHEEL_MARGIN,
+    VARIANTS,
     backup_command,
     backup_rollout,
     check_margins,
+    energy_reserve,
     gate,
     is_settled,
     reset,
@@ -528,3 +530,164 @@ def test_with_sensor_errors_the_backup_law_stays_inside_its_rollouts_margins(cfg
         found, _ = backup_rollout(x, backup_command(x, f), f)
         settled += found == "settled"
     assert settled >= 3
+
+
+@numba.njit
+def _reserve(x: Array, fa: np.ndarray, ga: np.ndarray) -> bool:
+    f = fa[0]
+    return energy_reserve(x, f.plant, f.constraints, f.backup, ga[0])
+
+
+def with_lookahead(cfg: Config, seconds: float) -> Config:
+    return dataclasses.replace(cfg, filter=dataclasses.replace(cfg.filter, backup_energy_lookahead_s=seconds))
+
+
+def _projected_threshold(x: Array, cfg: Config, floor_J: float) -> float:
+    """The least E at x for which the panel, held at the smallest angle to the sun at which the wheels hold
+    the momentum at rest, keeps E >= floor at every 10 s step of the lookahead: written here with angles
+    (the band of beta = angle(k_B, H) from the wheel box, the panel's distance to it), not the kernel's
+    cosines. The attitude matrix from scipy (passive: A = R^T)."""
+    from scipy.spatial.transform import Rotation
+
+    sc, L, o = cfg.spacecraft, cfg.limits, cfg.filter
+    D, J, w_max = sc.wheel_inertia_kgm2, np.asarray(sc.J), L.omega_max_rad_s
+    A = Rotation.from_quat(x[0:4]).as_matrix().T
+    hb = J * x[4:7] - sc.torque_sign * D * x[7:10]
+    h0 = A.T @ hb
+    hn = float(np.linalg.norm(h0))
+    top = (1.0 - TILT_WHEEL_MARGIN) * L.psi_max_rad_s * D
+    c1, c2, c3 = top - J * w_max
+    lo_beta = np.arccos(min(1.0, c3 / hn))                  # the panel-axis wheel: |H cos beta| <= c3
+    hi_beta = np.arcsin(min(1.0, np.hypot(c1, c2) / hn))    # the others: |H| sin beta <= |(c1, c2)|
+    bands = [(lo_beta, hi_beta), (np.pi - hi_beta, np.pi - lo_beta)]
+    if hn * np.cos(np.pi / 4 - CORRIDOR_HALF_WIDTH_RAD) > min(c1, c2):  # a narrow corridor: H_body's side
+        bands = [bands[0] if hb[2] >= 0 else bands[1]]
+    n = cfg.environment.mean_motion_rad_s
+    frame = n if cfg.environment.rotating_hill else 0.0
+    t = (np.arange(round(o.backup_energy_lookahead_s / 10.0)) + 0.5) * 10.0
+    theta = x[12] - n * t
+    sun = np.stack([np.cos(theta), np.sin(theta), np.zeros_like(t)], axis=1)
+    c, s = np.cos(-frame * t), np.sin(-frame * t)  # H fixed inertially: in Hill it turns by -frame t
+    h = np.stack([c * h0[0] - s * h0[1], s * h0[0] + c * h0[1], np.full_like(t, h0[2])], axis=1)
+    alpha = np.arccos(np.clip(np.sum(h * sun, axis=1) / hn, -1.0, 1.0))
+    if hn <= c3:
+        phi = np.zeros_like(t)
+    else:
+        phi = np.min([np.maximum(0.0, np.maximum(lo - alpha, alpha - hi)) for lo, hi in bands], axis=0)
+    pw = cfg.power
+    peak = pw.ideal_W_m2 * pw.degradation * pw.panel_area_m2
+    gain = np.cumsum(10.0 * (peak * np.maximum(0.0, np.cos(phi)) - pw.load_W))
+    return floor_J - float(gain.min())
+
+
+def _kernel_threshold(x: Array, f: np.ndarray) -> float:
+    g = np.zeros(1, GATE_DTYPE)
+    y = x.copy()
+    lo, hi = -1e5, 1e5
+    for _ in range(80):
+        y[11] = 0.5 * (lo + hi)
+        if _reserve(y, f, g):
+            hi = y[11]
+        else:
+            lo = y[11]
+    return hi
+
+
+@pytest.mark.parametrize("rotating", [False, True])
+def test_the_energy_reserve_is_the_projection_of_the_tilted_panel(cfg: Config, rotating: bool) -> None:
+    """`energy_reserve` accepts exactly the energies at which the battery stays above E_min over the
+    lookahead with the panel as near the sun as the wheels hold the momentum (an independent projection
+    written with angles), for large momenta (|H|/D 560-830 rad/s, both sides of the split), a small one
+    (the panel on the sun: the threshold is one step's charge below the floor), in an inertial Hill frame
+    and in a rotating one (H turns with the sun there)."""
+    from scipy.spatial.transform import Rotation
+
+    c = with_lookahead(cfg, 3000.0)
+    if rotating:
+        c = dataclasses.replace(c, environment=dataclasses.replace(c.environment, rotating_hill=True))
+    f = filter_record(c)
+    assert f[0]["plant"]["frame_rate_rad_s"] == (c.environment.mean_motion_rad_s if rotating else 0.0)
+    floor = c.limits.energy_min_J + float(f[0]["backup"]["margin"][CONSTRAINT_NAMES.index("battery")])
+    rng = np.random.default_rng(23)
+    seen, tested = [], 0
+    while tested < 10:
+        x = np.zeros(19)
+        x[0:4] = Rotation.random(random_state=rng.integers(1 << 31)).as_quat()
+        x[4:7] = rng.uniform(-1.0, 1.0, 3) * c.limits.omega_max_rad_s
+        x[7:10] = rng.choice([-1.0, 1.0], 3) * rng.uniform(0.0 if tested == 0 else 300.0, 576.0, 3)
+        x[10], x[12] = 280.0, rng.uniform(0.0, 2.0 * np.pi)
+        hn = momentum_rad_s(x, c)
+        if not (hn < 400.0 if tested == 0 else 560.0 < hn < 830.0):
+            continue
+        want = _projected_threshold(x, c, floor)
+        got = _kernel_threshold(x, f)
+        assert got == pytest.approx(want, abs=1e-6), (hn, got, want)
+        x[11] = want + 1e-3
+        assert _reserve(x, f, np.zeros(1, GATE_DTYPE))
+        x[11] = want - 1e-3
+        assert not _reserve(x, f, np.zeros(1, GATE_DTYPE))
+        seen.append((hn, want))
+        tested += 1
+    assert seen[0][1] == pytest.approx(floor - 10.0 * (f[0]["plant"]["panel_peak_W"] - c.power.load_W))
+    if not rotating:  # the sun turning past a fixed H: some momenta need a real reserve
+        assert max(w for _, w in seen) > floor + 1000.0
+
+
+def test_short_of_the_energy_reserve_the_gate_applies_the_backup_law_and_follows_it(cfg: Config) -> None:
+    """A large momentum (Monte Carlo run 377 of seed 1, |H|/D = 838 rad/s), the panel held by the backup
+    law for 300 s: with plenty of charge the gate applies the candidate (u = 0: verified); with less than the
+    lookahead needs (the horizon itself stays safe), it applies the backup law instead and commits its plan
+    as one short of the reserve, which the lookahead 0 (off) would not (the candidate again). At the state
+    the plan predicted, the plan is followed without a new rollout (one sample simulated: the next
+    prediction) until nominal_steps samples have passed, then checked afresh."""
+    c = config.load()
+    f, f_off = filter_record(c), filter_record(with_lookahead(c, 0.0))
+    x0, _ = sample_initial_states(5000, 1, c)
+    x = x0[377].copy()
+    assert 830.0 < momentum_rad_s(x, c) < 840.0
+    D, p = c.spacecraft.wheel_inertia_kgm2, f[0:1]["plant"]
+    for _ in range(300):
+        u = torque_to_wheel_accel(wheel_accel_to_torque(backup_command(x, f), D), D)
+        x, _ = integrate(x, u, 1.0, p, c.substeps)
+    x[11] = 20000.0
+    g = np.zeros(1, GATE_DTYPE)
+    applied = np.zeros(3)
+    assert _gate(x, applied, f, g) == GATE_VERIFIED and not g[0]["plan_weak"]
+    np.testing.assert_array_equal(applied, 0.0)
+    x[11] = 6000.0
+    assert backup_rollout(x, np.zeros(3), f)[0] == "horizon"  # the candidate is safe to the horizon ...
+    assert not _reserve(x, f, np.zeros(1, GATE_DTYPE))        # ... but short of the reserve at its end
+    g_off = np.zeros(1, GATE_DTYPE)
+    applied = np.zeros(3)
+    assert _gate(x, applied, f_off, g_off) == GATE_VERIFIED
+    g = np.zeros(1, GATE_DTYPE)
+    applied = np.zeros(3)
+    assert _gate(x, applied, f, g) == GATE_BACKUP and g[0]["plan_weak"] == 1
+    np.testing.assert_array_equal(applied, backup_command(x, f, VARIANTS[int(g[0]["plan_law"])]))
+    assert backup_rollout(x, applied, f, VARIANTS[int(g[0]["plan_law"])])[0] == "horizon"
+    ins = Instruments(c)
+    steps = int(f[0]["backup"]["horizon_steps"])
+    nominal = int(f[0]["backup"]["nominal_steps"])
+    followed = 0
+    for _ in range(nominal + 2):
+        u = torque_to_wheel_accel(wheel_accel_to_torque(applied, D), D)
+        x, _ = integrate(x, u, 1.0, p, c.substeps)
+        left = int(g[0]["plan_steps"])
+        applied = np.zeros(3)
+        code = _gate(ins.deliver(x), applied, f, g)
+        assert code == GATE_BACKUP
+        if int(g[0]["checked"]) == c.substeps:  # one sample: the plan followed, no rollout
+            assert int(g[0]["plan_steps"]) == left - 1 and left > steps - nominal
+            followed += 1
+        else:  # checked afresh once the plan is nominal_steps old: committed again
+            assert left <= steps - nominal + 1 and int(g[0]["plan_steps"]) == steps
+    assert followed >= nominal - 1
+
+
+def test_backup_energy_lookahead_is_validated() -> None:
+    cfg = config.load()
+    for bad in (-1.0, float("nan"), float("inf"), 2e6):
+        with pytest.raises(ConfigError, match=r"filter\.backup_energy_lookahead_s"):
+            with_lookahead(cfg, bad)
+    assert filter_record(with_lookahead(cfg, 0.0))[0]["backup"]["reserve_steps"] == 0
+    assert filter_record(cfg)[0]["backup"]["reserve_steps"] == round(cfg.filter.backup_energy_lookahead_s / 10.0)

@@ -188,6 +188,22 @@ def test_integrator_equals_rk4_of_the_oracle_with_saturation():
         np.testing.assert_array_equal(got_last, got_subs[-1])
 
 
+def test_saturated_is_the_actuator_clip_for_any_shape():
+    """`saturated` (the Python face of the compiled `saturate`, used by the plant node, simulate's record,
+    the bag analysis and the Basilisk plant) against numpy's clip at the configured limit, 181.3 rad/s^2
+    written by hand: any shape (..., 3), the limit itself, signed zeros, +-inf clipped, NaN passed."""
+    assert CFG.limits.wheel_accel_max_rad_s2 == 181.3
+    u = RNG.uniform(-400.0, 400.0, (7, 5, 3))
+    u[0, 0] = [181.3, -181.3, np.nextafter(181.3, 1e9)]
+    u[0, 1] = [-0.0, np.inf, -np.inf]
+    u[0, 2] = [np.nan, 1.0, -np.nan]
+    got = spacecraft.saturated(u, P)
+    assert got.shape == u.shape and got is not u
+    np.testing.assert_array_equal(got, np.clip(u, -181.3, 181.3))
+    assert np.signbit(got[0, 1, 0]) and got[0, 0, 2] == 181.3
+    np.testing.assert_array_equal(spacecraft.saturated(u[3, 2], P), np.clip(u[3, 2], -181.3, 181.3))
+
+
 def test_torque_interface_round_trip():
     D = CFG.spacecraft.wheel_inertia_kgm2
     u = RNG.uniform(-50, 50, 1000)

@@ -289,6 +289,7 @@ def from_parameters(params: Mapping[str, Any], source: str = "<memory>") -> Conf
         solver=fi.text("solver", "active_set"), model=fi.text("model", "gyrostat"),
         backup_law=fi.text("backup_law", "none"), backup_horizon_s=fi.number("backup_horizon_s", 300.0),
         backup_nominal_s=fi.number("backup_nominal_s", 20.0),
+        backup_energy_lookahead_s=fi.number("backup_energy_lookahead_s", 6000.0),
         priorities=fi.levels("priorities", DEFAULT_PRIORITIES))
     fi.done()
     ct = root.section("controller")

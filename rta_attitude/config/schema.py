@@ -366,6 +366,11 @@ class FilterOptions:
     """How long the gatekeeper's rollout follows the filter's own answers (u_des held) before the backup
     law, s (one sample: the candidate alone). A plan verified that way is applied, without a new rollout,
     at each later sample whose state and answer are the ones it predicted (docs/backup.md)."""
+    backup_energy_lookahead_s: float = 6000.0
+    """With a momentum too large for the sun-safe attitude (its plans hold for the horizon only), a plan is
+    accepted only if at its end the battery could stay above E_min for this long more with the panel
+    held where the wheels allow it nearest the sun (`filter.backup.energy_reserve`); 0: off. About one
+    orbit (2 pi / n = 6,118 s): the sun's direction to the momentum repeats each orbit."""
     priorities: tuple[tuple[str, ...], ...] = DEFAULT_PRIORITIES
     """Levels of constraint groups (BARRIER_GROUPS), most important first: with `fallback: prioritize`, an
     infeasible QP is answered by letting the least important level give way first, by as little as
@@ -379,6 +384,9 @@ class FilterOptions:
         _choice("filter.fallback", self.fallback, FALLBACKS)
         _choice("filter.backup_law", self.backup_law, BACKUP_LAWS)
         _positive("filter.backup_horizon_s", self.backup_horizon_s)
+        if not (math.isfinite(self.backup_energy_lookahead_s) and 0.0 <= self.backup_energy_lookahead_s <= 1e6):
+            raise ConfigError(f"filter.backup_energy_lookahead_s must be between 0 (off) and 1e6 s, got "
+                              f"{self.backup_energy_lookahead_s!r}")
         named = [g for level in self.priorities for g in level]
         for g in named:
             _choice("filter.priorities", g, BARRIER_GROUPS)

@@ -44,7 +44,7 @@ from numpy.typing import NDArray
 
 from rta_attitude.config.schema import Config
 from rta_attitude.dynamics.quaternion import product
-from rta_attitude.dynamics.spacecraft import RK4_WORK_ROWS, plant_record, rk4_hold
+from rta_attitude.dynamics.spacecraft import RK4_WORK_ROWS, plant_record, rk4_hold, saturated
 from rta_attitude.dynamics.state import STATE_SIZE
 from rta_attitude.errors import ConfigError
 from rta_attitude.jit import LEAF
@@ -284,7 +284,7 @@ class BasiliskPlant:
         u = np.ascontiguousarray(u, dtype=float)
         if u.shape != (3,) or not np.all(np.isfinite(u)):
             raise ValueError(f"u must be 3 finite wheel accelerations, got {u!r}")
-        np.clip(u, -self.u_max, self.u_max, out=self._us)  # the actuator, as `spacecraft.saturate`
+        self._us[:] = saturated(u, self.record)  # the actuator
         self._write_torque(self._us)
         t0_ns = self.t_ns
         self.t_ns = t0_ns + self.h_ns * self.substeps

@@ -313,6 +313,22 @@ def _integrate(x: Array, u: Array, dt_s: float, substeps: int, pa: NDArray[np.vo
     rk4_hold(x, us, dt_s, substeps, pa[0], out, work)
 
 
+@numba.njit(**LEAF)
+def _saturate_all(U: Array, pa: NDArray[np.void], out: Array) -> None:
+    for k in range(U.shape[0]):
+        saturate(U[k], pa[0], out[k])
+
+
+def saturated(u: Array, p: NDArray[np.void]) -> Array:
+    """What the actuator holds of wheel accelerations u (..., 3), rad/s^2: `saturate` for Python callers
+    (the plant node, `simulate`'s record, the analysis of a bag, the Basilisk plant), a new array."""
+    u = np.asarray(u, dtype=float)
+    U = np.ascontiguousarray(u.reshape(-1, 3))
+    out = np.empty_like(U)
+    _saturate_all(U, p, out)
+    return out.reshape(u.shape)
+
+
 def omega_dot(x: Array, u: Array, p: NDArray[np.void]) -> Array:
     """Body angular accelerations (..., 3), rad/s^2, of states x (..., 19) under wheel accelerations u."""
     x = np.asarray(x, dtype=float)
@@ -358,7 +374,7 @@ def integrate(x: Array, u: Array, dt_s: float, p: NDArray[np.void], substeps: in
 
 __all__ = [
     "EARTH_HILL", "PLANT_DTYPE", "RK4_WORK_ROWS", "derivative", "integrate", "net_power", "omega_dot",
-    "omega_drift", "plant_record", "positive_part", "rk4_hold", "rk4_work", "saturate", "state_derivative",
+    "omega_drift", "plant_record", "positive_part", "rk4_hold", "rk4_work", "saturate", "saturated", "state_derivative",
     "sun_hill", "thermal_rate",
     "torque_round_trip", "torque_to_wheel_accel", "wheel_accel_to_torque",
 ]  # fmt: skip

@@ -59,6 +59,7 @@ from rta_attitude.dynamics.sensors import ENERGY_RELATIVE_ERROR, FIELD_SIZE, SEN
 from rta_attitude.dynamics.spacecraft import (
     EARTH_HILL,
     RK4_WORK_ROWS,
+    net_power,
     omega_drift,
     rk4_hold,
     saturate,
@@ -92,6 +93,8 @@ backup's failures keep the wheels 0.06 rad/s inside psi_max, and the smaller res
 CORRIDOR_HALF_WIDTH_RAD = math.radians(10.0)
 """Where H_body could cross the i_B-j_B plane only through corridors narrower than this either side of
 the diagonal (a large momentum), the tilted target keeps the panel on its side of H."""
+RESERVE_STEP_S = 10.0
+"""Step of `energy_reserve`'s projection, s (the sun moves 0.6 deg in it; midpoint rule)."""
 VARIANTS = ("sun_safe", "momentum")
 """The backup law's variants: the sun-safe attitude (the momentum mode where the wheels could not hold
 the momentum there), the momentum mode always. The gatekeeper tries the committed plan's first."""
@@ -114,6 +117,8 @@ BACKUP_DTYPE = np.dtype([
     ("psi_limit_rad_s", np.float64),     # the wheel speed the law's targets may use (psi_max; less with sensor errors)
     ("momentum_variant_rad_s", np.float64),  # the MOMENTUM variant only where |J w - s D psi| / D exceeds this
     ("nominal_steps", np.int64),         # samples of the filter's own answers before the backup law (>= 1)
+    ("reserve_steps", np.int64),         # steps of `energy_reserve`'s projection (0: off)
+    ("reserve_step_s", np.float64),      # ... each this long
     ("margin", np.float64, (M,)),        # what each h must keep in a rollout (`check_margins`; 0 without sensor errors)
     ("interface", SENSORS_DTYPE),        # how the filter receives a state (`sensors.deliver`): plans predict that
 ])  # fmt: skip
@@ -130,6 +135,11 @@ GATE_DTYPE = np.dtype([
     # receive it (`sensors.deliver` of the prediction)
     ("has_next", np.uint8),              # ... next_x is set
     ("plan_settled", np.uint8),          # the committed plan reaches the terminal set (holds for good)
+    ("plan_weak", np.uint8),             # the committed plan is safe to its horizon but short of the energy reserve
+    ("weak_law", np.int8),               # the last `verify`'s first variant safe to the horizon without the
+    # energy reserve (-1: none), its command and its state after the first sample (`commit_weak`)
+    ("weak_u", np.float64, (3,)),
+    ("weak_x", np.float64, (STATE_SIZE,)),
     ("first_x", np.float64, (STATE_SIZE,)),  # the last rollout's state after its first sample
     ("x0", np.float64, (STATE_SIZE,)),   # the state the call's rollouts start from
     ("reused", np.int64),                # calls answered from a committed plan without a rollout (since reset)
@@ -175,6 +185,8 @@ def backup_record(cfg: Config) -> NDArray[np.void]:
     sc = cfg.spacecraft
     b["momentum_variant_rad_s"] = L.psi_max_rad_s - float(np.max(sc.J)) * L.omega_max_rad_s / sc.wheel_inertia_kgm2
     b["nominal_steps"] = max(1, round(o.backup_nominal_s / o.sample_time_s))
+    b["reserve_step_s"] = RESERVE_STEP_S
+    b["reserve_steps"] = round(o.backup_energy_lookahead_s / RESERVE_STEP_S)
     b["interface"] = sensors_record(cfg)[0]
     return rec
 
@@ -234,6 +246,86 @@ def _h_first(b0: float, b1: float, b2: float, t0: float, t1: float, t2: float, b
 
 
 @numba.njit(**LEAF)
+def _wheel_caps(p: np.void, b: np.void) -> tuple[float, float]:
+    """What the i_B and j_B wheels may hold at rest at the tilted target, N m s: (1 - TILT_WHEEL_MARGIN)
+    psi_limit D, less their rates' share J_a w_max."""
+    top = (1.0 - TILT_WHEEL_MARGIN) * b.psi_limit_rad_s * p.wheel_inertia_kgm2
+    return top - p.inertia_kgm2[0] * b.omega_max_rad_s, top - p.inertia_kgm2[1] * b.omega_max_rad_s
+
+
+@numba.njit(**LEAF)
+def _tilt(hn: float, ca: float, hb2: float, p: np.void, b: np.void) -> float:
+    """cos beta of the tilted target (`_tilted_target`): the panel's angle to the momentum (|H| = hn, N m s)
+    nearest alpha = angle(H, r_S) (ca = cos alpha) at which the wheels hold H at rest: the panel-axis wheel
+    |H| |cos beta| <= cap, the i_B and j_B wheels |H| sin beta <= |(c_1, c_2)|; on the side of hb2 (H_body's
+    k_B part) where the corridor between the sides is narrow. 2.0 where no tilt is needed (the panel-axis
+    wheel holds all of H), NaN where the wheels hold H at no beta."""
+    top = (1.0 - TILT_WHEEL_MARGIN) * b.psi_limit_rad_s * p.wheel_inertia_kgm2  # what each wheel may hold
+    cap = top - p.inertia_kgm2[2] * b.omega_max_rad_s  # at rest, with the rates' share left over
+    if not cap > 0.0:
+        return math.nan
+    if not hn > cap:
+        return 2.0
+    c1, c2 = _wheel_caps(p, b)
+    cos_a = cap / hn
+    # |cos beta| <= cos_a for the panel-axis wheel; the i_B and j_B wheels share |H| sin(beta) in
+    # proportion to c_1, c_2: |cos beta| >= lo
+    c12 = math.sqrt(c1 * c1 + c2 * c2)
+    lo = math.sqrt(max(0.0, 1.0 - (c12 / hn) ** 2))
+    if lo > cos_a:
+        return math.nan
+    side = 1.0 if ca >= 0.0 else -1.0
+    if hn * math.cos(0.25 * math.pi - CORRIDOR_HALF_WIDTH_RAD) > min(c1, c2):  # a narrow corridor: keep the side
+        side = 1.0 if hb2 >= 0.0 else -1.0
+    return side * min(max(side * ca, lo), cos_a)
+
+
+@numba.njit(**LEAF)
+def energy_reserve(x: Array, p: np.void, c: np.void, b: np.void, g: np.void) -> bool:
+    """From the state x (19,) (a rollout's end, a large momentum), the battery stays at or above E_min (plus
+    the rollouts' battery margin) for b.reserve_steps steps of b.reserve_step_s with the panel held at the
+    tilted target's angle to the sun (`_tilt`: as near the sun as the wheels can hold the momentum at rest)
+    while the sun moves on: E_dot = `net_power` at that angle (midpoint rule). H is conserved in an inertial
+    frame (no gravity gradient: its torque changes H by ~2 % an orbit), so in Hill it turns at -frame_rate
+    about z_Hill as the sun turns at -n. A projection of what the backup law could keep, not a check of it:
+    it makes the gate switch to the backup law while the battery can still afford the dark part of the
+    orbit, instead of at the end of a horizon-only plan. False where the wheels hold H at no angle."""
+    if b.reserve_steps <= 0:
+        return True
+    A = g.A
+    attitude_matrix(x[0], x[1], x[2], x[3], A)
+    s, D = p.torque_sign, p.wheel_inertia_kgm2
+    Hb0 = p.inertia_kgm2[0] * x[4] - s * D * x[7]
+    Hb1 = p.inertia_kgm2[1] * x[5] - s * D * x[8]
+    Hb2 = p.inertia_kgm2[2] * x[6] - s * D * x[9]
+    hx = A[0, 0] * Hb0 + A[1, 0] * Hb1 + A[2, 0] * Hb2  # H in Hill: A^T H_body
+    hy = A[0, 1] * Hb0 + A[1, 1] * Hb1 + A[2, 1] * Hb2
+    hz = A[0, 2] * Hb0 + A[1, 2] * Hb1 + A[2, 2] * Hb2
+    hn = math.sqrt(hx * hx + hy * hy + hz * hz)
+    if not hn > 0.0:
+        return True
+    E = x[ENERGY]
+    floor = c.energy_min_J + b.margin[BATTERY]
+    dt = b.reserve_step_s
+    for k in range(b.reserve_steps):
+        t = (k + 0.5) * dt
+        cs, sn = sun_hill(x[THETA_S] - p.mean_motion_rad_s * t)
+        cf, sf = math.cos(p.frame_rate_rad_s * t), math.sin(p.frame_rate_rad_s * t)
+        ca = ((cf * hx + sf * hy) * cs + (cf * hy - sf * hx) * sn) / hn  # H turned by -frame_rate t
+        cb = _tilt(hn, ca, Hb2, p, b)
+        if cb > 1.0:
+            cos_phi = 1.0
+        elif abs(cb) <= 1.0:  # the panel in the plane of H and r_S, beta from H: cos(alpha - beta)
+            cos_phi = ca * cb + math.sqrt(max(0.0, 1.0 - ca * ca)) * math.sqrt(max(0.0, 1.0 - cb * cb))
+        else:
+            return False
+        E += dt * net_power(cos_phi, p)
+        if not E >= floor:
+            return False
+    return True
+
+
+@numba.njit(**LEAF)
 def _tilted_target(cs: float, sn: float, hb0: float, hb1: float, hb2: float, p: np.void, b: np.void,
                    g: np.void) -> bool:
     """Write into g.target the sun-safe attitude tilted off the sun just enough for the wheels to hold
@@ -254,26 +346,16 @@ def _tilted_target(cs: float, sn: float, hb0: float, hb1: float, hb2: float, p: 
     momentum to tilt from or the wheels cannot hold it at any beta."""
     Hh = g.Hh
     hn = math.sqrt(Hh[0] * Hh[0] + Hh[1] * Hh[1] + Hh[2] * Hh[2])
-    top = (1.0 - TILT_WHEEL_MARGIN) * b.psi_limit_rad_s * p.wheel_inertia_kgm2  # what each wheel may hold
-    cap = top - p.inertia_kgm2[2] * b.omega_max_rad_s  # at rest, with the rates' share left over
-    c1 = top - p.inertia_kgm2[0] * b.omega_max_rad_s
-    c2 = top - p.inertia_kgm2[1] * b.omega_max_rad_s
-    if not hn > cap > 0.0:
+    if not hn > 0.0:
         return False
     hx, hy, hz = Hh[0] / hn, Hh[1] / hn, Hh[2] / hn
     ca = hx * cs + hy * sn
-    cos_a = cap / hn
-    # |cos beta| <= cos_a for the panel-axis wheel; the i_B and j_B wheels share |H| sin(beta) in
-    # proportion to c_1, c_2: |cos beta| >= lo
-    c12 = math.sqrt(c1 * c1 + c2 * c2)
-    lo = math.sqrt(max(0.0, 1.0 - (c12 / hn) ** 2))
-    if lo > cos_a:
+    cb = _tilt(hn, ca, hb2, p, b)
+    if not abs(cb) <= 1.0:  # no tilt needed, or none the wheels can hold
         return False
-    side = 1.0 if ca >= 0.0 else -1.0
-    if hn * math.cos(0.25 * math.pi - CORRIDOR_HALF_WIDTH_RAD) > min(c1, c2):  # a narrow corridor: keep the side
-        side = 1.0 if hb2 >= 0.0 else -1.0
-    cb = side * min(max(side * ca, lo), cos_a)
     sb = math.sqrt(max(0.0, 1.0 - cb * cb))
+    c1, c2 = _wheel_caps(p, b)
+    c12 = math.sqrt(c1 * c1 + c2 * c2)
     ox, oy, oz = _sun_across(hx, hy, hz, cs, sn, ca)
     kx, ky, kz = cb * hx + sb * ox, cb * hy + sb * oy, cb * hz + sb * oz
     px, py, pz = (hx - cb * kx) / sb, (hy - cb * ky) / sb, (hz - cb * kz) / sb  # H's part perpendicular to k
@@ -544,8 +626,20 @@ def reset(g: np.void) -> None:
     g.plan_law = SUN_SAFE_VARIANT
     g.plan_n = g.plan_at = 0
     g.nominal_wait = 0
-    g.has_next = g.plan_settled = 0
+    g.has_next = g.plan_settled = g.plan_weak = 0
     g.reused = 0
+    g.weak_law = -1
+
+
+@numba.njit(**LEAF)
+def _commit(first_x: Array, law: int, settled_: bool, weak: bool, b: np.void, g: np.void) -> None:
+    """Commit a verified plan of variant law whose state after its first sample is first_x."""
+    predict(first_x, b, g, g.next_x)
+    g.has_next = 1
+    g.plan_settled = settled_
+    g.plan_weak = weak
+    g.plan_law = law
+    g.plan_steps = b.horizon_steps
 
 
 @numba.njit(**LEAF)
@@ -556,11 +650,14 @@ def verify(x: Array, u: Array, candidate: bool, f: np.void, g: np.void) -> bool:
     battery into a dead end): the candidate u (candidate True) or the variant's own command at x
     (into u). With a small momentum the rollout must reach the terminal set (SETTLED: invariant, so
     the plan holds for good); with a large one, where the sun-safe attitude may not hold H, a horizon
-    safe to its end is accepted (HORIZON: the plan holds for the horizon only). On success the plan is
-    committed (plan_law, plan_steps) and u holds the command to apply."""
+    safe to its end with the battery's reserve at its end (`energy_reserve`) is accepted (HORIZON: the
+    plan holds for the horizon only). On success the plan is committed (plan_law, plan_steps) and u holds
+    the command to apply. The first variant safe to the horizon but short of the reserve is kept
+    (weak_law, weak_u, weak_x: `commit_weak` commits it)."""
     b = f.backup
     p = f.plant
     large = large_momentum(x, p, b)
+    g.weak_law = -1
     for t in range(len(VARIANTS)):
         g.law = g.plan_law if t == 0 else 1 - g.plan_law
         if g.law == MOMENTUM and not large:  # the sun-safe attitude holds a small momentum: charge there
@@ -569,13 +666,29 @@ def verify(x: Array, u: Array, candidate: bool, f: np.void, g: np.void) -> bool:
             sun_safe_command(x, f.plant, f.constraints, b, g, u)
         found = rollout(x, u, f, g, g.subs, False)
         if found == SETTLED or (found == HORIZON and large):
-            predict(g.first_x, b, g, g.next_x)
-            g.has_next = 1
-            g.plan_settled = found == SETTLED
-            g.plan_law = g.law
-            g.plan_steps = b.horizon_steps
+            if found == HORIZON and not energy_reserve(g.x, p, f.constraints, b, g):
+                if g.weak_law < 0:
+                    g.weak_law = g.law
+                    for i in range(STATE_SIZE):
+                        g.weak_x[i] = g.first_x[i]
+                    for a in range(3):
+                        g.weak_u[a] = u[a]
+                continue
+            _commit(g.first_x, g.law, found == SETTLED, False, b, g)
             return True
     return False
+
+
+@numba.njit(**LEAF)
+def commit_weak(g: np.void, b: np.void, u: Array) -> bool:
+    """Commit the last `verify`'s plan that is safe to its horizon but short of the energy reserve, if it
+    found one (its command into u); False if it found none."""
+    if g.weak_law < 0:
+        return False
+    _commit(g.weak_x, g.weak_law, False, True, b, g)
+    for a in range(3):
+        u[a] = g.weak_u[a]
+    return True
 
 
 @numba.njit(**LEAF)
@@ -659,12 +772,20 @@ def gate(x: Array, f: np.void, g: np.void, u: Array) -> int:
     b = f.backup
     if b.law == NO_LAW:
         return GATE_OFF
+    if (g.plan_weak and g.plan_steps > b.horizon_steps - b.nominal_steps and g.has_next
+            and predicted(x, g.next_x)):
+        # on a plan short of the energy reserve (the backup law, charging as well as the wheels allow): it
+        # goes on, checked afresh every nominal_steps samples (a candidate is a sample off the same path)
+        _follow_plan(x, f, g, u)
+        return GATE_BACKUP
     if verify(x, u, True, f, g):
         return GATE_VERIFIED
+    candidate_weak = g.weak_law >= 0  # safe to the horizon, short of the energy reserve
     if g.plan_steps > 0:  # the plan verified earlier: its next command is its backup law's, here
         on_plan = g.has_next and predicted(x, g.next_x)
-        # a settled plan holds for good on its own trajectory; else a fresh plan from here (either variant)
-        if not (on_plan and g.plan_settled) and verify(x, g.u_backup, False, f, g):
+        # a settled plan holds for good on its own trajectory; else a fresh plan from here (either variant),
+        # one short of the energy reserve if that is all there is (the backup law charges best)
+        if not (on_plan and g.plan_settled) and (verify(x, g.u_backup, False, f, g) or commit_weak(g, b, g.u_backup)):
             for a in range(3):
                 u[a] = g.u_backup[a]
             return GATE_BACKUP
@@ -673,16 +794,25 @@ def gate(x: Array, f: np.void, g: np.void, u: Array) -> int:
             # state the spacecraft is not in; the candidate (its rows robust to the errors) instead
             g.plan_steps = 0
             g.has_next = 0
-            return GATE_UNVERIFIED
+            return _weak_candidate(x, u, candidate_weak, f, g)
         if g.plan_settled:
             g.reused += 1
         _follow_plan(x, f, g, u)
         return GATE_BACKUP
-    if not verify(x, g.u_backup, False, f, g):
-        return GATE_UNVERIFIED
-    for a in range(3):
-        u[a] = g.u_backup[a]
-    return GATE_BACKUP
+    if verify(x, g.u_backup, False, f, g) or commit_weak(g, b, g.u_backup):
+        for a in range(3):
+            u[a] = g.u_backup[a]
+        return GATE_BACKUP
+    return _weak_candidate(x, u, candidate_weak, f, g)
+
+
+@numba.njit(**LEAF)
+def _weak_candidate(x: Array, u: Array, weak: bool, f: np.void, g: np.void) -> int:
+    """The gate's last resort: the candidate u, committed as a plan safe to its horizon if it was one short of
+    the energy reserve only (weak: verified again, now to commit it), else unverified."""
+    if weak and (verify(x, u, True, f, g) or commit_weak(g, f.backup, u)):
+        return GATE_VERIFIED
+    return GATE_UNVERIFIED
 
 
 # ----------------------------------------------------------------------------- Python faces
@@ -768,9 +898,9 @@ def backup_rollout(x: Array, u0: Array, f: NDArray[np.void], variant: str = "sun
 
 __all__ = [
     "ANSWER_RTOL", "BACKUP_DTYPE", "FAILED", "GATE_DTYPE", "HORIZON", "MOMENTUM", "NO_LAW", "PREDICTION_RTOL",
-    "RATE_LIMIT_FRACTION", "RATE_TIME_CONSTANT_S", "SETTLED", "SETTLED_ANGLE_RAD", "SETTLED_RATE_FRACTION",
-    "SUN_SAFE", "SUN_SAFE_VARIANT", "VARIANTS", "apply_measurement_margins", "backup_command", "backup_record",
-    "backup_rollout", "backup_tail", "check_margins", "gate", "hold_sample", "is_settled", "large_momentum",
-    "predict", "predicted", "reset", "rollout", "same_answer", "settled", "sun_safe_command",
-    "sun_safe_error", "verify",
+    "RATE_LIMIT_FRACTION", "RATE_TIME_CONSTANT_S", "RESERVE_STEP_S", "SETTLED", "SETTLED_ANGLE_RAD",
+    "SETTLED_RATE_FRACTION", "SUN_SAFE", "SUN_SAFE_VARIANT", "VARIANTS", "apply_measurement_margins",
+    "backup_command", "backup_record", "backup_rollout", "backup_tail", "check_margins", "commit_weak",
+    "energy_reserve", "gate", "hold_sample", "is_settled", "large_momentum", "predict", "predicted", "reset",
+    "rollout", "same_answer", "settled", "sun_safe_command", "sun_safe_error", "verify",
 ]  # fmt: skip

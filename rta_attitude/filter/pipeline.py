@@ -56,6 +56,7 @@ from rta_attitude.filter.backup import (
     apply_measurement_margins,
     backup_record,
     backup_tail,
+    energy_reserve,
     gate,
     hold_sample,
     large_momentum,
@@ -644,7 +645,7 @@ def plan_nominal(x: Array, u: Array, u_des: Array, N: int, f: np.void, wsa: NDAr
     for i in range(STATE_SIZE):
         g.first_x[i] = g.x[i]
     found = backup_tail(f, g, g.subs, False)
-    if not (found == SETTLED or (found == HORIZON and large)):
+    if not (found == SETTLED or (found == HORIZON and large and energy_reserve(g.x, f.plant, f.constraints, b, g))):
         return False
     g.plan_law = g.law
     g.plan_steps = b.horizon_steps + N - 1
@@ -653,6 +654,7 @@ def plan_nominal(x: Array, u: Array, u_des: Array, N: int, f: np.void, wsa: NDAr
     predict(g.first_x, b, g, g.next_x)
     g.has_next = 1
     g.plan_settled = found == SETTLED
+    g.plan_weak = 0
     return True
 
 

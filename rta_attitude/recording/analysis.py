@@ -455,8 +455,7 @@ def load_run(
                      "deadline misses: held or zero torque); the series use what it applied")
     plant = spacecraft.plant_record(run_cfg)
     D = run_cfg.spacecraft.wheel_inertia_kgm2
-    u = np.clip(spacecraft.torque_to_wheel_accel(tau, D), -run_cfg.limits.wheel_accel_max_rad_s2,
-                run_cfg.limits.wheel_accel_max_rad_s2)  # what the actuator applied (`spacecraft.saturate`)
+    u = spacecraft.saturated(spacecraft.torque_to_wheel_accel(tau, D), plant)  # what the actuator applied
     des_missing = sum(c not in rec.torque_des for c in cmd_used)
     if des_missing:
         notes.append(f"steps without torque_des: {des_missing} (u_des taken as the applied command)")

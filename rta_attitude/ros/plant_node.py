@@ -94,7 +94,6 @@ class PlantNode(RtaNode):
         self.get_logger().info(f"plant integrator ({self.cfg.plant.simulator}) ready in "
                                f"{self.wall_now_s() - t0:.2f} s")
         self.held_tau = np.zeros(3)
-        self.u_limit = self.cfg.limits.wheel_accel_max_rad_s2
         self.wheel_effort_Nm = np.zeros(3)
         """The motor torque on each rotor over the last hold (-s D u, saturated): joint_states' effort."""
         self.misses_in_a_row = 0
@@ -208,7 +207,7 @@ class PlantNode(RtaNode):
         if self.truth:
             u = self.instruments.actuate(u, self.k)
             tau_Nm = spacecraft.wheel_accel_to_torque(u, self.D)
-        u_held = np.clip(u, -self.u_limit, self.u_limit)
+        u_held = spacecraft.saturated(u, self.plant)
         self.wheel_effort_Nm = -self.cfg.spacecraft.torque_sign * spacecraft.wheel_accel_to_torque(u_held, self.D)
         x_next, _ = self.simulator.step(u)
         t_ns = self._t_ns(self.k)

@@ -48,6 +48,7 @@ from rta_attitude.dynamics.spacecraft import (
     plant_record,
     rk4_hold,
     saturate,
+    saturated,
     torque_round_trip,
     torque_to_wheel_accel,
     wheel_accel_to_torque,
@@ -275,7 +276,6 @@ def run_stepped(cfg: Config, scenario: Scenario, steps: int, plant: Plant, filt:
     truth = simulated_model(cfg)
     constraints = ConstraintSet(cfg)
     D = cfg.spacecraft.wheel_inertia_kgm2
-    lim = cfg.limits.wheel_accel_max_rad_s2
     sched_t = np.asarray(scenario.schedule_s, dtype=float)
     sched_q = np.ascontiguousarray(scenario.schedule_q, dtype=float)
     instruments = Instruments(cfg, stream)
@@ -293,7 +293,7 @@ def run_stepped(cfg: Config, scenario: Scenario, steps: int, plant: Plant, filt:
             u = torque_to_wheel_accel(wheel_accel_to_torque(result.u, D), D)
         else:
             u = run.u_des[k]
-        run.u[k] = np.clip(instruments.actuate(u, k), -lim, lim)
+        run.u[k] = saturated(instruments.actuate(u, k), truth)
         run.omega_dot[k] = omega_dot(x, run.u[k], truth)
         x_next, subs = plant.step(run.u[k])
         run.h_sub[k] = constraints.safety_values(subs)
