@@ -281,6 +281,21 @@ def _tilt(hn: float, ca: float, hb2: float, p: np.void, b: np.void) -> float:
 
 
 @numba.njit(**LEAF)
+def _momentum(x: Array, p: np.void, g: np.void) -> tuple[float, float, float]:
+    """The body's angular momentum H = J w - s D psi of the state x (19,): returned in body axes, N m s, and
+    in Hill (A^T H) into g.Hh; g.A := A(q)."""
+    A = g.A
+    attitude_matrix(x[0], x[1], x[2], x[3], A)
+    s, D = p.torque_sign, p.wheel_inertia_kgm2
+    Hb0 = p.inertia_kgm2[0] * x[4] - s * D * x[7]
+    Hb1 = p.inertia_kgm2[1] * x[5] - s * D * x[8]
+    Hb2 = p.inertia_kgm2[2] * x[6] - s * D * x[9]
+    for c in range(3):
+        g.Hh[c] = A[0, c] * Hb0 + A[1, c] * Hb1 + A[2, c] * Hb2
+    return Hb0, Hb1, Hb2
+
+
+@numba.njit(**LEAF)
 def energy_reserve(x: Array, p: np.void, c: np.void, b: np.void, g: np.void) -> bool:
     """From the state x (19,) (a rollout's end, a large momentum), the battery stays at or above E_min (plus
     the rollouts' battery margin) for b.reserve_steps steps of b.reserve_step_s with the panel held at the
@@ -292,15 +307,8 @@ def energy_reserve(x: Array, p: np.void, c: np.void, b: np.void, g: np.void) -> 
     orbit, instead of at the end of a horizon-only plan. False where the wheels hold H at no angle."""
     if b.reserve_steps <= 0:
         return True
-    A = g.A
-    attitude_matrix(x[0], x[1], x[2], x[3], A)
-    s, D = p.torque_sign, p.wheel_inertia_kgm2
-    Hb0 = p.inertia_kgm2[0] * x[4] - s * D * x[7]
-    Hb1 = p.inertia_kgm2[1] * x[5] - s * D * x[8]
-    Hb2 = p.inertia_kgm2[2] * x[6] - s * D * x[9]
-    hx = A[0, 0] * Hb0 + A[1, 0] * Hb1 + A[2, 0] * Hb2  # H in Hill: A^T H_body
-    hy = A[0, 1] * Hb0 + A[1, 1] * Hb1 + A[2, 1] * Hb2
-    hz = A[0, 2] * Hb0 + A[1, 2] * Hb1 + A[2, 2] * Hb2
+    _, _, Hb2 = _momentum(x, p, g)
+    hx, hy, hz = g.Hh[0], g.Hh[1], g.Hh[2]
     hn = math.sqrt(hx * hx + hy * hy + hz * hz)
     if not hn > 0.0:
         return True
@@ -402,14 +410,7 @@ def sun_safe_error(x: Array, p: np.void, b: np.void, g: np.void) -> float:
     stage), then about H to the panel's roll."""
     cs, sn = sun_hill(x[12])
     T = g.target
-    A = g.A
-    attitude_matrix(x[0], x[1], x[2], x[3], A)
-    s, D = p.torque_sign, p.wheel_inertia_kgm2
-    Hb0 = p.inertia_kgm2[0] * x[4] - s * D * x[7]
-    Hb1 = p.inertia_kgm2[1] * x[5] - s * D * x[8]
-    Hb2 = p.inertia_kgm2[2] * x[6] - s * D * x[9]
-    for c in range(3):  # H in Hill: A^T H_body
-        g.Hh[c] = A[0, c] * Hb0 + A[1, c] * Hb1 + A[2, c] * Hb2
+    Hb0, Hb1, Hb2 = _momentum(x, p, g)
     ex, ey, ez = EARTH_HILL
     d = ex * cs + ey * sn
     jx, jy, jz = ex - d * cs, ey - d * sn, ez
@@ -768,7 +769,10 @@ def gate(x: Array, f: np.void, g: np.void, u: Array) -> int:
     committed plan from call to call. Where the candidate fails at x, the committed plan reaches the
     terminal set and x is its predicted state (`predicted`, next_x: the filter's model is the plant's),
     the plan's next command (its backup law at x) is applied without a new rollout: its rollout verified
-    it; next_x then becomes one sample of it from x."""
+    it; next_x then becomes one sample of it from x. With a large momentum, plans safe to the horizon but
+    short of the energy reserve (`energy_reserve`) come after those with it, in order: the backup law's
+    (committed, `plan_weak`), the candidate's; at its predicted states a weak plan is followed without a
+    rollout for nominal_steps samples (docs/backup.md, "The energy reserve")."""
     b = f.backup
     if b.law == NO_LAW:
         return GATE_OFF
