@@ -246,11 +246,12 @@ def _h_first(b0: float, b1: float, b2: float, t0: float, t1: float, t2: float, b
 
 
 @numba.njit(**LEAF)
-def _wheel_caps(p: np.void, b: np.void) -> tuple[float, float]:
-    """What the i_B and j_B wheels may hold at rest at the tilted target, N m s: (1 - TILT_WHEEL_MARGIN)
-    psi_limit D, less their rates' share J_a w_max."""
+def _wheel_caps(p: np.void, b: np.void) -> tuple[float, float, float]:
+    """What each wheel (i_B, j_B, k_B) may hold at rest at the tilted target, N m s: (1 - TILT_WHEEL_MARGIN)
+    psi_limit D, less its rates' share J_a w_max (the rates the law may still command)."""
     top = (1.0 - TILT_WHEEL_MARGIN) * b.psi_limit_rad_s * p.wheel_inertia_kgm2
-    return top - p.inertia_kgm2[0] * b.omega_max_rad_s, top - p.inertia_kgm2[1] * b.omega_max_rad_s
+    w = b.omega_max_rad_s
+    return top - p.inertia_kgm2[0] * w, top - p.inertia_kgm2[1] * w, top - p.inertia_kgm2[2] * w
 
 
 @numba.njit(**LEAF)
@@ -260,13 +261,11 @@ def _tilt(hn: float, ca: float, hb2: float, p: np.void, b: np.void) -> float:
     |H| |cos beta| <= cap, the i_B and j_B wheels |H| sin beta <= |(c_1, c_2)|; on the side of hb2 (H_body's
     k_B part) where the corridor between the sides is narrow. 2.0 where no tilt is needed (the panel-axis
     wheel holds all of H), NaN where the wheels hold H at no beta."""
-    top = (1.0 - TILT_WHEEL_MARGIN) * b.psi_limit_rad_s * p.wheel_inertia_kgm2  # what each wheel may hold
-    cap = top - p.inertia_kgm2[2] * b.omega_max_rad_s  # at rest, with the rates' share left over
+    c1, c2, cap = _wheel_caps(p, b)
     if not cap > 0.0:
         return math.nan
     if not hn > cap:
         return 2.0
-    c1, c2 = _wheel_caps(p, b)
     cos_a = cap / hn
     # |cos beta| <= cos_a for the panel-axis wheel; the i_B and j_B wheels share |H| sin(beta) in
     # proportion to c_1, c_2: |cos beta| >= lo
@@ -362,7 +361,7 @@ def _tilted_target(cs: float, sn: float, hb0: float, hb1: float, hb2: float, p: 
     if not abs(cb) <= 1.0:  # no tilt needed, or none the wheels can hold
         return False
     sb = math.sqrt(max(0.0, 1.0 - cb * cb))
-    c1, c2 = _wheel_caps(p, b)
+    c1, c2, _ = _wheel_caps(p, b)
     c12 = math.sqrt(c1 * c1 + c2 * c2)
     ox, oy, oz = _sun_across(hx, hy, hz, cs, sn, ca)
     kx, ky, kz = cb * hx + sb * ox, cb * hy + sb * oy, cb * hz + sb * oz
