@@ -632,8 +632,10 @@ def reset(g: np.void) -> None:
 
 
 @numba.njit(**LEAF)
-def _commit(first_x: Array, law: int, settled_: bool, weak: bool, b: np.void, g: np.void) -> None:
-    """Commit a verified plan of variant law whose state after its first sample is first_x."""
+def commit(first_x: Array, law: int, settled_: bool, weak: bool, b: np.void, g: np.void) -> None:
+    """Commit a verified plan of variant law whose state after its first sample is first_x: next_x is that
+    state as the filter will receive it, the plan runs horizon_steps samples (`verify`, `commit_weak`; the
+    nominal plan adds its own)."""
     predict(first_x, b, g, g.next_x)
     g.has_next = 1
     g.plan_settled = settled_
@@ -674,7 +676,7 @@ def verify(x: Array, u: Array, candidate: bool, f: np.void, g: np.void) -> bool:
                     for a in range(3):
                         g.weak_u[a] = u[a]
                 continue
-            _commit(g.first_x, g.law, found == SETTLED, False, b, g)
+            commit(g.first_x, g.law, found == SETTLED, False, b, g)
             return True
     return False
 
@@ -685,7 +687,7 @@ def commit_weak(g: np.void, b: np.void, u: Array) -> bool:
     found one (its command into u); False if it found none."""
     if g.weak_law < 0:
         return False
-    _commit(g.weak_x, g.weak_law, False, True, b, g)
+    commit(g.weak_x, g.weak_law, False, True, b, g)
     for a in range(3):
         u[a] = g.weak_u[a]
     return True
@@ -903,7 +905,7 @@ __all__ = [
     "ANSWER_RTOL", "BACKUP_DTYPE", "FAILED", "GATE_DTYPE", "HORIZON", "MOMENTUM", "NO_LAW", "PREDICTION_RTOL",
     "RATE_LIMIT_FRACTION", "RATE_TIME_CONSTANT_S", "RESERVE_STEP_S", "SETTLED", "SETTLED_ANGLE_RAD",
     "SETTLED_RATE_FRACTION", "SUN_SAFE", "SUN_SAFE_VARIANT", "VARIANTS", "apply_measurement_margins",
-    "backup_command", "backup_record", "backup_rollout", "backup_tail", "check_margins", "commit_weak",
+    "backup_command", "backup_record", "backup_rollout", "backup_tail", "check_margins", "commit", "commit_weak",
     "energy_reserve", "gate", "hold_sample", "is_settled", "large_momentum", "predict", "predicted", "reset",
     "rollout", "same_answer", "settled", "sun_safe_command", "sun_safe_error", "verify",
 ]  # fmt: skip

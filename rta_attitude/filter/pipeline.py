@@ -56,6 +56,7 @@ from rta_attitude.filter.backup import (
     apply_measurement_margins,
     backup_record,
     backup_tail,
+    commit,
     energy_reserve,
     gate,
     hold_sample,
@@ -647,14 +648,10 @@ def plan_nominal(x: Array, u: Array, u_des: Array, N: int, f: np.void, wsa: NDAr
     found = backup_tail(f, g, g.subs, False)
     if not (found == SETTLED or (found == HORIZON and large and energy_reserve(g.x, f.plant, f.constraints, b, g))):
         return False
-    g.plan_law = g.law
-    g.plan_steps = b.horizon_steps + N - 1
+    commit(g.first_x, g.law, found == SETTLED, False, b, g)
+    g.plan_steps = b.horizon_steps + N - 1  # the nominal samples, then the backup law's horizon
     g.plan_n = N
     g.plan_at = 1
-    predict(g.first_x, b, g, g.next_x)
-    g.has_next = 1
-    g.plan_settled = found == SETTLED
-    g.plan_weak = 0
     return True
 
 
