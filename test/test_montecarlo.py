@@ -38,9 +38,16 @@ def _single_run(cfg: Config, x0: np.ndarray, duration_s: float) -> simulation.Tr
 
 
 # ----------------------------------------------------------------------------- sampling
-def test_sampling_is_reproducible_and_independent_of_preset(cfg: Config) -> None:
+def test_sampling_is_reproducible_and_independent_of_preset_and_sensors(cfg: Config) -> None:
     a, ra = sample_initial_states(64, 3, cfg)
     b, rb = sample_initial_states(64, 3, cfg.with_preset("paper"))
+    # sensor errors widen the robust preset's margins: the states must not change with them (a noisy
+    # campaign runs the nominal one's states; once they did not, 2 of 3 differed)
+    n, rn = sample_initial_states(64, 3, cfg.with_noise())
+    robust = cfg.with_preset("robust").with_models(filter="paper")
+    assert np.any(ConstraintSet(robust.with_noise()).evaluate(a).psi0 < ConstraintSet(robust).evaluate(a).psi0)
+    np.testing.assert_array_equal(a, n)
+    np.testing.assert_array_equal(ra, rn)
     # Psi of either preset >= 0, with the paper model's margins (the sampler's rule: the same states for
     # every model; a gyrostat filter's larger exclusion-zone margin may start inside it, h >= 0)
     t = ConstraintSet(cfg.with_preset("robust").with_models(filter="paper")).evaluate(a)

@@ -66,12 +66,14 @@ def _to_states(u: Array, cfg: Config) -> Array:
 
 def rejected(x: Array, cfg: Config) -> NDArray[np.bool_]:
     """(n,) True where an enabled constraint has h, Psi_0 or Psi_1 < 0 at x (n, 19) under any filter
-    preset (the robust preset may keep a sampled-data margin in Psi_0), with the paper model's margins:
-    one test for all presets and models, so a seed gives the same initial states whichever preset and
-    model run them (a gyrostat filter, whose margin is larger, may start inside its margin, h >= 0)."""
+    preset (the robust preset may keep a sampled-data margin in Psi_0), with the paper model's margins and
+    no sensor errors: one test for all presets, models and sensor settings, so a seed gives the same
+    initial states whichever preset, model and sensors run them (a gyrostat filter, or the robust
+    preset's measurement margins with sensor errors on, may start inside its margin, h >= 0)."""
     out = np.zeros(len(x), dtype=bool)
+    exact = cfg.with_noise(False)
     for preset in PRESETS:
-        cs = ConstraintSet.from_config(cfg.with_preset(preset).with_models(filter="paper"))
+        cs = ConstraintSet.from_config(exact.with_preset(preset).with_models(filter="paper"))
         t = cs.evaluate(x)
         on = cs.enabled.astype(bool)
         out |= np.any(((t["h"] < 0) | (t["psi0"] < 0) | (t["psi1"] < 0)) & on, axis=1)
