@@ -488,6 +488,51 @@ def test_rollout_margins_cover_the_measurement_errors(cfg: Config) -> None:
             assert kept.any() and np.all(limit**2 - true[kept] ** 2 >= 0.0), name
 
 
+def test_a_candidate_keeps_the_reading_errors_twice_and_the_backup_law_once(cfg: Config, states: Array) -> None:
+    """Hysteresis (sensor errors on): a candidate's rollout keeps the keep-out cone's, the temperature's and the
+    charge's reading errors twice, the backup law's once; without sensor errors both margins are equal. A
+    backup path whose lowest charge lies between the two floors (E's dynamics do not depend on E: the
+    path is shifted, checked here) is accepted as the backup law's and refused as a candidate's, at the
+    battery."""
+    from rta_attitude.constraints.base import measurement_errors
+
+    col = {n: i for i, n in enumerate(CONSTRAINT_NAMES)}
+    plain = filter_record(cfg)[0]["backup"]
+    np.testing.assert_array_equal(plain["candidate_margin"], plain["margin"])
+    noisy = cfg.with_noise()
+    f = filter_record(noisy)
+    b = f[0]["backup"]
+    err = measurement_errors(noisy)
+    extra = b["candidate_margin"] - b["margin"]
+    assert extra[col["exclusion_zone"]] == err["err_att_rad"] > 0
+    assert extra[col["temperature"]] == err["err_T_K"] > 0
+    assert extra[col["battery"]] == pytest.approx(err["err_E_J"], rel=1e-12) and err["err_E_J"] > 0
+    np.testing.assert_array_equal(np.delete(extra, [col["exclusion_zone"], col["temperature"], col["battery"]]), 0.0)
+    E = 11
+    floor = noisy.limits.energy_min_J + b["margin"][col["battery"]]
+    tried = 0
+    for x in states:
+        u = backup_command(x, f)
+        found, path = backup_rollout(x, u, f)
+        if found == "failed" or path[:, E].argmin() == 0:
+            continue  # a path whose charge falls, then rises
+        tried += 1
+        y = x.copy()
+        y[E] += floor + 0.5 * extra[col["battery"]] - path[:, E].min()
+        found_b, path_b = backup_rollout(y, u, f)
+        assert found_b == found
+        np.testing.assert_allclose(path_b[:, E] - path[:, E], y[E] - x[E], atol=1e-9)
+        found_c, path_c = backup_rollout(y, u, f, candidate=True)
+        assert found_c == "failed"
+        assert path_c[-1, E] < floor + extra[col["battery"]]
+        c_rows = ConstraintSet(noisy).safety_values(path_c[-1])
+        assert c_rows[col["battery"]] < b["candidate_margin"][col["battery"]]
+        assert np.all(np.delete(c_rows >= b["candidate_margin"], [col["battery"], col["communication"]]))
+        if tried == 3:
+            break
+    assert tried == 3
+
+
 def test_off_its_plan_the_gate_does_not_apply_a_stale_backup_command(cfg: Config, states: Array) -> None:
     """After a plan was committed, a state that is not the one it predicted (sensor errors, another model),
     from which neither the candidate nor the backup law verifies, gets the candidate (unverified) and the

@@ -55,7 +55,14 @@ from rta_attitude.constraints.base import (
 from rta_attitude.constraints.geometry import CONTEXT_DTYPE
 from rta_attitude.constraints.rows import safety_values
 from rta_attitude.dynamics.quaternion import attitude_matrix, error_vector, from_matrix
-from rta_attitude.dynamics.sensors import ENERGY_RELATIVE_ERROR, FIELD_SIZE, SENSORS_DTYPE, deliver, sensors_record
+from rta_attitude.dynamics.sensors import (
+    ENERGY_RELATIVE_ERROR,
+    FIELD_SIZE,
+    SENSORS_DTYPE,
+    deliver,
+    interface_energy_error,
+    sensors_record,
+)
 from rta_attitude.dynamics.spacecraft import (
     EARTH_HILL,
     RK4_WORK_ROWS,
@@ -120,6 +127,7 @@ BACKUP_DTYPE = np.dtype([
     ("reserve_steps", np.int64),         # steps of `energy_reserve`'s projection (0: off)
     ("reserve_step_s", np.float64),      # ... each this long
     ("margin", np.float64, (M,)),        # what each h must keep in a rollout (`check_margins`; 0 without sensor errors)
+    ("candidate_margin", np.float64, (M,)),  # ... in a candidate's rollout (`apply_measurement_margins`)
     ("interface", SENSORS_DTYPE),        # how the filter receives a state (`sensors.deliver`): plans predict that
 ])  # fmt: skip
 """The gatekeeper's parameters (a field of the filter's record)."""
@@ -163,6 +171,8 @@ GATE_DTYPE = np.dtype([
     ("q_c", np.float64, (4,)),
     ("dq", np.float64, (3,)),
     ("wd", np.float64, (3,)),
+    ("candidate", np.uint8),             # the rollout checks a candidate: h >= candidate_margin (else margin)
+    ("xm", np.float64, (STATE_SIZE,)),   # the law's state at the middle of its hold (`_rate_command`)
 ])  # fmt: skip
 """The gatekeeper's memory (plan_steps) and scratch (one per filter workspace)."""
 
@@ -505,15 +515,32 @@ def sun_safe_command(x: Array, p: np.void, c: np.void, b: np.void, g: np.void, o
 
 @numba.njit(**LEAF)
 def _rate_command(x: Array, p: np.void, c: np.void, b: np.void, g: np.void, out: Array) -> None:
-    """`sun_safe_command` with g.dq and g.A already those of x (`sun_safe_error` ran on it)."""
-    omega_drift(x, g.A, p, g.wd)
+    """`sun_safe_command` with g.dq and g.A already those of x (`sun_safe_error` ran on it).
+
+    Per axis, the wheel acceleration that turns the rate towards w_ref (|w_ref| <= rate_limit) with the
+    time constant, cancelling the drift (Euler's and the wheels' gyroscopic terms) held over the sample:
+    the drift at the hold's middle (one predictor step of the held command, from x; the attitude's part,
+    gravity gradient, at x), not at its start. The command changes the rates, and with a large momentum the
+    gyroscopic torque with them, within the hold: cancelling the drift at its start overshot w_ref by up
+    to 0.08 deg/s in one sample (docs/backup.md, "Hysteresis")."""
     lim = b.rate_limit_rad_s
-    for a in range(3):
-        w_ref = -(b.kp / b.kd) * g.dq[a]
-        w_ref = -lim if w_ref < -lim else (lim if w_ref > lim else w_ref)
-        v = ((w_ref - x[4 + a]) / b.rate_time_constant_s - g.wd[a]) / p.control_gain[a]
-        m = c.u_max_rad_s2[a]
-        out[a] = -m if v < -m else (m if v > m else v)
+    omega_drift(x, g.A, p, g.wd)
+    for it in range(2):
+        for a in range(3):
+            w_ref = -(b.kp / b.kd) * g.dq[a]
+            w_ref = -lim if w_ref < -lim else (lim if w_ref > lim else w_ref)
+            v = ((w_ref - x[4 + a]) / b.rate_time_constant_s - g.wd[a]) / p.control_gain[a]
+            m = c.u_max_rad_s2[a]
+            out[a] = -m if v < -m else (m if v > m else v)
+        if it == 1:
+            return
+        half = 0.5 * c.dt_s
+        for i in range(STATE_SIZE):
+            g.xm[i] = x[i]
+        for a in range(3):
+            g.xm[4 + a] = x[4 + a] + half * (g.wd[a] + p.control_gain[a] * out[a])
+            g.xm[7 + a] = x[7 + a] + half * out[a]
+        omega_drift(g.xm, g.A, p, g.wd)
 
 
 @numba.njit(**LEAF)
@@ -560,7 +587,8 @@ def check_margins(p: np.void, c: np.void, out: Array) -> None:
 def hold_sample(u: Array, f: np.void, g: np.void, traj: Array, record: bool) -> bool:
     """One sample of a rollout from g.x (19,): u (3,) held (across the torque interface, saturated, as the
     loop applies it), `substeps` RK4 steps of the filter's model, every enabled, non-slacked constraint
-    checked at each substep (h >= b.margin, `check_margins`: 0 without sensor errors; NaN fails). g.x becomes
+    checked at each substep (h >= b.margin, `check_margins`: 0 without sensor errors; b.candidate_margin where
+    g.candidate; NaN fails). g.x becomes
     the state at the sample's end; g.checked counts the substeps (with record, their states go to traj).
     Returns False at the first violation."""
     p, c, b = f.plant, f.constraints, f.backup
@@ -570,6 +598,7 @@ def hold_sample(u: Array, f: np.void, g: np.void, traj: Array, record: bool) -> 
     torque_round_trip(u, p, g.us)
     saturate(g.us, p, g.us)
     rk4_hold(x, g.us, c.dt_s, S, p, subs, g.work)
+    margin = b.candidate_margin if g.candidate else b.margin
     for j in range(S):
         if record:
             for i in range(STATE_SIZE):
@@ -578,7 +607,7 @@ def hold_sample(u: Array, f: np.void, g: np.void, traj: Array, record: bool) -> 
         safety_values(subs[j], p, c, g.ctx, g.h)
         for i in range(M):
             gi = c.gains[i]
-            if gi.enabled != 0 and gi.slack_weight == 0.0 and not g.h[i] >= b.margin[i]:
+            if gi.enabled != 0 and gi.slack_weight == 0.0 and not g.h[i] >= margin[i]:
                 return False
     for i in range(STATE_SIZE):
         x[i] = subs[S - 1, i]
@@ -660,6 +689,7 @@ def verify(x: Array, u: Array, candidate: bool, f: np.void, g: np.void) -> bool:
     p = f.plant
     large = large_momentum(x, p, b)
     g.weak_law = -1
+    g.candidate = candidate
     for t in range(len(VARIANTS)):
         g.law = g.plan_law if t == 0 else 1 - g.plan_law
         if g.law == MOMENTUM and not large:  # the sun-safe attitude holds a small momentum: charge there
@@ -756,6 +786,7 @@ def _follow_plan(x: Array, f: np.void, g: np.void, u: Array) -> None:
     for i in range(STATE_SIZE):
         g.x[i] = x[i]
     g.checked = 0
+    g.candidate = 0
     g.has_next = hold_sample(g.u_backup, f, g, g.subs, False)
     predict(g.x, f.backup, g, g.next_x)
     g.plan_steps -= 1
@@ -829,16 +860,28 @@ def _margins_of(fa: NDArray[np.void], out: Array) -> None:
     check_margins(f.plant, f.constraints, out)
 
 
-def apply_measurement_margins(rec: NDArray[np.void]) -> None:
+def apply_measurement_margins(rec: NDArray[np.void], cfg: Config) -> None:
     """The rollouts' measurement margins (`check_margins`, once: they depend on the record only) into the
     backup record, and the backup law kept inside what the rollouts then accept (sensor errors on): its rate
     command at RATE_LIMIT_FRACTION of the rate the margins leave (sqrt(w_max^2 - margin)), its targets'
-    wheel speeds within the wheel speed they leave. rec: the FILTER_DTYPE record (1,), changed in place;
-    without rate and wheel-speed errors (their margins 0: no sensor errors) the law is unchanged."""
+    wheel speeds within the wheel speed they leave. rec: the FILTER_DTYPE record (1,) of cfg, changed in
+    place; without rate and wheel-speed errors (their margins 0: no sensor errors) the law is unchanged.
+
+    A candidate's rollout keeps the errors of the keep-out cone's angle, the temperature and the charge
+    twice (candidate_margin; docs/backup.md, "Hysteresis"): the gate falls back to the backup law at the
+    next sample, from the next reading, whose own errors shift that path's angles, T and E by up to as much
+    again (E's and nearly T's dynamics do not depend on them: the path moves by the offset). Without sensor
+    errors the two margins are equal."""
     m = np.empty(M)
     _margins_of(rec, m)
     b = rec["backup"]
     b["margin"][0] = m
+    c = rec["constraints"][0]
+    extra = np.zeros(M)
+    extra[EXCLUSION_ZONE] = float(c["err_att_rad"])
+    extra[TEMPERATURE] = float(c["err_T_K"])
+    extra[BATTERY] = max(0.0, float(c["err_E_J"]) - (interface_energy_error(cfg) if c["robust"] else 0.0))
+    b["candidate_margin"][0] = m + extra
     w_max, psi_max = float(b["omega_max_rad_s"][0]), float(b["psi_max_rad_s"][0])
     rate_margin, speed_margin = float(np.max(m[OMEGA_X:OMEGA_X + 3])), float(np.max(m[PSI_X:PSI_X + 3]))
     if rate_margin > 0.0:
@@ -886,9 +929,11 @@ def is_settled(x: Array, f: NDArray[np.void], variant: str = "sun_safe") -> bool
     return bool(_settled(np.ascontiguousarray(x, dtype=float), f, _scratch(variant)))
 
 
-def backup_rollout(x: Array, u0: Array, f: NDArray[np.void], variant: str = "sun_safe") -> tuple[str, Array]:
+def backup_rollout(x: Array, u0: Array, f: NDArray[np.void], variant: str = "sun_safe",
+                   candidate: bool = False) -> tuple[str, Array]:
     """`rollout` of candidate u0 (3,) at state x (19,) with filter record f (1,) and a variant of the
-    backup law (VARIANTS).
+    backup law (VARIANTS); candidate: it checks a candidate's margins (b.candidate_margin), as `verify` does
+    for the filter's answer.
 
     Returns:
         (what it found: 'failed', 'horizon' or 'settled'; the substep states it checked (K, 19): the
@@ -897,6 +942,7 @@ def backup_rollout(x: Array, u0: Array, f: NDArray[np.void], variant: str = "sun
     b = f[0]["backup"]
     traj = np.empty(((int(b["horizon_steps"]) + 1) * int(b["substeps"]), STATE_SIZE))
     g = _scratch(variant)
+    g[0]["candidate"] = candidate
     found = _rollout(np.ascontiguousarray(x, dtype=float), np.ascontiguousarray(u0, dtype=float), f, g, traj)
     return ("failed", "horizon", "settled")[found], traj[:int(g[0]["checked"])]
 

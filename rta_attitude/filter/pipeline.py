@@ -185,7 +185,7 @@ def filter_record(cfg: Config) -> NDArray[np.void]:
     f["backup"] = backup_record(cfg)[0]
     f["level"] = constraint_levels(cfg.filter.priorities)
     f["n_levels"] = len(cfg.filter.priorities)
-    apply_measurement_margins(rec)  # the backup law inside its rollouts' margins (sensor errors on)
+    apply_measurement_margins(rec, cfg)  # the backup law inside its rollouts' margins (sensor errors on)
     return rec
 
 
@@ -629,6 +629,7 @@ def plan_nominal(x: Array, u: Array, u_des: Array, N: int, f: np.void, wsa: NDAr
     for i in range(STATE_SIZE):
         g.x[i] = x[i]
     g.checked = 0
+    g.candidate = 1  # the filter's own answers: a candidate's margins
     for j in range(N):
         if j == 0:
             for i in range(STATE_SIZE):

@@ -95,9 +95,14 @@ def law_command(x: Array, law: str, m: OracleModel, rate_limit_fraction: float =
         w_ref = np.clip(-(m.kp / m.kd) * attitude_error(x, m), -lim, lim)
     else:
         raise ValueError(f"unknown law {law!r}; known: {', '.join(LAWS)}")
-    h = J * w - D * x[7:10] if m.gyrostat else J * w
-    u = s * np.cross(w, h) / D + s * J * (w_ref - w) / (RATE_TIME_CONSTANT_S * D)
-    return np.clip(u, -m.u_max, m.u_max)
+    u = np.zeros(3)
+    w_d, psi_d = w, x[7:10]  # the drift's state: the hold's start, then (as the backup law) its middle
+    for _ in range(2):
+        h = J * w_d - D * psi_d if m.gyrostat else J * w_d
+        u = np.clip(s * np.cross(w_d, h) / D + s * J * (w_ref - w) / (RATE_TIME_CONSTANT_S * D), -m.u_max, m.u_max)
+        w_dot = (-np.cross(w, J * w - D * x[7:10] if m.gyrostat else J * w) + s * D * u) / J
+        w_d, psi_d = w + 0.5 * m.dt_s * w_dot, x[7:10] + 0.5 * m.dt_s * u
+    return u
 
 
 def simulate_law(x0: Array, steps: int, m: OracleModel, law: str,
