@@ -522,7 +522,7 @@ def _rate_command(x: Array, p: np.void, c: np.void, b: np.void, g: np.void, out:
     the drift at the hold's middle (one predictor step of the held command, from x; the attitude's part,
     gravity gradient, at x), not at its start. The command changes the rates, and with a large momentum the
     gyroscopic torque with them, within the hold: cancelling the drift at its start overshot w_ref by up
-    to 0.08 deg/s in one sample (docs/backup.md, "Hysteresis")."""
+    to 0.08 deg/s in one sample (docs/backup.md, "Hysteresis and the law's hold")."""
     lim = b.rate_limit_rad_s
     omega_drift(x, g.A, p, g.wd)
     for it in range(2):
@@ -868,10 +868,10 @@ def apply_measurement_margins(rec: NDArray[np.void], cfg: Config) -> None:
     place; without rate and wheel-speed errors (their margins 0: no sensor errors) the law is unchanged.
 
     A candidate's rollout keeps the errors of the keep-out cone's angle, the temperature and the charge
-    twice (candidate_margin; docs/backup.md, "Hysteresis"): the gate falls back to the backup law at the
-    next sample, from the next reading, whose own errors shift that path's angles, T and E by up to as much
-    again (E's and nearly T's dynamics do not depend on them: the path moves by the offset). Without sensor
-    errors the two margins are equal."""
+    twice (candidate_margin; docs/backup.md, "Hysteresis and the law's hold"): the gate falls back to the
+    backup law at the next sample, from the next reading, whose own errors shift that path's angles, T and E
+    by up to as much again (E's and nearly T's dynamics do not depend on them: the path moves by the
+    offset). Without sensor errors the two margins are equal."""
     m = np.empty(M)
     _margins_of(rec, m)
     b = rec["backup"]
