@@ -539,12 +539,12 @@ def test_the_backup_law_does_not_overshoot_its_rate_limit_with_a_large_momentum(
     552 rad/s that start inside the law's rate limit, its rollouts (the plant's RK4 substeps) keep every
     rate within 4 % of that limit after their first two samples, with and without sensor errors (the
     drift held from the hold's start: 5-18 % above it in a third of them, measured 2026-11-26)."""
+    states, _ = sample_initial_states(5000, 1, cfg)  # the same with or without sensor errors
     for noisy in (False, True):
         c = cfg.with_noise(noisy)
         f = filter_record(c)
         lim = float(f[0]["backup"]["rate_limit_rad_s"])
-        x0, _ = sample_initial_states(5000, 1, c)
-        x0 = x0[(momentum_rad_s(x0, c) > 552.0) & (np.abs(x0[:, 4:7]).max(axis=1) < lim)][:150]
+        x0 = states[(momentum_rad_s(states, c) > 552.0) & (np.abs(states[:, 4:7]).max(axis=1) < lim)][:150]
         assert len(x0) == 150
         worst = 0.0
         for x in x0:

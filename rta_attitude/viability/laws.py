@@ -95,14 +95,15 @@ def law_command(x: Array, law: str, m: OracleModel, rate_limit_fraction: float =
         w_ref = np.clip(-(m.kp / m.kd) * attitude_error(x, m), -lim, lim)
     else:
         raise ValueError(f"unknown law {law!r}; known: {', '.join(LAWS)}")
-    u = np.zeros(3)
-    w_d, psi_d = w, x[7:10]  # the drift's state: the hold's start, then (as the backup law) its middle
-    for _ in range(2):
+    def held(w_d: Array, psi_d: Array) -> Array:  # the command cancelling the drift of state (w_d, psi_d)
         h = J * w_d - D * psi_d if m.gyrostat else J * w_d
-        u = np.clip(s * np.cross(w_d, h) / D + s * J * (w_ref - w) / (RATE_TIME_CONSTANT_S * D), -m.u_max, m.u_max)
-        w_dot = (-np.cross(w, J * w - D * x[7:10] if m.gyrostat else J * w) + s * D * u) / J
-        w_d, psi_d = w + 0.5 * m.dt_s * w_dot, x[7:10] + 0.5 * m.dt_s * u
-    return u
+        return np.clip(s * np.cross(w_d, h) / D + s * J * (w_ref - w) / (RATE_TIME_CONSTANT_S * D), -m.u_max, m.u_max)
+
+    # as the backup law: the drift at the hold's middle, one predictor step of the command at its start
+    psi = x[7:10]
+    u0 = held(w, psi)
+    w_dot = (-np.cross(w, J * w - D * psi if m.gyrostat else J * w) + s * D * u0) / J
+    return held(w + 0.5 * m.dt_s * w_dot, psi + 0.5 * m.dt_s * u0)
 
 
 def simulate_law(x0: Array, steps: int, m: OracleModel, law: str,
