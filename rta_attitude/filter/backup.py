@@ -97,6 +97,9 @@ TILT_WHEEL_MARGIN = 0.002
 """The tilted sun-safe target keeps the panel-axis wheel this fraction of psi_max (1.2 rad/s) inside its limit
 (0.01 until 2026-11-25: the rollout checks the wheel speeds at every substep; the oracle's witnesses of the
 backup's failures keep the wheels 0.06 rad/s inside psi_max, and the smaller reserve saved two of them)."""
+WHEEL_SPEED_RTOL = 1e-12
+"""The backup law's command keeps each wheel at most (1 - this) psi_limit at its hold's end (`_rate_command`):
+the rollout checks the speed at every substep, and the RK4 steps round in the last bits."""
 CORRIDOR_HALF_WIDTH_RAD = math.radians(10.0)
 """Where H_body could cross the i_B-j_B plane only through corridors narrower than this either side of
 the diagonal (a large momentum), the tilted target keeps the panel on its side of H."""
@@ -522,14 +525,19 @@ def _rate_command(x: Array, p: np.void, c: np.void, b: np.void, g: np.void, out:
     the drift at the hold's middle (one predictor step of the held command, from x; the attitude's part,
     gravity gradient, at x), not at its start. The command changes the rates, and with a large momentum the
     gyroscopic torque with them, within the hold: cancelling the drift at its start overshot w_ref by up
-    to 0.08 deg/s in one sample (docs/backup.md, "Hysteresis and the law's hold")."""
+    to 0.08 deg/s in one sample (docs/backup.md, "Hysteresis and the law's hold"). Each wheel's acceleration
+    keeps its speed within psi_limit at the hold's end (psi_dot = u: the speed is linear in the hold), the
+    speed the rollout checks (docs/backup.md, "The wheels within their checked speed")."""
     lim = b.rate_limit_rad_s
+    top = (1.0 - WHEEL_SPEED_RTOL) * b.psi_limit_rad_s
     omega_drift(x, g.A, p, g.wd)
     for it in range(2):
         for a in range(3):
             w_ref = -(b.kp / b.kd) * g.dq[a]
             w_ref = -lim if w_ref < -lim else (lim if w_ref > lim else w_ref)
             v = ((w_ref - x[4 + a]) / b.rate_time_constant_s - g.wd[a]) / p.control_gain[a]
+            hi, lo = (top - x[7 + a]) / c.dt_s, (-top - x[7 + a]) / c.dt_s  # the wheel within psi_limit
+            v = lo if v < lo else (hi if v > hi else v)
             m = c.u_max_rad_s2[a]
             out[a] = -m if v < -m else (m if v > m else v)
         if it == 1:

@@ -9,7 +9,8 @@ perpendicular to the sun). Laws (tried in LAWS order):
   tracked by u = clip(s (w x H)/D + s J (w_ref - w) / (tau D), U): the gyroscopic feed-forward
   cancels w x H (H = J w - D psi, gyrostat; J w, paper), a first-order rate loop of time constant tau.
   Why: with large wheel momentum, w x D psi is as large as the PD law's rate-loop torque and drags
-  the rates past w_max.
+  the rates past w_max. The drift is taken at the hold's middle (one predictor step), and each wheel's
+  acceleration is clipped so that its speed stays within psi_max at the hold's end (psi_dot = u).
 - `hold`: the same with w_ref = 0 (stop and hold the attitude).
 - `sun_safe`: the PD law of the primary controller aimed at the sun-safe attitude,
   u = clip(s psi_dot_max tanh(-kp dq_v - kd w), U) (dq sign-fixed to the shorter rotation).
@@ -35,6 +36,8 @@ RATE_LIMIT_FRACTION = 0.7
 """The feed-forward laws command |w_ref_i| <= this fraction of w_max."""
 RATE_TIME_CONSTANT_S = 2.0
 """Rate-loop time constant of the feed-forward laws, s."""
+WHEEL_SPEED_RTOL = 1e-12
+"""The feed-forward laws keep each wheel's speed within (1 - this) psi_max at their hold's end."""
 
 
 def quat_product(q: Array, p: Array) -> Array:
@@ -95,12 +98,16 @@ def law_command(x: Array, law: str, m: OracleModel, rate_limit_fraction: float =
         w_ref = np.clip(-(m.kp / m.kd) * attitude_error(x, m), -lim, lim)
     else:
         raise ValueError(f"unknown law {law!r}; known: {', '.join(LAWS)}")
+    psi = x[7:10]
+    top = (1.0 - WHEEL_SPEED_RTOL) * m.psi_max_rad_s
+
     def held(w_d: Array, psi_d: Array) -> Array:  # the command cancelling the drift of state (w_d, psi_d)
         h = J * w_d - D * psi_d if m.gyrostat else J * w_d
-        return np.clip(s * np.cross(w_d, h) / D + s * J * (w_ref - w) / (RATE_TIME_CONSTANT_S * D), -m.u_max, m.u_max)
+        u = s * np.cross(w_d, h) / D + s * J * (w_ref - w) / (RATE_TIME_CONSTANT_S * D)
+        u = np.clip(u, (-top - psi) / m.dt_s, (top - psi) / m.dt_s)  # each wheel within psi_max at the hold's end
+        return np.clip(u, -m.u_max, m.u_max)
 
     # as the backup law: the drift at the hold's middle, one predictor step of the command at its start
-    psi = x[7:10]
     u0 = held(w, psi)
     w_dot = (-np.cross(w, J * w - D * psi if m.gyrostat else J * w) + s * D * u0) / J
     return held(w + 0.5 * m.dt_s * w_dot, psi + 0.5 * m.dt_s * u0)
