@@ -98,7 +98,7 @@ TILT_WHEEL_MARGIN = 0.002
 (0.01 until 2026-11-25: the rollout checks the wheel speeds at every substep; the oracle's witnesses of the
 backup's failures keep the wheels 0.06 rad/s inside psi_max, and the smaller reserve saved two of them)."""
 WHEEL_SPEED_RTOL = 1e-12
-"""The backup law's command keeps each wheel at most (1 - this) psi_limit at its hold's end (`_rate_command`):
+"""The backup law's command keeps each wheel at most (1 - this) psi_hold at its hold's end (`_rate_command`):
 the rollout checks the speed at every substep, and the RK4 steps round in the last bits."""
 CORRIDOR_HALF_WIDTH_RAD = math.radians(10.0)
 """Where H_body could cross the i_B-j_B plane only through corridors narrower than this either side of
@@ -125,6 +125,7 @@ BACKUP_DTYPE = np.dtype([
     ("omega_max_rad_s", np.float64),
     ("psi_max_rad_s", np.float64),
     ("psi_limit_rad_s", np.float64),     # the wheel speed the law's targets may use (psi_max; less with sensor errors)
+    ("psi_hold_rad_s", np.float64),      # the law's command keeps each wheel within this (psi_limit less one reading's error)
     ("momentum_variant_rad_s", np.float64),  # the MOMENTUM variant only where |J w - s D psi| / D exceeds this
     ("nominal_steps", np.int64),         # samples of the filter's own answers before the backup law (>= 1)
     ("reserve_steps", np.int64),         # steps of `energy_reserve`'s projection (0: off)
@@ -195,6 +196,7 @@ def backup_record(cfg: Config) -> NDArray[np.void]:
     b["settled_rate_rad_s"] = SETTLED_RATE_FRACTION * L.omega_max_rad_s
     b["omega_max_rad_s"], b["psi_max_rad_s"] = L.omega_max_rad_s, L.psi_max_rad_s
     b["psi_limit_rad_s"] = L.psi_max_rad_s
+    b["psi_hold_rad_s"] = L.psi_max_rad_s
     sc = cfg.spacecraft
     b["momentum_variant_rad_s"] = L.psi_max_rad_s - float(np.max(sc.J)) * L.omega_max_rad_s / sc.wheel_inertia_kgm2
     b["nominal_steps"] = max(1, round(o.backup_nominal_s / o.sample_time_s))
@@ -526,10 +528,11 @@ def _rate_command(x: Array, p: np.void, c: np.void, b: np.void, g: np.void, out:
     gravity gradient, at x), not at its start. The command changes the rates, and with a large momentum the
     gyroscopic torque with them, within the hold: cancelling the drift at its start overshot w_ref by up
     to 0.08 deg/s in one sample (docs/backup.md, "Hysteresis and the law's hold"). Each wheel's acceleration
-    keeps its speed within psi_limit at the hold's end (psi_dot = u: the speed is linear in the hold), the
-    speed the rollout checks (docs/backup.md, "The wheels within their checked speed")."""
+    keeps its speed within psi_hold at the hold's end (psi_dot = u: the speed is linear in the hold): the
+    speed the rollout checks, psi_limit, less one reading's error (docs/backup.md, "The wheels within their
+    checked speed")."""
     lim = b.rate_limit_rad_s
-    top = (1.0 - WHEEL_SPEED_RTOL) * b.psi_limit_rad_s
+    top = (1.0 - WHEEL_SPEED_RTOL) * b.psi_hold_rad_s
     omega_drift(x, g.A, p, g.wd)
     for it in range(2):
         for a in range(3):
@@ -879,7 +882,12 @@ def apply_measurement_margins(rec: NDArray[np.void], cfg: Config) -> None:
     twice (candidate_margin; docs/backup.md, "Hysteresis and the law's hold"): the gate falls back to the
     backup law at the next sample, from the next reading, whose own errors shift that path's angles, T and E
     by up to as much again (E's and nearly T's dynamics do not depend on them: the path moves by the
-    offset). Without sensor errors the two margins are equal."""
+    offset). Without sensor errors the two margins are equal.
+
+    Likewise the law's command holds each wheel within psi_hold = psi_limit less one reading's error (the
+    tachometer's and the actuator's over a hold, as in `check_margins`): a plan that parks a wheel at
+    psi_limit leaves the next reading above it half the time, and from there no rollout passes
+    (docs/backup.md, "The wheels within their checked speed")."""
     m = np.empty(M)
     _margins_of(rec, m)
     b = rec["backup"]
@@ -897,6 +905,8 @@ def apply_measurement_margins(rec: NDArray[np.void], cfg: Config) -> None:
         b["rate_limit_rad_s"] = min(float(b["rate_limit_rad_s"][0]), RATE_LIMIT_FRACTION * w_left)
     if speed_margin > 0.0:
         b["psi_limit_rad_s"] = math.sqrt(max(0.0, psi_max * psi_max - speed_margin))
+        e = max(float(c["err_psi_rad_s"]) + float(c["err_u_rad_s2"][a]) * float(c["dt_s"]) for a in range(3))
+        b["psi_hold_rad_s"] = max(0.0, float(b["psi_limit_rad_s"][0]) - e)
 
 
 @numba.njit(**LEAF)
