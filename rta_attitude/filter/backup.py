@@ -125,7 +125,7 @@ BACKUP_DTYPE = np.dtype([
     ("omega_max_rad_s", np.float64),
     ("psi_max_rad_s", np.float64),
     ("psi_limit_rad_s", np.float64),     # the wheel speed the law's targets may use (psi_max; less with sensor errors)
-    ("psi_hold_rad_s", np.float64),      # the law's command keeps each wheel within this (psi_limit less one reading's error)
+    ("psi_hold_rad_s", np.float64),      # the law keeps each wheel within this (psi_limit less one reading's error)
     ("momentum_variant_rad_s", np.float64),  # the MOMENTUM variant only where |J w - s D psi| / D exceeds this
     ("nominal_steps", np.int64),         # samples of the filter's own answers before the backup law (>= 1)
     ("reserve_steps", np.int64),         # steps of `energy_reserve`'s projection (0: off)
