@@ -34,6 +34,14 @@ def row(ctx: np.void, x: NDArray[np.float64], c: np.void, axis: int, t: np.void)
 
 
 @numba.njit(**LEAF)
+def wheel_speed_error(c: np.void, axis: int) -> float:
+    """One reading's error bound on a wheel's speed, rad/s: the tachometer's plus the actuator's over a hold
+    (c: the constraint record; 0 without sensor errors). The gatekeeper's rollout margins and its backup
+    law's psi_hold use it."""
+    return c.err_psi_rad_s + c.err_u_rad_s2[axis] * c.dt_s
+
+
+@numba.njit(**LEAF)
 def zoh_interval(ctx: np.void, x: NDArray[np.float64], c: np.void, axis: int) -> tuple[float, float]:
     """(lower, upper) on u_axis, rad/s^2, keeping |psi_axis(t + dt)| <= (1 - zoh_margin) psi_max."""
     # measurement-robust (0 without sensor errors): the tachometer's error now, the actuator's over the hold

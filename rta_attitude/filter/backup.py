@@ -54,6 +54,7 @@ from rta_attitude.constraints.base import (
 )
 from rta_attitude.constraints.geometry import CONTEXT_DTYPE
 from rta_attitude.constraints.rows import safety_values
+from rta_attitude.constraints.wheel_speed import wheel_speed_error
 from rta_attitude.dynamics.quaternion import attitude_matrix, error_vector, from_matrix
 from rta_attitude.dynamics.sensors import (
     ENERGY_RELATIVE_ERROR,
@@ -590,7 +591,7 @@ def check_margins(p: np.void, c: np.void, out: Array) -> None:
     for a in range(3):
         e = c.err_omega_axis_rad_s + abs(p.control_gain[a]) * c.err_u_rad_s2[a] * c.dt_s
         out[OMEGA_X + a] = 2.0 * c.omega_max_rad_s * e + e * e
-        e = c.err_psi_rad_s + c.err_u_rad_s2[a] * c.dt_s
+        e = wheel_speed_error(c, a)
         out[PSI_X + a] = 2.0 * c.psi_max_rad_s * e + e * e
 
 
@@ -905,7 +906,7 @@ def apply_measurement_margins(rec: NDArray[np.void], cfg: Config) -> None:
         b["rate_limit_rad_s"] = min(float(b["rate_limit_rad_s"][0]), RATE_LIMIT_FRACTION * w_left)
     if speed_margin > 0.0:
         b["psi_limit_rad_s"] = math.sqrt(max(0.0, psi_max * psi_max - speed_margin))
-        e = max(float(c["err_psi_rad_s"]) + float(c["err_u_rad_s2"][a]) * float(c["dt_s"]) for a in range(3))
+        e = max(wheel_speed_error(c, a) for a in range(3))
         b["psi_hold_rad_s"] = max(0.0, float(b["psi_limit_rad_s"][0]) - e)
 
 
