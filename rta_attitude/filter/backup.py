@@ -25,7 +25,8 @@ every enabled, non-slacked constraint must have h >= 0 at every substep, until t
 terminal set (`settled`: near the sun-safe attitude with small rates and a wheel momentum the wheels
 can hold there), which the backup law keeps (docs/backup.md). `verify` accepts a settled rollout,
 and, only with a large momentum (|H| / D > psi_max - max J_a w_max / D), one whose horizon ends safe;
-it tries the committed plan's variant of the law first (VARIANTS: sun-safe, momentum mode).
+it tries the committed plan's variant of the law first, then the others (VARIANTS: sun-safe, momentum mode,
+and with a large momentum the Earth-side target as it is and the tight tilt).
 
 The gate (`gate`), at each filter call with a backup law: the candidate (the ASIF's answer) passes
 -> apply it, commit its plan; else, if the backup law's own command passes -> apply it, commit;
@@ -106,10 +107,15 @@ CORRIDOR_HALF_WIDTH_RAD = math.radians(10.0)
 the diagonal (a large momentum), the tilted target keeps the panel on its side of H."""
 RESERVE_STEP_S = 10.0
 """Step of `energy_reserve`'s projection, s (the sun moves 0.6 deg in it; midpoint rule)."""
-VARIANTS = ("sun_safe", "momentum")
-"""The backup law's variants: the sun-safe attitude (the momentum mode where the wheels could not hold
-the momentum there), the momentum mode always. The gatekeeper tries the committed plan's first."""
-SUN_SAFE_VARIANT, MOMENTUM = range(len(VARIANTS))
+VARIANTS = ("sun_safe", "momentum", "earth_side", "tight")
+"""The backup law's variants (its targets): the sun-safe attitude (rolled or tilted for a large momentum, the
+momentum mode where the wheels could not hold the momentum there); the momentum mode always; the Earth-side
+sun-safe attitude as it is, whatever the momentum; the tilted target with only the terminal set's rates
+(SETTLED_RATE_FRACTION w_max) kept in its wheels. The last three only with a large momentum. The gatekeeper
+tries the committed plan's first, then the others in this order: each is a way out the rollout verifies, so
+another variant adds ways out and only acts where the ones before it failed (docs/backup.md, "A portfolio of
+targets")."""
+SUN_SAFE_VARIANT, MOMENTUM, EARTH_SIDE, TIGHT = range(len(VARIANTS))
 FAILED, HORIZON, SETTLED = 0, 1, 2
 """What a rollout found: a violation; the horizon safe; the terminal set reached, safe till then."""
 
@@ -170,7 +176,8 @@ GATE_DTYPE = np.dtype([
     ("target", np.float64, (3, 3)),      # the sun-safe attitude, rows i_B, j_B, k_B in Hill
     ("Hh", np.float64, (3,)),            # the body's angular momentum J w - s D psi in Hill, N m s
     ("load", np.float64),                # `_wheel_load` of the sun-safe target
-    ("momentum_mode", np.uint8),         # 1: the target is the momentum mode's; 2: the tilted sun-safe one
+    ("momentum_mode", np.uint8),         # 1: the target is the momentum mode's; 2: the tilted sun-safe one;
+    # 3: the Earth-side one with a large momentum (EARTH_SIDE); 0: a terminal set may apply (`settled`)
     ("law", np.uint8),                   # the variant the rollout and the command use (VARIANTS)
     ("plan_law", np.uint8),              # the variant of the committed plan
     ("q_c", np.float64, (4,)),
@@ -222,14 +229,14 @@ def large_momentum(x: Array, p: np.void, b: np.void) -> bool:
 
 
 @numba.njit(**LEAF)
-def _wheel_load(T: Array, Hh: Array, p: np.void, b: np.void) -> float:
+def _wheel_load(T: Array, Hh: Array, p: np.void, b: np.void, share: float = 1.0) -> float:
     """The largest wheel speed the momentum Hh (Hill, 3) needs at rest in the attitude T (rows i_B, j_B,
-    k_B in Hill), plus J_a w_max / D (the rates the law may still command), minus psi_max: > 0 means the
-    wheels cannot hold it."""
+    k_B in Hill), plus J_a share w_max / D (the rates the law may still command), minus psi_max: > 0 means
+    the wheels cannot hold it."""
     worst = -np.inf
     for a in range(3):
         ha = abs(T[a, 0] * Hh[0] + T[a, 1] * Hh[1] + T[a, 2] * Hh[2])
-        v = (ha + p.inertia_kgm2[a] * b.omega_max_rad_s) / p.wheel_inertia_kgm2
+        v = (ha + p.inertia_kgm2[a] * share * b.omega_max_rad_s) / p.wheel_inertia_kgm2
         worst = max(worst, v)
     return worst - b.psi_limit_rad_s
 
@@ -262,22 +269,23 @@ def _h_first(b0: float, b1: float, b2: float, t0: float, t1: float, t2: float, b
 
 
 @numba.njit(**LEAF)
-def _wheel_caps(p: np.void, b: np.void) -> tuple[float, float, float]:
+def _wheel_caps(p: np.void, b: np.void, share: float = 1.0) -> tuple[float, float, float]:
     """What each wheel (i_B, j_B, k_B) may hold at rest at the tilted target, N m s: (1 - TILT_WHEEL_MARGIN)
-    psi_limit D, less its rates' share J_a w_max (the rates the law may still command)."""
+    psi_limit D, less its rates' share J_a share w_max (the rates the law may still command: all of w_max,
+    or the terminal set's SETTLED_RATE_FRACTION in the TIGHT variant, `_rate_share`)."""
     top = (1.0 - TILT_WHEEL_MARGIN) * b.psi_limit_rad_s * p.wheel_inertia_kgm2
-    w = b.omega_max_rad_s
+    w = share * b.omega_max_rad_s
     return top - p.inertia_kgm2[0] * w, top - p.inertia_kgm2[1] * w, top - p.inertia_kgm2[2] * w
 
 
 @numba.njit(**LEAF)
-def _tilt(hn: float, ca: float, hb2: float, p: np.void, b: np.void) -> float:
+def _tilt(hn: float, ca: float, hb2: float, p: np.void, b: np.void, share: float = 1.0) -> float:
     """cos beta of the tilted target (`_tilted_target`): the panel's angle to the momentum (|H| = hn, N m s)
     nearest alpha = angle(H, r_S) (ca = cos alpha) at which the wheels hold H at rest: the panel-axis wheel
     |H| |cos beta| <= cap, the i_B and j_B wheels |H| sin beta <= |(c_1, c_2)|; on the side of hb2 (H_body's
     k_B part) where the corridor between the sides is narrow. 2.0 where no tilt is needed (the panel-axis
-    wheel holds all of H), NaN where the wheels hold H at no beta."""
-    c1, c2, cap = _wheel_caps(p, b)
+    wheel holds all of H), NaN where the wheels hold H at no beta. share: as `_wheel_caps`'s."""
+    c1, c2, cap = _wheel_caps(p, b, share)
     if not cap > 0.0:
         return math.nan
     if not hn > cap:
@@ -293,6 +301,14 @@ def _tilt(hn: float, ca: float, hb2: float, p: np.void, b: np.void) -> float:
     if hn * math.cos(0.25 * math.pi - CORRIDOR_HALF_WIDTH_RAD) > min(c1, c2):  # a narrow corridor: keep the side
         side = 1.0 if hb2 >= 0.0 else -1.0
     return side * min(max(side * ca, lo), cos_a)
+
+
+@numba.njit(**LEAF)
+def _rate_share(g: np.void) -> float:
+    """The fraction of w_max whose momentum (J_a share w_max) the tilted target leaves each wheel for the
+    rates, in the variant g.law: all of it; in the TIGHT variant the terminal set's rates only
+    (SETTLED_RATE_FRACTION), the panel nearer the sun and the wheels nearer their limit."""
+    return SETTLED_RATE_FRACTION if g.law == TIGHT else 1.0
 
 
 @numba.njit(**LEAF)
@@ -373,11 +389,12 @@ def _tilted_target(cs: float, sn: float, hb0: float, hb1: float, hb2: float, p: 
         return False
     hx, hy, hz = Hh[0] / hn, Hh[1] / hn, Hh[2] / hn
     ca = hx * cs + hy * sn
-    cb = _tilt(hn, ca, hb2, p, b)
+    share = _rate_share(g)
+    cb = _tilt(hn, ca, hb2, p, b, share)
     if not abs(cb) <= 1.0:  # no tilt needed, or none the wheels can hold
         return False
     sb = math.sqrt(max(0.0, 1.0 - cb * cb))
-    c1, c2, _ = _wheel_caps(p, b)
+    c1, c2, _ = _wheel_caps(p, b, share)
     c12 = math.sqrt(c1 * c1 + c2 * c2)
     ox, oy, oz = _sun_across(hx, hy, hz, cs, sn, ca)
     kx, ky, kz = cb * hx + sb * ox, cb * hy + sb * oy, cb * hz + sb * oz
@@ -422,7 +439,10 @@ def sun_safe_error(x: Array, p: np.void, b: np.void, g: np.void) -> float:
     nearest the sun (k_B . H / |H| = d_3: k_B in the plane of H and r_S). While H_body is more than
     SETTLED_ANGLE_RAD from d, dq_v := (h x d) / 2 (h = H_body / |H_body|) instead: the rate command
     then turns the body about an axis perpendicular to H, which moves H_body straight towards d (first
-    stage), then about H to the panel's roll."""
+    stage), then about H to the panel's roll. The EARTH_SIDE variant aims at the Earth-side attitude as it
+    is (g.momentum_mode = 3, no terminal set: `verify` uses it with a large momentum only); the TIGHT
+    variant tilts as above with only SETTLED_RATE_FRACTION w_max of the rates' momentum kept in the wheels
+    (`_rate_share`)."""
     cs, sn = sun_hill(x[12])
     T = g.target
     Hb0, Hb1, Hb2 = _momentum(x, p, g)
@@ -439,6 +459,10 @@ def sun_safe_error(x: Array, p: np.void, b: np.void, g: np.void) -> float:
     # a large momentum (as `verify`'s) is shared between the wheels even where one could hold it, and
     # H_body goes to its place at the target first: a straight slew can carry H_body past a wheel's limit
     large = large_momentum(x, p, b)
+    if g.law == EARTH_SIDE:  # the Earth-side target as it is (used with a large momentum: no terminal set)
+        g.load = _wheel_load(T, g.Hh, p, b)
+        g.momentum_mode = 3
+        return _error_to(x, g)
     rolled = large or _wheel_load(T, g.Hh, p, b) > 0.0
     if rolled:
         Hh = g.Hh
@@ -462,11 +486,12 @@ def sun_safe_error(x: Array, p: np.void, b: np.void, g: np.void) -> float:
                     best, ux, uy, uz = e, ix, iy, iz
             T[0, 0], T[0, 1], T[0, 2] = ux, uy, uz
             T[1, 0], T[1, 1], T[1, 2] = sn * uz, -cs * uz, cs * uy - sn * ux
-    g.load = _wheel_load(T, g.Hh, p, b)
+    share = _rate_share(g)
+    g.load = _wheel_load(T, g.Hh, p, b, share)
     tilted = False
     if (large or g.load > 0.0) and g.law != MOMENTUM and _tilted_target(cs, sn, Hb0, Hb1, Hb2, p, b, g):
         tilted = True
-        g.load = _wheel_load(T, g.Hh, p, b)
+        g.load = _wheel_load(T, g.Hh, p, b, share)
     g.momentum_mode = 1 if (g.law == MOMENTUM or g.load > 0.0) else (2 if tilted else 0)
     if g.momentum_mode == 1:  # H_body on the body diagonal d, the panel as near the sun as that allows
         Hh = g.Hh
@@ -500,7 +525,14 @@ def sun_safe_error(x: Array, p: np.void, b: np.void, g: np.void) -> float:
         dq4 = _h_first(Hb0 / hb, Hb1 / hb, Hb2 / hb, t0, t1, t2, b, g)
         if dq4 >= 0.0:
             return dq4
-    from_matrix(T, g.q_c)
+    return _error_to(x, g)
+
+
+@numba.njit(**LEAF)
+def _error_to(x: Array, g: np.void) -> float:
+    """dq_v of the state x (19,) towards the attitude g.target into g.dq (g.q_c its quaternion), sign fixed
+    so that dq4 >= 0; returns dq4."""
+    from_matrix(g.target, g.q_c)
     q, c = x, g.q_c
     error_vector(q[0:4], c, g.dq)
     dq4 = q[3] * c[3] + q[0] * c[0] + q[1] * c[1] + q[2] * c[2]
@@ -559,8 +591,9 @@ def _rate_command(x: Array, p: np.void, c: np.void, b: np.void, g: np.void, out:
 def settled(x: Array, p: np.void, b: np.void, g: np.void) -> bool:
     """x (19,) is in the backup law's terminal set: within SETTLED_ANGLE_RAD of the sun-safe attitude,
     every body rate within SETTLED_RATE_FRACTION w_max, and the wheels can hold the momentum at rest
-    there (`_wheel_load` <= 0). Never in the momentum mode or at the large-momentum target (the panel
-    may not charge enough and the sun moves on: their rollouts run the whole horizon)."""
+    there (`_wheel_load` <= 0). Never in the momentum mode, at the large-momentum targets or in the TIGHT and
+    EARTH_SIDE variants (the panel may not charge enough and the sun moves on: their rollouts run the whole
+    horizon)."""
     sun_safe_error(x, p, b, g)
     dq = g.dq
     if math.sqrt(dq[0] * dq[0] + dq[1] * dq[1] + dq[2] * dq[2]) > b.settled_sin_half_angle:
@@ -568,7 +601,8 @@ def settled(x: Array, p: np.void, b: np.void, g: np.void) -> bool:
     for a in range(3):
         if abs(x[4 + a]) > b.settled_rate_rad_s:
             return False
-    if g.momentum_mode:  # not a terminal set: the panel may not charge, the sun moves on
+    if g.momentum_mode or g.law == TIGHT:  # not a terminal set: the panel may not charge, the sun moves on
+        # (TIGHT: its wheels keep less than the rates' margin the set needs)
         return False
     return g.load <= 0.0
 
@@ -703,8 +737,9 @@ def verify(x: Array, u: Array, candidate: bool, f: np.void, g: np.void) -> bool:
     g.weak_law = -1
     g.candidate = candidate
     for t in range(len(VARIANTS)):
-        g.law = g.plan_law if t == 0 else 1 - g.plan_law
-        if g.law == MOMENTUM and not large:  # the sun-safe attitude holds a small momentum: charge there
+        # the plan's variant, then the others in VARIANTS order
+        g.law = g.plan_law if t == 0 else (t - 1 if t - 1 < g.plan_law else t)
+        if g.law != SUN_SAFE_VARIANT and not large:  # the sun-safe attitude holds a small momentum: charge there
             continue
         if not candidate:
             sun_safe_command(x, f.plant, f.constraints, b, g, u)
@@ -831,7 +866,7 @@ def gate(x: Array, f: np.void, g: np.void, u: Array) -> int:
     candidate_weak = g.weak_law >= 0  # safe to the horizon, short of the energy reserve
     if g.plan_steps > 0:  # the plan verified earlier: its next command is its backup law's, here
         on_plan = g.has_next and predicted(x, g.next_x)
-        # a settled plan holds for good on its own trajectory; else a fresh plan from here (either variant),
+        # a settled plan holds for good on its own trajectory; else a fresh plan from here (any variant),
         # one short of the energy reserve if that is all there is (the backup law charges best)
         if not (on_plan and g.plan_settled) and (verify(x, g.u_backup, False, f, g) or commit_weak(g, b, g.u_backup)):
             for a in range(3):
@@ -967,9 +1002,9 @@ def backup_rollout(x: Array, u0: Array, f: NDArray[np.void], variant: str = "sun
 
 
 __all__ = [
-    "ANSWER_RTOL", "BACKUP_DTYPE", "FAILED", "GATE_DTYPE", "HORIZON", "MOMENTUM", "NO_LAW", "PREDICTION_RTOL",
-    "RATE_LIMIT_FRACTION", "RATE_TIME_CONSTANT_S", "RESERVE_STEP_S", "SETTLED", "SETTLED_ANGLE_RAD",
-    "SETTLED_RATE_FRACTION", "SUN_SAFE", "SUN_SAFE_VARIANT", "VARIANTS", "apply_measurement_margins",
+    "ANSWER_RTOL", "BACKUP_DTYPE", "EARTH_SIDE", "FAILED", "GATE_DTYPE", "HORIZON", "MOMENTUM", "NO_LAW",
+    "PREDICTION_RTOL", "RATE_LIMIT_FRACTION", "RATE_TIME_CONSTANT_S", "RESERVE_STEP_S", "SETTLED", "SETTLED_ANGLE_RAD",
+    "SETTLED_RATE_FRACTION", "SUN_SAFE", "SUN_SAFE_VARIANT", "TIGHT", "VARIANTS", "apply_measurement_margins",
     "backup_command", "backup_record", "backup_rollout", "backup_tail", "check_margins", "commit", "commit_weak",
     "energy_reserve", "gate", "hold_sample", "is_settled", "large_momentum", "predict", "predicted", "reset",
     "rollout", "same_answer", "settled", "sun_safe_command", "sun_safe_error", "verify",
