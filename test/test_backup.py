@@ -21,6 +21,7 @@ from rta_attitude.filter.backup import (
     CORRIDOR_HALF_WIDTH_RAD,
     GATE_DTYPE,
     RATE_LIMIT_FRACTION,
+    SETTLED_RATE_FRACTION,
     TILT_WHEEL_MARGIN,
     VARIANTS,
     backup_command,
@@ -31,6 +32,7 @@ from rta_attitude.filter.backup import (
     is_settled,
     reset,
     sun_safe_error,
+    verify,
 )
 from rta_attitude.filter.backup import predicted as backup_predicted
 from rta_attitude.filter.outcome import GATE_BACKUP, GATE_NAMES, GATE_OFF, GATE_UNVERIFIED, GATE_VERIFIED
@@ -104,6 +106,62 @@ def test_backup_law_equals_the_viability_oracles_sun_safe_ff(cfg: Config) -> Non
         x[12] = rng.uniform(0.0, 2 * np.pi)
         np.testing.assert_allclose(backup_command(x, f), law_command(
             x[:13], "sun_safe_ff", m, rate_limit_fraction=RATE_LIMIT_FRACTION), rtol=1e-9, atol=1e-9)
+
+
+def test_the_earth_side_variant_is_the_oracles_sun_safe_ff_at_any_momentum(cfg: Config) -> None:
+    """The EARTH_SIDE variant aims at the Earth-side sun-safe attitude whatever the momentum, as the oracle's
+    `sun_safe_ff` does (numpy, written apart): with large momenta (|H| / D > 552 rad/s, where the sun-safe
+    variant rolls or tilts its target) the two commands agree to 1e-9, and the sun-safe variant's differs."""
+    f = filter_record(cfg)
+    m = from_config(cfg)
+    x0, _ = sample_initial_states(200, 7, cfg)
+    large = x0[momentum_rad_s(x0, cfg) > f[0]["backup"]["momentum_variant_rad_s"]][:30]
+    assert len(large) == 30
+    differs = 0
+    for x in large:
+        u = backup_command(x, f, "earth_side")
+        np.testing.assert_allclose(u, law_command(x[:13], "sun_safe_ff", m, rate_limit_fraction=RATE_LIMIT_FRACTION),
+                                   rtol=1e-9, atol=1e-9)
+        differs += not np.allclose(u, backup_command(x, f, "sun_safe"), rtol=1e-6, atol=1e-6)
+    assert differs >= 15
+
+
+@numba.njit
+def _verify(x: Array, u: Array, fa: np.ndarray, ga: np.ndarray) -> bool:
+    return verify(x, u, False, fa[0], ga[0])
+
+
+def test_verify_commits_the_first_variant_whose_rollout_passes(cfg: Config) -> None:
+    """`verify` of the backup law (no candidate) from large-momentum states of seed 1 commits the first of
+    the variants, in VARIANTS order, whose own rollout (each variant's `backup_rollout` of its command,
+    checked here one by one) settles, or is safe to the horizon with the energy reserve at its end; and
+    commits none where none does. States are picked so that each outcome and a later variant appear."""
+    f = filter_record(cfg)
+    x0, _ = sample_initial_states(400, 1, cfg)
+    large = x0[momentum_rad_s(x0, cfg) > f[0]["backup"]["momentum_variant_rad_s"]]
+    picked: dict[int, int] = {}
+    for x in large:
+        want = -1
+        for k, variant in enumerate(VARIANTS):
+            found, traj = backup_rollout(x, backup_command(x, f, variant), f, variant)
+            if found == "settled" or (found == "horizon" and _reserve(traj[-1], f, np.zeros(1, GATE_DTYPE))):
+                want = k
+                break
+        if picked.get(want, 0) >= 2:
+            continue
+        g = np.zeros(1, GATE_DTYPE)
+        _reset(g)
+        u = np.zeros(3)
+        ok = _verify(x, u, f, g)
+        assert ok == (want >= 0)
+        if ok:
+            assert int(g[0]["plan_law"]) == want
+            np.testing.assert_array_equal(u, backup_command(x, f, VARIANTS[want]))
+        picked[want] = picked.get(want, 0) + 1
+        if sum(picked.values()) >= 8 and any(k > 1 for k in picked) and 0 in picked:
+            break
+    assert any(k > 1 for k in picked), picked  # a variant after the sun-safe and momentum ones was committed
+    assert 0 in picked
 
 
 def test_rollout_equals_the_plants_python_integrate(cfg: Config, states: Array) -> None:
@@ -236,17 +294,20 @@ def _target(x: Array, fa: np.ndarray, ga: np.ndarray) -> None:
     sun_safe_error(x, f.plant, f.backup, ga[0])
 
 
-def test_the_tilted_target_puts_the_panel_as_near_the_sun_as_the_wheels_allow(cfg: Config) -> None:
+@pytest.mark.parametrize(("variant", "share"), [("sun_safe", 1.0), ("tight", SETTLED_RATE_FRACTION)])
+def test_the_tilted_target_puts_the_panel_as_near_the_sun_as_the_wheels_allow(cfg: Config, variant: str,
+                                                                              share: float) -> None:
     """Large momenta (|H|/D 600-830 rad/s) and the sun at any angle to H: the sun-safe target holds H at
-    rest with the rate margin (|T H|_a + J_a w_max <= D psi_max, checked here in numpy), and its panel is as
-    near the sun as an optimiser (SLSQP from many starts over all rotations, the same wheel box) can put
-    it: never nearer (sound), and at most 1.5 deg farther (past a narrow corridor, on its side of H)."""
+    rest with the rate margin (|T H|_a + J_a w_max <= D psi_max, checked here in numpy; the TIGHT variant's
+    with J_a 0.1 w_max, the terminal set's rates), and its panel is as near the sun as an optimiser (SLSQP
+    from many starts over all rotations, the same wheel box) can put it: never nearer (sound), and at most
+    1.5 deg farther (past a narrow corridor, on its side of H)."""
     from scipy.spatial.transform import Rotation
 
     f = filter_record(cfg)
     sc, L = cfg.spacecraft, cfg.limits
     D = sc.wheel_inertia_kgm2
-    cap = (1.0 - TILT_WHEEL_MARGIN) * D * L.psi_max_rad_s - sc.J * L.omega_max_rad_s
+    cap = (1.0 - TILT_WHEEL_MARGIN) * D * L.psi_max_rad_s - sc.J * share * L.omega_max_rad_s
     rng = np.random.default_rng(11)
     modes, checked = set(), 0
     while checked < 8:
@@ -258,6 +319,7 @@ def test_the_tilted_target_puts_the_panel_as_near_the_sun_as_the_wheels_allow(cf
         if not 600.0 < np.linalg.norm(hb) / D < 830.0:
             continue
         g = np.zeros(1, GATE_DTYPE)
+        g[0]["law"] = VARIANTS.index(variant)
         _target(x, f, g)
         mode, T, Hh = int(g[0]["momentum_mode"]), g[0]["target"], g[0]["Hh"]
         modes.add(mode)
