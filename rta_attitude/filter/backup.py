@@ -721,14 +721,14 @@ def commit(first_x: Array, law: int, settled_: bool, weak: bool, b: np.void, g: 
 
 @numba.njit(**LEAF)
 def verify(x: Array, u: Array, candidate: bool, f: np.void, g: np.void) -> bool:
-    """Roll out from x with each variant of the backup law in turn, the committed plan's first (the
-    MOMENTUM variant only with a momentum |H| / D above psi_max - max J_a w_max / D: below it the
-    sun-safe attitude holds H and the panel charges there, where the momentum mode may drain the
-    battery into a dead end): the candidate u (candidate True) or the variant's own command at x
-    (into u). With a small momentum the rollout must reach the terminal set (SETTLED: invariant, so
-    the plan holds for good); with a large one, where the sun-safe attitude may not hold H, a horizon
-    safe to its end with the battery's reserve at its end (`energy_reserve`) is accepted (HORIZON: the
-    plan holds for the horizon only). On success the plan is committed (plan_law, plan_steps) and u holds
+    """Roll out from x with each variant of the backup law in turn, the committed plan's first, then the
+    others in VARIANTS order (all but the sun-safe one only with a momentum |H| / D above psi_max - max
+    J_a w_max / D: below it the sun-safe attitude holds H and the panel charges there, where the
+    momentum mode may drain the battery into a dead end): the candidate u (candidate True) or the
+    variant's own command at x (into u). With a small momentum the rollout must reach the terminal set
+    (SETTLED: invariant, so the plan holds for good); with a large one, where the sun-safe attitude may not
+    hold H, a horizon safe to its end with the battery's reserve at its end (`energy_reserve`) is accepted
+    (HORIZON: the plan holds for the horizon only). On success the plan is committed (plan_law, plan_steps) and u holds
     the command to apply. The first variant safe to the horizon but short of the reserve is kept
     (weak_law, weak_u, weak_x: `commit_weak` commits it)."""
     b = f.backup
