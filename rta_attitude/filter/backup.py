@@ -365,8 +365,8 @@ def energy_reserve(x: Array, p: np.void, c: np.void, b: np.void, g: np.void) -> 
 
 
 @numba.njit(**LEAF)
-def _tilted_target(cs: float, sn: float, hb0: float, hb1: float, hb2: float, p: np.void, b: np.void,
-                   g: np.void) -> bool:
+def _tilted_target(cs: float, sn: float, hb0: float, hb1: float, hb2: float, share: float, p: np.void,
+                   b: np.void, g: np.void) -> bool:
     """Write into g.target the sun-safe attitude tilted off the sun just enough for the wheels to hold
     the momentum g.Hh (Hill): the panel k_B as near r_S = (cs, sn, 0) as the wheels allow.
 
@@ -381,7 +381,8 @@ def _tilted_target(cs: float, sn: float, hb0: float, hb1: float, hb2: float, p: 
     hold all of |H|), k_B stays on its side of H (k_B . H keeps the sign of hb2). Of the four rolls:
     first one that keeps the signs of (hb0, hb1) (H_body need not cross an axis plane on the way, where
     one wheel would have to hold more), then one with the -j_B radiator off the sun (j_B . r_S >= 0),
-    then the antenna j_B nearest the Earth. Returns False (target untouched) where there is no
+    then the antenna j_B nearest the Earth. share: the rates' share kept in the wheels (`_rate_share`,
+    `_wheel_caps`). Returns False (target untouched) where there is no
     momentum to tilt from or the wheels cannot hold it at any beta."""
     Hh = g.Hh
     hn = math.sqrt(Hh[0] * Hh[0] + Hh[1] * Hh[1] + Hh[2] * Hh[2])
@@ -389,7 +390,6 @@ def _tilted_target(cs: float, sn: float, hb0: float, hb1: float, hb2: float, p: 
         return False
     hx, hy, hz = Hh[0] / hn, Hh[1] / hn, Hh[2] / hn
     ca = hx * cs + hy * sn
-    share = _rate_share(g)
     cb = _tilt(hn, ca, hb2, p, b, share)
     if not abs(cb) <= 1.0:  # no tilt needed, or none the wheels can hold
         return False
@@ -456,13 +456,12 @@ def sun_safe_error(x: Array, p: np.void, b: np.void, g: np.void) -> float:
     T[1, 0], T[1, 1], T[1, 2] = jx, jy, jz
     T[2, 0], T[2, 1], T[2, 2] = cs, sn, 0.0
     T[0, 0], T[0, 1], T[0, 2] = jy * 0.0 - jz * sn, jz * cs - jx * 0.0, jx * sn - jy * cs  # j x k
+    if g.law == EARTH_SIDE:  # the Earth-side target as it is (used with a large momentum: no terminal set)
+        g.momentum_mode = 3
+        return _error_to(x, g)
     # a large momentum (as `verify`'s) is shared between the wheels even where one could hold it, and
     # H_body goes to its place at the target first: a straight slew can carry H_body past a wheel's limit
     large = large_momentum(x, p, b)
-    if g.law == EARTH_SIDE:  # the Earth-side target as it is (used with a large momentum: no terminal set)
-        g.load = _wheel_load(T, g.Hh, p, b)
-        g.momentum_mode = 3
-        return _error_to(x, g)
     rolled = large or _wheel_load(T, g.Hh, p, b) > 0.0
     if rolled:
         Hh = g.Hh
@@ -489,7 +488,7 @@ def sun_safe_error(x: Array, p: np.void, b: np.void, g: np.void) -> float:
     share = _rate_share(g)
     g.load = _wheel_load(T, g.Hh, p, b, share)
     tilted = False
-    if (large or g.load > 0.0) and g.law != MOMENTUM and _tilted_target(cs, sn, Hb0, Hb1, Hb2, p, b, g):
+    if (large or g.load > 0.0) and g.law != MOMENTUM and _tilted_target(cs, sn, Hb0, Hb1, Hb2, share, p, b, g):
         tilted = True
         g.load = _wheel_load(T, g.Hh, p, b, share)
     g.momentum_mode = 1 if (g.law == MOMENTUM or g.load > 0.0) else (2 if tilted else 0)
@@ -728,8 +727,8 @@ def verify(x: Array, u: Array, candidate: bool, f: np.void, g: np.void) -> bool:
     variant's own command at x (into u). With a small momentum the rollout must reach the terminal set
     (SETTLED: invariant, so the plan holds for good); with a large one, where the sun-safe attitude may not
     hold H, a horizon safe to its end with the battery's reserve at its end (`energy_reserve`) is accepted
-    (HORIZON: the plan holds for the horizon only). On success the plan is committed (plan_law, plan_steps) and u holds
-    the command to apply. The first variant safe to the horizon but short of the reserve is kept
+    (HORIZON: the plan holds for the horizon only). On success the plan is committed (plan_law, plan_steps)
+    and u holds the command to apply. The first variant safe to the horizon but short of the reserve is kept
     (weak_law, weak_u, weak_x: `commit_weak` commits it)."""
     b = f.backup
     p = f.plant
