@@ -35,7 +35,14 @@ from rta_attitude.filter.backup import (
     verify,
 )
 from rta_attitude.filter.backup import predicted as backup_predicted
-from rta_attitude.filter.outcome import GATE_BACKUP, GATE_NAMES, GATE_OFF, GATE_UNVERIFIED, GATE_VERIFIED
+from rta_attitude.filter.outcome import (
+    GATE_BACKUP,
+    GATE_NAMES,
+    GATE_OFF,
+    GATE_TOWARD_BACKUP,
+    GATE_UNVERIFIED,
+    GATE_VERIFIED,
+)
 from rta_attitude.filter.pipeline import filter_record
 from rta_attitude.montecarlo.runner import run_runs
 from rta_attitude.montecarlo.sampling import sample_initial_states
@@ -229,14 +236,15 @@ def test_gate_never_applies_an_unverified_candidate(cfg: Config, states: Array) 
     code = _gate(x, applied, f, g)
     assert code == GATE_BACKUP
     np.testing.assert_array_equal(applied, backup_command(x, f))
-    # without a plan, a failing candidate is applied only if the backup law's own command fails too
+    # without a plan, a failing candidate is left in place only if the backup law's own command fails too
+    # (the filter then applies it, or its answer to a backup command: `pipeline.filter_state`)
     _reset(g)
     applied = bad.copy()
     code = _gate(x, applied, f, g)
     if code == GATE_BACKUP:
         assert backup_rollout(x, applied, f)[0] != "failed"
     else:
-        assert code == GATE_UNVERIFIED
+        assert code in (GATE_UNVERIFIED, GATE_TOWARD_BACKUP)
         np.testing.assert_array_equal(applied, bad)
     # every command the gate calls verified passes an independent rollout
     rng = np.random.default_rng(5)
@@ -246,10 +254,46 @@ def test_gate_never_applies_an_unverified_candidate(cfg: Config, states: Array) 
         cand = rng.uniform(-1.0, 1.0, 3) * u_max
         applied = cand.copy()
         code = _gate(y, applied, f, g)
-        assert code in (GATE_VERIFIED, GATE_BACKUP, GATE_UNVERIFIED)
+        assert code in (GATE_VERIFIED, GATE_BACKUP, GATE_UNVERIFIED, GATE_TOWARD_BACKUP)
         if code == GATE_VERIFIED:
             np.testing.assert_array_equal(applied, cand)
             assert any(backup_rollout(y, cand, f, v)[0] != "failed" for v in ("sun_safe", "momentum"))
+
+
+def test_where_nothing_verifies_the_filter_answers_the_backup_command_that_lasted_longest(cfg: Config) -> None:
+    """Monte Carlo run 4705 of seed 1 at t = 0 (a large momentum, E_0 = 3,407 J): nothing verifies. Checked
+    here rollout by rollout (`backup_rollout`, each variant in VARIANTS order, the plan's first as after a
+    reset): the filter's answer to u_des = 0 held a sample then each variant fails, and so does each variant's
+    own command, and one of those stays safe longer than any rollout of the answer. The gate then names
+    `toward_backup` and the filter applies its own answer to the command of the variant that lasted longest
+    (the first of the longest): a filter without a gatekeeper given that command as u_des answers the same,
+    bit for bit. The record's u_des stays the primary's command."""
+    from rta_attitude.filter.asif import AsifFilter
+
+    c = config.load()
+    x0, _ = sample_initial_states(5000, 1, c)
+    x = x0[4705]
+    assert momentum_rad_s(x, c) > float(filter_record(c)[0]["backup"]["momentum_variant_rad_s"])
+    f = filter_record(c)
+    on, alone = AsifFilter(c), AsifFilter(c.with_backup("none"))
+    answer = alone.filter(x, np.zeros(3)).u
+    answer_lasted = 0
+    for v in VARIANTS:
+        found, checked = backup_rollout(x, answer, f, v, candidate=True)
+        assert found == "failed"
+        answer_lasted = max(answer_lasted, len(checked))
+    lasted = []
+    for v in VARIANTS:
+        found, checked = backup_rollout(x, backup_command(x, f, v), f, v)
+        assert found == "failed"
+        lasted.append(len(checked))
+    assert max(lasted) > answer_lasted
+    longest = VARIANTS[int(np.argmax(lasted))]
+    res = on.filter(x, np.zeros(3))
+    assert res.gate == "toward_backup"
+    np.testing.assert_array_equal(res.u, alone.filter(x, backup_command(x, f, longest)).u)
+    assert not np.array_equal(res.u, answer)
+    np.testing.assert_array_equal(res.u_des, 0.0)
 
 
 def test_no_backup_law_leaves_the_gate_off(cfg: Config, states: Array) -> None:
@@ -270,7 +314,7 @@ def test_recursive_feasibility_on_monte_carlo_runs(cfg: Config, states: Array) -
     np.testing.assert_array_equal(out.gate_steps.sum(axis=1), steps)
     assert np.all(out.gate_steps[:, GATE_OFF] == 0)
     hard = np.array([n not in cfg.slacked_constraints for n in CONSTRAINT_NAMES])
-    covered = out.gate_steps[:, GATE_UNVERIFIED] == 0
+    covered = (out.gate_steps[:, [GATE_UNVERIFIED, GATE_TOWARD_BACKUP]] == 0).all(axis=1)
     assert covered.sum() >= 6
     assert not np.any(out.violated_substeps[covered][:, hard])
 

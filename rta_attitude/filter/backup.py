@@ -76,7 +76,7 @@ from rta_attitude.dynamics.spacecraft import (
     torque_round_trip,
 )
 from rta_attitude.dynamics.state import ENERGY, STATE_SIZE, TEMP, THETA_S
-from rta_attitude.filter.outcome import GATE_BACKUP, GATE_OFF, GATE_UNVERIFIED, GATE_VERIFIED
+from rta_attitude.filter.outcome import GATE_BACKUP, GATE_OFF, GATE_TOWARD_BACKUP, GATE_UNVERIFIED, GATE_VERIFIED
 from rta_attitude.jit import LEAF
 
 Array = NDArray[np.float64]
@@ -185,6 +185,9 @@ GATE_DTYPE = np.dtype([
     ("wd", np.float64, (3,)),
     ("candidate", np.uint8),             # the rollout checks a candidate: h >= candidate_margin (else margin)
     ("xm", np.float64, (STATE_SIZE,)),   # the law's state at the middle of its hold (`_rate_command`)
+    ("answer_lasted", np.int64),         # this `gate` call: the most substeps a failed rollout of the answer checked
+    ("backup_lasted", np.int64),         # ... of a failed rollout of a variant's own command, that command:
+    ("longest_u", np.float64, (3,)),     # GATE_TOWARD_BACKUP's u_des
 ])  # fmt: skip
 """The gatekeeper's memory (plan_steps) and scratch (one per filter workspace)."""
 
@@ -743,6 +746,13 @@ def verify(x: Array, u: Array, candidate: bool, f: np.void, g: np.void) -> bool:
         if not candidate:
             sun_safe_command(x, f.plant, f.constraints, b, g, u)
         found = rollout(x, u, f, g, g.subs, False)
+        if found == FAILED:  # how long it stayed safe (`gate`: where nothing verifies)
+            if candidate:
+                g.answer_lasted = max(g.answer_lasted, g.checked)
+            elif g.checked > g.backup_lasted:
+                g.backup_lasted = g.checked
+                for a in range(3):
+                    g.longest_u[a] = u[a]
         if found == SETTLED or (found == HORIZON and large):
             if found == HORIZON and not energy_reserve(g.x, p, f.constraints, b, g):
                 if g.weak_law < 0:
@@ -850,10 +860,12 @@ def gate(x: Array, f: np.void, g: np.void, u: Array) -> int:
     it; next_x then becomes one sample of it from x. With a large momentum, plans safe to the horizon but
     short of the energy reserve (`energy_reserve`) come after those with it, in order: the backup law's
     (committed, `plan_weak`), the candidate's; at its predicted states a weak plan is followed without a
-    rollout for nominal_steps samples (docs/backup.md, "The energy reserve")."""
+    rollout for nominal_steps samples (docs/backup.md, "The energy reserve"). Where nothing verifies and
+    GATE_TOWARD_BACKUP is returned, u is left as it was: the caller answers g.longest_u (`_weak_candidate`)."""
     b = f.backup
     if b.law == NO_LAW:
         return GATE_OFF
+    g.answer_lasted = g.backup_lasted = 0
     if (g.plan_weak and g.plan_steps > b.horizon_steps - b.nominal_steps and g.has_next
             and predicted(x, g.next_x)):
         # on a plan short of the energy reserve (the backup law, charging as well as the wheels allow): it
@@ -891,9 +903,14 @@ def gate(x: Array, f: np.void, g: np.void, u: Array) -> int:
 @numba.njit(**LEAF)
 def _weak_candidate(x: Array, u: Array, weak: bool, f: np.void, g: np.void) -> int:
     """The gate's last resort: the candidate u, committed as a plan safe to its horizon if it was one short of
-    the energy reserve only (weak: verified again, now to commit it), else unverified."""
+    the energy reserve only (weak: verified again, now to commit it); else, where a variant's own command
+    stayed safe longer in its rollout than the candidate in any of its (`verify` counted the substeps),
+    GATE_TOWARD_BACKUP (the caller, `pipeline.filter_state`, answers that command, g.longest_u, instead of
+    u_des); else the candidate, unverified."""
     if weak and (verify(x, u, True, f, g) or commit_weak(g, f.backup, u)):
         return GATE_VERIFIED
+    if g.backup_lasted > g.answer_lasted:
+        return GATE_TOWARD_BACKUP
     return GATE_UNVERIFIED
 
 

@@ -32,13 +32,15 @@ ACTIVE_SET, PROXSUITE = (SOLVERS.index(n) for n in ("active_set", "proxsuite"))
 QUADPROG, NO_BACKUP = (BACKUP_SOLVERS.index(n) for n in ("quadprog", "none"))
 """Codes of the re-solvers of a QP proxsuite missed (`filter.backup_solver`)."""
 
-GATE_NAMES: tuple[str, ...] = ("off", "verified", "backup", "unverified")
+GATE_NAMES: tuple[str, ...] = ("off", "verified", "backup", "unverified", "toward_backup")
 """What the gatekeeper did (`filter.backup`): no backup law configured; the filter's answer passed the
 check (a hold of it, then the backup law, safe over the horizon) and was applied; the backup law was
 applied (the answer failed the check; the plan verified earlier, or the backup law's own command
 just checked, goes on); neither the answer nor the backup law passed and no plan remained (the answer
-was applied unverified)."""
-GATE_OFF, GATE_VERIFIED, GATE_BACKUP, GATE_UNVERIFIED = range(len(GATE_NAMES))
+was applied unverified); the same, but a variant of the backup law stayed safe longer in its rollout
+than the answer did in any of its own, so the filter answered that variant's command instead of u_des
+(the ASIF's answer to it was applied, unverified: docs/backup.md, "When nothing verifies")."""
+GATE_OFF, GATE_VERIFIED, GATE_BACKUP, GATE_UNVERIFIED, GATE_TOWARD_BACKUP = range(len(GATE_NAMES))
 
 SOLVE_RESULTS: tuple[str, ...] = ("solved", "infeasible", "max_iter", "check_failed")
 """What one QP solve ended in: optimal and checked; infeasible; out of iterations; a claimed solution
@@ -59,8 +61,8 @@ def solve_text(solver: int, result: int, backup: int = NOT_SOLVED) -> str:
 
 
 __all__ = [
-    "ACTIVE_SET", "FALLBACK", "FALLBACK_REASONS", "GATE_BACKUP", "GATE_NAMES", "GATE_OFF", "GATE_UNVERIFIED",
-    "GATE_VERIFIED", "HOLD", "INVALID_STATE", "NON_FINITE_U_DES", "NOT_SOLVED",
+    "ACTIVE_SET", "FALLBACK", "FALLBACK_REASONS", "GATE_BACKUP", "GATE_NAMES", "GATE_OFF", "GATE_TOWARD_BACKUP",
+    "GATE_UNVERIFIED", "GATE_VERIFIED", "HOLD", "INVALID_STATE", "NON_FINITE_U_DES", "NOT_SOLVED",
     "NO_BACKUP", "NO_FALLBACK", "OUTPUT_GUARD", "PASS", "PASS_THROUGH", "POLICY_ACTED", "PRIORITIZE", "PROXSUITE",
     "QUADPROG",
     "RAISE", "SOFTEN", "SOLVED", "SOLVE_CHECK_FAILED", "SOLVE_INFEASIBLE", "SOLVE_MAX_ITER", "SOLVE_OK",

@@ -71,6 +71,7 @@ from rta_attitude.filter.outcome import (
     FALLBACK,
     GATE_BACKUP,
     GATE_OFF,
+    GATE_TOWARD_BACKUP,
     GATE_VERIFIED,
     HOLD,
     INVALID_STATE,
@@ -728,6 +729,17 @@ def filter_state(x: Array, u_des: Array, f: np.void, wsa: NDArray[np.void], r: n
     if not answer(x, u_des, f, ws, r):
         return
     r.gate = gate_call(x, u_des, f, wsa, r)
+    if r.gate == GATE_TOWARD_BACKUP:
+        # nothing verified, and a variant of the backup law stayed safe longer than the answer: the ASIF's
+        # answer to that variant's command instead of u_des (docs/backup.md, "When nothing verifies")
+        # (r.u_des stays the primary's command; iterations and solves count both answers' QPs)
+        iterations, solves = r.iterations, r.solves
+        answer(x, ws.gate.longest_u, f, ws, r)
+        r.gate = GATE_TOWARD_BACKUP
+        r.iterations += iterations
+        r.solves += solves
+        for a in range(3):
+            r.u_des[a] = u_des[a]
     finish(ws, r)
 
 
