@@ -261,7 +261,7 @@ def test_gate_never_applies_an_unverified_candidate(cfg: Config, states: Array) 
 
 
 def test_where_nothing_verifies_the_filter_answers_the_backup_command_that_lasted_longest(cfg: Config) -> None:
-    """Monte Carlo run 4705 of seed 1 at t = 0 (a large momentum, E_0 = 3,407 J): nothing verifies. Checked
+    """Monte Carlo run 2998 of seed 1 at t = 0 (|H| / D = 778 rad/s, E_0 = 5,224 J): nothing verifies. Checked
     here rollout by rollout (`backup_rollout`, each variant in VARIANTS order, the plan's first as after a
     reset): the filter's answer to u_des = 0 held a sample then each variant fails, and so does each variant's
     own command, and one of those stays safe longer than any rollout of the answer. The gate then names
@@ -272,7 +272,7 @@ def test_where_nothing_verifies_the_filter_answers_the_backup_command_that_laste
 
     c = config.load()
     x0, _ = sample_initial_states(5000, 1, c)
-    x = x0[4705]
+    x = x0[2998]
     assert momentum_rad_s(x, c) > float(filter_record(c)[0]["backup"]["momentum_variant_rad_s"])
     f = filter_record(c)
     on, alone = AsifFilter(c), AsifFilter(c.with_backup("none"))
@@ -338,14 +338,16 @@ def _target(x: Array, fa: np.ndarray, ga: np.ndarray) -> None:
     sun_safe_error(x, f.plant, f.backup, ga[0])
 
 
-@pytest.mark.parametrize(("variant", "share"), [("sun_safe", 1.0), ("tight", SETTLED_RATE_FRACTION)])
+@pytest.mark.parametrize(("variant", "share"), [("sun_safe", 1.0), ("tight", SETTLED_RATE_FRACTION),
+                                               ("cross", SETTLED_RATE_FRACTION)])
 def test_the_tilted_target_puts_the_panel_as_near_the_sun_as_the_wheels_allow(cfg: Config, variant: str,
                                                                               share: float) -> None:
     """Large momenta (|H|/D 600-830 rad/s) and the sun at any angle to H: the sun-safe target holds H at
     rest with the rate margin (|T H|_a + J_a w_max <= D psi_max, checked here in numpy; the TIGHT variant's
     with J_a 0.1 w_max, the terminal set's rates), and its panel is as near the sun as an optimiser (SLSQP
     from many starts over all rotations, the same wheel box) can put it: never nearer (sound), and at most
-    1.5 deg farther (past a narrow corridor, on its side of H)."""
+    1.5 deg farther (past a narrow corridor, on its side of H; the CROSS variant on the sun's side, against
+    the optimiser over both sides)."""
     from scipy.spatial.transform import Rotation
 
     f = filter_record(cfg)
@@ -374,13 +376,55 @@ def test_the_tilted_target_puts_the_panel_as_near_the_sun_as_the_wheels_allow(cf
         np.testing.assert_allclose(T @ T.T, np.eye(3), atol=1e-12)
         got = float(T[2] @ s)
         # past a narrow corridor the target keeps the panel on its side of H (k_B . H with the sign of H_3)
-        side = np.linalg.norm(Hh) * np.cos(np.pi / 4 - CORRIDOR_HALF_WIDTH_RAD) > cap[:2].min()
+        side = (variant != "cross"
+                and np.linalg.norm(Hh) * np.cos(np.pi / 4 - CORRIDOR_HALF_WIDTH_RAD) > cap[:2].min())
         best = best_panel_cos(Hh, s, cap, rng, side=float(np.sign(hb[2])) if side else 0.0)
         assert got <= best + 1e-9
         # within 1.5 deg: the target splits H_perp at 45 deg with the smaller of the two wheels' rate margins
         assert np.degrees(np.arccos(np.clip(got, -1, 1)) - np.arccos(np.clip(best, -1, 1))) < 1.5
         checked += 1
     assert 2 in modes  # the tilted target was exercised
+
+
+def test_the_cross_variant_takes_the_momentum_through_the_corridor_to_the_suns_side(cfg: Config) -> None:
+    """Monte Carlo run 4056 of seed 1 (|H| / D = 796 rad/s, E_0 = 4,650 J; it failed the battery at 243 s
+    before this variant): the corridor across the i_B-j_B plane is narrow (the i_B and j_B wheels must hold
+    nearly all of H there), and every attitude the wheels can hold on H_body's side of that plane keeps the
+    panel more than 80 deg off the sun (an optimiser over rotations, `best_panel_cos`): each other variant's
+    rollout fails the battery (or, the Earth-side one, a rate) within 300 s. The CROSS variant's rollout is
+    safe for the whole horizon, checked here again substep by substep in numpy (wheel speeds, rates, the
+    charge, the keep-out cone); H_body's k_B part changes sign on the way; the panel ends within 30 deg of
+    the sun and the charge is rising there."""
+    c = config.load()
+    f = filter_record(c)
+    x0, _ = sample_initial_states(5000, 1, c)
+    x = x0[4056]
+    assert 790.0 < momentum_rad_s(x, c) < 800.0
+    sc, L = c.spacecraft, c.limits
+    D = sc.wheel_inertia_kgm2
+    hb = sc.J * x[4:7] - sc.torque_sign * D * x[7:10]
+    g = np.zeros(1, GATE_DTYPE)
+    _target(x, f, g)
+    Hh = g[0]["Hh"]  # H in Hill (constant: no external torque)
+    np.testing.assert_allclose(np.linalg.norm(Hh), np.linalg.norm(hb), rtol=1e-12)
+    s = np.array([np.cos(x[12]), np.sin(x[12]), 0.0])
+    cap = D * L.psi_max_rad_s * np.ones(3)
+    this_side = best_panel_cos(Hh, s, cap, np.random.default_rng(3), side=float(np.sign(hb[2])))
+    assert this_side < np.cos(np.radians(80.0))  # > 80 deg off the sun on this side, whatever the attitude
+    for v in VARIANTS[:-1]:
+        assert backup_rollout(x, backup_command(x, f, v), f, v)[0] == "failed"
+    found, traj = backup_rollout(x, backup_command(x, f, "cross"), f, "cross")
+    assert found == "horizon"
+    assert np.all(np.abs(traj[:, 7:10]) <= L.psi_max_rad_s)
+    assert np.all(np.abs(traj[:, 4:7]) <= L.omega_max_rad_s)
+    assert np.all(traj[:, 11] >= L.energy_min_J)
+    h = ConstraintSet(c).safety_values(traj)
+    assert np.all(h[:, list(CONSTRAINT_NAMES).index("exclusion_zone")] >= 0.0)
+    hz = (sc.J[2] * traj[:, 6] - sc.torque_sign * D * traj[:, 9])
+    assert hz[0] * hz[-1] < 0.0  # H_body crossed the i_B-j_B plane
+    panel = np.degrees(ConstraintSet(c).angles(traj[-1])["panel_sun"])
+    assert panel < 30.0
+    assert traj[-1, 11] > traj[-c.substeps * 30, 11]  # charging over the last 30 s
 
 
 def test_a_large_momentum_moves_h_in_the_body_before_the_roll(cfg: Config) -> None:

@@ -107,15 +107,16 @@ CORRIDOR_HALF_WIDTH_RAD = math.radians(10.0)
 the diagonal (a large momentum), the tilted target keeps the panel on its side of H."""
 RESERVE_STEP_S = 10.0
 """Step of `energy_reserve`'s projection, s (the sun moves 0.6 deg in it; midpoint rule)."""
-VARIANTS = ("sun_safe", "momentum", "earth_side", "tight")
+VARIANTS = ("sun_safe", "momentum", "earth_side", "tight", "cross")
 """The backup law's variants (its targets): the sun-safe attitude (rolled or tilted for a large momentum, the
 momentum mode where the wheels could not hold the momentum there); the momentum mode always; the Earth-side
 sun-safe attitude as it is, whatever the momentum; the tilted target with only the terminal set's rates
-(SETTLED_RATE_FRACTION w_max) kept in its wheels. The last three only with a large momentum. The gatekeeper
+(SETTLED_RATE_FRACTION w_max) kept in its wheels; the same on the sun's side of a narrow corridor, reached
+through it (`_cross`). The last four only with a large momentum. The gatekeeper
 tries the committed plan's first, then the others in this order: each is a way out the rollout verifies, so
 another variant adds ways out and only acts where the ones before it failed (docs/backup.md, "A portfolio of
 targets")."""
-SUN_SAFE_VARIANT, MOMENTUM, EARTH_SIDE, TIGHT = range(len(VARIANTS))
+SUN_SAFE_VARIANT, MOMENTUM, EARTH_SIDE, TIGHT, CROSS = range(len(VARIANTS))
 FAILED, HORIZON, SETTLED = 0, 1, 2
 """What a rollout found: a violation; the horizon safe; the terminal set reached, safe till then."""
 
@@ -272,6 +273,39 @@ def _h_first(b0: float, b1: float, b2: float, t0: float, t1: float, t2: float, b
 
 
 @numba.njit(**LEAF)
+def _toward(b0: float, b1: float, b2: float, t0: float, t1: float, t2: float, g: np.void) -> float:
+    """dq_v := (b x t) / 2 into g.dq (the rate command turns the body about b x t, which moves the unit body
+    momentum b straight towards t); returns dq4."""
+    c0, c1, c2 = b1 * t2 - b2 * t1, b2 * t0 - b0 * t2, b0 * t1 - b1 * t0
+    g.dq[0], g.dq[1], g.dq[2] = 0.5 * c0, 0.5 * c1, 0.5 * c2
+    return math.sqrt(max(0.0, 1.0 - 0.25 * (c0 * c0 + c1 * c1 + c2 * c2)))
+
+
+@numba.njit(**LEAF)
+def _cross(b0: float, b1: float, b2: float, t2: float, hb: float, share: float, p: np.void, b: np.void,
+           g: np.void) -> float:
+    """The CROSS variant's path while the unit body momentum (b0, b1, b2) is on the other side of the i_B-j_B
+    plane from its place at the target (k_B part t2): through the corridor between the i_B and j_B wheels'
+    caps. The corridor's middle longitude phi (|H| cos phi <= c_1, |H| sin phi <= c_2 at rest, `_wheel_caps`);
+    first along the latitude to it (while more than half the corridor's half-width off), then along that
+    meridian to the target's latitude. Returns dq4 (g.dq set), or -1 where there is no corridor."""
+    c1, c2, _ = _wheel_caps(p, b, share)
+    lo = math.acos(min(1.0, c1 / hb))
+    hi = math.asin(min(1.0, c2 / hb))
+    if not hi > lo:
+        return -1.0
+    phi = 0.5 * (lo + hi)
+    sx = 1.0 if b0 >= 0.0 else -1.0
+    sy = 1.0 if b1 >= 0.0 else -1.0
+    lon = math.atan2(abs(b1), abs(b0))
+    if abs(lon - phi) > 0.25 * (hi - lo):  # along the latitude to the corridor's longitude
+        r = math.sqrt(max(0.0, 1.0 - b2 * b2))
+        return _toward(b0, b1, b2, sx * r * math.cos(phi), sy * r * math.sin(phi), b2, g)
+    r = math.sqrt(max(0.0, 1.0 - t2 * t2))  # along the meridian to the target's latitude
+    return _toward(b0, b1, b2, sx * r * math.cos(phi), sy * r * math.sin(phi), t2, g)
+
+
+@numba.njit(**LEAF)
 def _wheel_caps(p: np.void, b: np.void, share: float = 1.0) -> tuple[float, float, float]:
     """What each wheel (i_B, j_B, k_B) may hold at rest at the tilted target, N m s: (1 - TILT_WHEEL_MARGIN)
     psi_limit D, less its rates' share J_a share w_max (the rates the law may still command: all of w_max,
@@ -282,12 +316,13 @@ def _wheel_caps(p: np.void, b: np.void, share: float = 1.0) -> tuple[float, floa
 
 
 @numba.njit(**LEAF)
-def _tilt(hn: float, ca: float, hb2: float, p: np.void, b: np.void, share: float = 1.0) -> float:
+def _tilt(hn: float, ca: float, hb2: float, p: np.void, b: np.void, share: float = 1.0, cross: bool = False) -> float:
     """cos beta of the tilted target (`_tilted_target`): the panel's angle to the momentum (|H| = hn, N m s)
     nearest alpha = angle(H, r_S) (ca = cos alpha) at which the wheels hold H at rest: the panel-axis wheel
     |H| |cos beta| <= cap, the i_B and j_B wheels |H| sin beta <= |(c_1, c_2)|; on the side of hb2 (H_body's
-    k_B part) where the corridor between the sides is narrow. 2.0 where no tilt is needed (the panel-axis
-    wheel holds all of H), NaN where the wheels hold H at no beta. share: as `_wheel_caps`'s."""
+    k_B part) where the corridor between the sides is narrow, unless cross (the CROSS variant: the sun's
+    side, reached through the corridor, `_cross`). 2.0 where no tilt is needed (the panel-axis wheel holds
+    all of H), NaN where the wheels hold H at no beta. share: as `_wheel_caps`'s."""
     c1, c2, cap = _wheel_caps(p, b, share)
     if not cap > 0.0:
         return math.nan
@@ -301,17 +336,17 @@ def _tilt(hn: float, ca: float, hb2: float, p: np.void, b: np.void, share: float
     if lo > cos_a:
         return math.nan
     side = 1.0 if ca >= 0.0 else -1.0
-    if hn * math.cos(0.25 * math.pi - CORRIDOR_HALF_WIDTH_RAD) > min(c1, c2):  # a narrow corridor: keep the side
-        side = 1.0 if hb2 >= 0.0 else -1.0
+    if not cross and hn * math.cos(0.25 * math.pi - CORRIDOR_HALF_WIDTH_RAD) > min(c1, c2):
+        side = 1.0 if hb2 >= 0.0 else -1.0  # a narrow corridor: keep the side (CROSS: the sun's side)
     return side * min(max(side * ca, lo), cos_a)
 
 
 @numba.njit(**LEAF)
 def _rate_share(g: np.void) -> float:
     """The fraction of w_max whose momentum (J_a share w_max) the tilted target leaves each wheel for the
-    rates, in the variant g.law: all of it; in the TIGHT variant the terminal set's rates only
+    rates, in the variant g.law: all of it; in the TIGHT and CROSS variants the terminal set's rates only
     (SETTLED_RATE_FRACTION), the panel nearer the sun and the wheels nearer their limit."""
-    return SETTLED_RATE_FRACTION if g.law == TIGHT else 1.0
+    return SETTLED_RATE_FRACTION if (g.law == TIGHT or g.law == CROSS) else 1.0
 
 
 @numba.njit(**LEAF)
@@ -393,7 +428,7 @@ def _tilted_target(cs: float, sn: float, hb0: float, hb1: float, hb2: float, sha
         return False
     hx, hy, hz = Hh[0] / hn, Hh[1] / hn, Hh[2] / hn
     ca = hx * cs + hy * sn
-    cb = _tilt(hn, ca, hb2, p, b, share)
+    cb = _tilt(hn, ca, hb2, p, b, share, g.law == CROSS)
     if not abs(cb) <= 1.0:  # no tilt needed, or none the wheels can hold
         return False
     sb = math.sqrt(max(0.0, 1.0 - cb * cb))
@@ -445,7 +480,8 @@ def sun_safe_error(x: Array, p: np.void, b: np.void, g: np.void) -> float:
     stage), then about H to the panel's roll. The EARTH_SIDE variant aims at the Earth-side attitude as it
     is (g.momentum_mode = 3, no terminal set: `verify` uses it with a large momentum only); the TIGHT
     variant tilts as above with only SETTLED_RATE_FRACTION w_max of the rates' momentum kept in the wheels
-    (`_rate_share`)."""
+    (`_rate_share`); the CROSS variant as TIGHT, but with the panel on the sun's side of H where the corridor
+    across the i_B-j_B plane is narrow, H_body taken through the corridor's middle first (`_cross`)."""
     cs, sn = sun_hill(x[12])
     T = g.target
     Hb0, Hb1, Hb2 = _momentum(x, p, g)
@@ -524,6 +560,10 @@ def sun_safe_error(x: Array, p: np.void, b: np.void, g: np.void) -> float:
         t0 = (T[0, 0] * Hh[0] + T[0, 1] * Hh[1] + T[0, 2] * Hh[2]) / hb  # H_body at the target, unit
         t1 = (T[1, 0] * Hh[0] + T[1, 1] * Hh[1] + T[1, 2] * Hh[2]) / hb
         t2 = (T[2, 0] * Hh[0] + T[2, 1] * Hh[1] + T[2, 2] * Hh[2]) / hb
+        if g.law == CROSS and Hb2 * t2 < 0.0:
+            dq4 = _cross(Hb0 / hb, Hb1 / hb, Hb2 / hb, t2, hb, share, p, b, g)
+            if dq4 >= 0.0:
+                return dq4
         dq4 = _h_first(Hb0 / hb, Hb1 / hb, Hb2 / hb, t0, t1, t2, b, g)
         if dq4 >= 0.0:
             return dq4
@@ -603,8 +643,9 @@ def settled(x: Array, p: np.void, b: np.void, g: np.void) -> bool:
     for a in range(3):
         if abs(x[4 + a]) > b.settled_rate_rad_s:
             return False
-    if g.momentum_mode or g.law == TIGHT:  # not a terminal set: the panel may not charge, the sun moves on
-        # (TIGHT: its wheels keep less than the rates' margin the set needs)
+    if g.momentum_mode or g.law == TIGHT or g.law == CROSS:
+        # not a terminal set: the panel may not charge, the sun moves on (TIGHT, CROSS: their wheels keep
+        # less than the rates' margin the set needs)
         return False
     return g.load <= 0.0
 
@@ -1018,7 +1059,7 @@ def backup_rollout(x: Array, u0: Array, f: NDArray[np.void], variant: str = "sun
 
 
 __all__ = [
-    "ANSWER_RTOL", "BACKUP_DTYPE", "EARTH_SIDE", "FAILED", "GATE_DTYPE", "HORIZON", "MOMENTUM", "NO_LAW",
+    "ANSWER_RTOL", "BACKUP_DTYPE", "CROSS", "EARTH_SIDE", "FAILED", "GATE_DTYPE", "HORIZON", "MOMENTUM", "NO_LAW",
     "PREDICTION_RTOL", "RATE_LIMIT_FRACTION", "RATE_TIME_CONSTANT_S", "RESERVE_STEP_S", "SETTLED", "SETTLED_ANGLE_RAD",
     "SETTLED_RATE_FRACTION", "SUN_SAFE", "SUN_SAFE_VARIANT", "TIGHT", "VARIANTS", "apply_measurement_margins",
     "backup_command", "backup_record", "backup_rollout", "backup_tail", "check_margins", "commit", "commit_weak",
