@@ -418,11 +418,12 @@ def test_the_cross_variant_takes_the_momentum_through_the_corridor_to_the_suns_s
     assert np.all(np.abs(traj[:, 7:10]) <= L.psi_max_rad_s)
     assert np.all(np.abs(traj[:, 4:7]) <= L.omega_max_rad_s)
     assert np.all(traj[:, 11] >= L.energy_min_J)
-    h = ConstraintSet(c).safety_values(traj)
+    cs = ConstraintSet(c)
+    h = cs.safety_values(traj)
     assert np.all(h[:, list(CONSTRAINT_NAMES).index("exclusion_zone")] >= 0.0)
     hz = (sc.J[2] * traj[:, 6] - sc.torque_sign * D * traj[:, 9])
     assert hz[0] * hz[-1] < 0.0  # H_body crossed the i_B-j_B plane
-    panel = np.degrees(ConstraintSet(c).angles(traj[-1])["panel_sun"])
+    panel = np.degrees(cs.angles(traj[-1])["panel_sun"])
     assert panel < 30.0
     assert traj[-1, 11] > traj[-c.substeps * 30, 11]  # charging over the last 30 s
 

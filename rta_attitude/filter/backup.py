@@ -26,7 +26,8 @@ terminal set (`settled`: near the sun-safe attitude with small rates and a wheel
 can hold there), which the backup law keeps (docs/backup.md). `verify` accepts a settled rollout,
 and, only with a large momentum (|H| / D > psi_max - max J_a w_max / D), one whose horizon ends safe;
 it tries the committed plan's variant of the law first, then the others (VARIANTS: sun-safe, momentum mode,
-and with a large momentum the Earth-side target as it is and the tight tilt).
+and with a large momentum the Earth-side target as it is, the tight tilt and the tight tilt on the sun's side
+of a narrow corridor, reached through it).
 
 The gate (`gate`), at each filter call with a backup law: the candidate (the ASIF's answer) passes
 -> apply it, commit its plan; else, if the backup law's own command passes -> apply it, commit;
@@ -259,26 +260,26 @@ def _sun_across(hx: float, hy: float, hz: float, cs: float, sn: float, sh: float
 
 
 @numba.njit(**LEAF)
-def _h_first(b0: float, b1: float, b2: float, t0: float, t1: float, t2: float, b: np.void, g: np.void) -> float:
-    """First stage of a slew with a large momentum: while the unit body momentum (b0, b1, b2) is more
-    than SETTLED_ANGLE_RAD from its place at the target (t0, t1, t2), dq_v := (b x t) / 2 into g.dq and
-    returns dq4 (the rate command then turns the body about an axis perpendicular to H, which moves
-    H_body straight towards t: dH_body/dt = H_body x w, so it does not wander past a wheel's limit);
-    else returns -1 (the target's own attitude error applies)."""
-    c0, c1, c2 = b1 * t2 - b2 * t1, b2 * t0 - b0 * t2, b0 * t1 - b1 * t0
-    if c0 * c0 + c1 * c1 + c2 * c2 > b.settled_sin_half_angle**2 * 4.0:
-        g.dq[0], g.dq[1], g.dq[2] = 0.5 * c0, 0.5 * c1, 0.5 * c2
-        return math.sqrt(max(0.0, 1.0 - 0.25 * (c0 * c0 + c1 * c1 + c2 * c2)))
-    return -1.0
-
-
-@numba.njit(**LEAF)
 def _toward(b0: float, b1: float, b2: float, t0: float, t1: float, t2: float, g: np.void) -> float:
     """dq_v := (b x t) / 2 into g.dq (the rate command turns the body about b x t, which moves the unit body
     momentum b straight towards t); returns dq4."""
     c0, c1, c2 = b1 * t2 - b2 * t1, b2 * t0 - b0 * t2, b0 * t1 - b1 * t0
     g.dq[0], g.dq[1], g.dq[2] = 0.5 * c0, 0.5 * c1, 0.5 * c2
     return math.sqrt(max(0.0, 1.0 - 0.25 * (c0 * c0 + c1 * c1 + c2 * c2)))
+
+
+@numba.njit(**LEAF)
+def _h_first(b0: float, b1: float, b2: float, t0: float, t1: float, t2: float, b: np.void, g: np.void) -> float:
+    """First stage of a slew with a large momentum: while the unit body momentum (b0, b1, b2) is more
+    than SETTLED_ANGLE_RAD from its place at the target (t0, t1, t2), dq_v := (b x t) / 2 into g.dq and
+    returns dq4 (the rate command then turns the body about an axis perpendicular to H, which moves
+    H_body straight towards t: dH_body/dt = H_body x w, so it does not wander past a wheel's limit);
+    else returns -1 (the target's own attitude error applies; g.dq is then overwritten by the caller)."""
+    dq4 = _toward(b0, b1, b2, t0, t1, t2, g)
+    dq = g.dq
+    if dq[0] * dq[0] + dq[1] * dq[1] + dq[2] * dq[2] > b.settled_sin_half_angle**2:
+        return dq4
+    return -1.0
 
 
 @numba.njit(**LEAF)
@@ -633,9 +634,9 @@ def _rate_command(x: Array, p: np.void, c: np.void, b: np.void, g: np.void, out:
 def settled(x: Array, p: np.void, b: np.void, g: np.void) -> bool:
     """x (19,) is in the backup law's terminal set: within SETTLED_ANGLE_RAD of the sun-safe attitude,
     every body rate within SETTLED_RATE_FRACTION w_max, and the wheels can hold the momentum at rest
-    there (`_wheel_load` <= 0). Never in the momentum mode, at the large-momentum targets or in the TIGHT and
-    EARTH_SIDE variants (the panel may not charge enough and the sun moves on: their rollouts run the whole
-    horizon)."""
+    there (`_wheel_load` <= 0). Never in the momentum mode, at the large-momentum targets (the tilted and
+    the EARTH_SIDE one: g.momentum_mode 2, 3) or in the TIGHT and CROSS variants (the panel may not charge
+    enough and the sun moves on: their rollouts run the whole horizon)."""
     sun_safe_error(x, p, b, g)
     dq = g.dq
     if math.sqrt(dq[0] * dq[0] + dq[1] * dq[1] + dq[2] * dq[2]) > b.settled_sin_half_angle:
