@@ -261,18 +261,18 @@ def test_gate_never_applies_an_unverified_candidate(cfg: Config, states: Array) 
 
 
 def test_where_nothing_verifies_the_filter_answers_the_backup_command_that_lasted_longest(cfg: Config) -> None:
-    """Monte Carlo run 2998 of seed 1 at t = 0 (|H| / D = 778 rad/s, E_0 = 5,224 J): nothing verifies. Checked
+    """Monte Carlo run 1684 of seed 1 at t = 45 s of its loop (|H| / D = 781 rad/s): nothing verifies. Checked
     here rollout by rollout (`backup_rollout`, each variant in VARIANTS order, the plan's first as after a
     reset): the filter's answer to u_des = 0 held a sample then each variant fails, and so does each variant's
-    own command, and one of those stays safe longer than any rollout of the answer. The gate then names
-    `toward_backup` and the filter applies its own answer to the command of the variant that lasted longest
-    (the first of the longest): a filter without a gatekeeper given that command as u_des answers the same,
-    bit for bit. The record's u_des stays the primary's command."""
+    own command, and one of those stays safe longer than any rollout of the answer; the backup law through the
+    filter does not verify either. The gate then names `toward_backup` and the filter applies its own answer to
+    the command of the variant that lasted longest (the first of the longest): a filter without a gatekeeper
+    given that command as u_des answers the same, bit for bit. The record's u_des stays the primary's command."""
     from rta_attitude.filter.asif import AsifFilter
 
     c = config.load()
     x0, _ = sample_initial_states(5000, 1, c)
-    x = x0[2998]
+    x = run_runs(c, x0[1684:1685], 45.0, record=True).trajectory[0, 45]
     assert momentum_rad_s(x, c) > float(filter_record(c)[0]["backup"]["momentum_variant_rad_s"])
     f = filter_record(c)
     on, alone = AsifFilter(c), AsifFilter(c.with_backup("none"))
@@ -294,6 +294,64 @@ def test_where_nothing_verifies_the_filter_answers_the_backup_command_that_laste
     np.testing.assert_array_equal(res.u, alone.filter(x, backup_command(x, f, longest)).u)
     assert not np.array_equal(res.u, answer)
     np.testing.assert_array_equal(res.u_des, 0.0)
+
+
+def test_where_the_backup_law_fails_alone_it_can_verify_through_the_filter(cfg: Config) -> None:
+    """Monte Carlo run 2998 of seed 1 at t = 0 (|H| / D = 778 rad/s, E_0 = 5,224 J; it failed before this
+    mode): the filter's answer to u_des = 0, held a sample then each variant, fails, and so does each
+    variant's own command. The backup law filtered by the ASIF (at every sample the filter's answer to the
+    law's command) verifies: the gate names `filtered_backup`. Re-derived here independently: from x, at each
+    sample the state as the filter receives it (`Instruments.deliver`), the law's command there
+    (`backup_command`), a gate-less filter's answer to it, held over the sample through the torque interface
+    by the plant's Python `integrate`: every substep keeps every hard constraint until the law's terminal set or,
+    with this large momentum, to the horizon with the energy reserve; the plan's committed commands and states
+    are these, bit for bit, and the first is the one applied. Fed the plan's next states, the filter applies
+    its commands ('backup')."""
+    from rta_attitude.filter.asif import AsifFilter
+
+    c = config.load()
+    x0, _ = sample_initial_states(5000, 1, c)
+    x = x0[2998]
+    f = filter_record(c)
+    b = f[0]["backup"]
+    on, alone = AsifFilter(c), AsifFilter(c.with_backup("none"))
+    answer = alone.filter(x, np.zeros(3)).u
+    for v in VARIANTS:
+        assert backup_rollout(x, answer, f, v, candidate=True)[0] == "failed"
+        assert backup_rollout(x, backup_command(x, f, v), f, v)[0] == "failed"
+    res = on.filter(x, np.zeros(3))
+    assert res.gate == "filtered_backup"
+    g = on._ws[0]["gate"]
+    variant = VARIANTS[int(g["plan_law"])]
+    n = int(g["plan_n"])
+    assert n == round(c.filter.backup_nominal_s / c.filter.sample_time_s)
+    plan_x, plan_u = g["plan_x"][:n].copy(), g["plan_u"][:n].copy()
+    read = Instruments(c)
+    cs = ConstraintSet.from_config(c)
+    hard = np.array([name not in c.slacked_constraints for name in CONSTRAINT_NAMES])
+    p, D = f["plant"], c.spacecraft.wheel_inertia_kgm2
+    y, subs_all, commands = x.copy(), [], []
+    ended = "horizon"
+    for j in range(int(b["horizon_steps"]) + 1):
+        if j > 0 and is_settled(y, f, variant):
+            ended = "settled"
+            break
+        xr = x if j == 0 else read.deliver(y)
+        u = alone.filter(xr, backup_command(xr, f, variant)).u
+        if j < n:
+            np.testing.assert_array_equal(plan_x[j], xr)
+            commands.append(u)
+        y, subs = integrate(y, torque_to_wheel_accel(wheel_accel_to_torque(u, D), D), 1.0, p, c.substeps)
+        subs_all.append(subs)
+    np.testing.assert_array_equal(plan_u, np.array(commands))
+    np.testing.assert_array_equal(res.u, plan_u[0])
+    assert np.all(cs.safety_values(np.concatenate(subs_all))[:, hard] >= 0.0)
+    assert ended == "settled" or _reserve(y, f, np.zeros(1, GATE_DTYPE))
+    for j in range(1, 4):  # on the plan: its commands, no rollout of the backup law needed
+        step = on.filter(plan_x[j], np.zeros(3))
+        assert step.gate in ("backup", "verified")
+        if step.gate == "backup":
+            np.testing.assert_array_equal(step.u, plan_u[j])
 
 
 def test_no_backup_law_leaves_the_gate_off(cfg: Config, states: Array) -> None:

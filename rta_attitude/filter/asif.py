@@ -54,7 +54,7 @@ class FilterResult:
     psi1, bc (barrier conditions at u, slack not included), slack, intervening (rows active at the
     solution), uncontrollable, box_active, lo, hi. Text fields: status ('pass', 'solved', 'fallback'),
     fallback (the policy applied, 'non_finite_u_des', 'invalid_state' or ''), solver_status, gate
-    (what the gatekeeper did: 'off', 'verified', 'backup', 'unverified', 'toward_backup').
+    (what the gatekeeper did: 'off', 'verified', 'backup', 'unverified', 'toward_backup', 'filtered_backup').
     """
 
     def __init__(self, record: NDArray[np.void], policy: str,

@@ -287,10 +287,13 @@ def _cross(b0: float, b1: float, b2: float, t2: float, hb: float, share: float, 
            g: np.void) -> float:
     """The CROSS variant's path while the unit body momentum (b0, b1, b2) is on the other side of the i_B-j_B
     plane from its place at the target (k_B part t2): through the corridor between the i_B and j_B wheels'
-    caps. The corridor's middle longitude phi (|H| cos phi <= c_1, |H| sin phi <= c_2 at rest, `_wheel_caps`);
-    first along the latitude to it (while more than half the corridor's half-width off), then along that
-    meridian to the target's latitude. Returns dq4 (g.dq set), or -1 where there is no corridor."""
+    caps, each less one reading's error (psi_limit - psi_hold: 0 without sensor errors; every call re-plans
+    from a reading). The corridor's middle longitude phi (|H| cos phi <= c_1, |H| sin phi <= c_2 at rest,
+    `_wheel_caps`); first along the latitude to it (while more than half the corridor's half-width off), then
+    along that meridian to the target's latitude. Returns dq4 (g.dq set), or -1 where there is no corridor."""
     c1, c2, _ = _wheel_caps(p, b, share)
+    room = (b.psi_limit_rad_s - b.psi_hold_rad_s) * p.wheel_inertia_kgm2  # one reading's error (0 without)
+    c1, c2 = c1 - room, c2 - room
     lo = math.acos(min(1.0, c1 / hb))
     hi = math.asin(min(1.0, c2 / hb))
     if not hi > lo:

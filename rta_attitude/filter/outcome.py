@@ -32,15 +32,18 @@ ACTIVE_SET, PROXSUITE = (SOLVERS.index(n) for n in ("active_set", "proxsuite"))
 QUADPROG, NO_BACKUP = (BACKUP_SOLVERS.index(n) for n in ("quadprog", "none"))
 """Codes of the re-solvers of a QP proxsuite missed (`filter.backup_solver`)."""
 
-GATE_NAMES: tuple[str, ...] = ("off", "verified", "backup", "unverified", "toward_backup")
+GATE_NAMES: tuple[str, ...] = ("off", "verified", "backup", "unverified", "toward_backup", "filtered_backup")
 """What the gatekeeper did (`filter.backup`): no backup law configured; the filter's answer passed the
 check (a hold of it, then the backup law, safe over the horizon) and was applied; the backup law was
 applied (the answer failed the check; the plan verified earlier, or the backup law's own command
 just checked, goes on); neither the answer nor the backup law passed and no plan remained (the answer
 was applied unverified); the same, but a variant of the backup law stayed safe longer in its rollout
 than the answer did in any of its own, so the filter answered that variant's command instead of u_des
-(the ASIF's answer to it was applied, unverified: docs/backup.md, "When nothing verifies")."""
-GATE_OFF, GATE_VERIFIED, GATE_BACKUP, GATE_UNVERIFIED, GATE_TOWARD_BACKUP = range(len(GATE_NAMES))
+(the ASIF's answer to it was applied, unverified: docs/backup.md, "When nothing verifies"); neither the
+answer nor the backup law passed, but the backup law filtered by the ASIF (the filter's answer to the law's
+command at every sample of the rollout) did, and its first command was applied (docs/backup.md, "The backup
+law through the filter"; the following calls on its plan apply its commands as 'backup')."""
+GATE_OFF, GATE_VERIFIED, GATE_BACKUP, GATE_UNVERIFIED, GATE_TOWARD_BACKUP, GATE_FILTERED_BACKUP = range(len(GATE_NAMES))
 
 SOLVE_RESULTS: tuple[str, ...] = ("solved", "infeasible", "max_iter", "check_failed")
 """What one QP solve ended in: optimal and checked; infeasible; out of iterations; a claimed solution
@@ -61,7 +64,8 @@ def solve_text(solver: int, result: int, backup: int = NOT_SOLVED) -> str:
 
 
 __all__ = [
-    "ACTIVE_SET", "FALLBACK", "FALLBACK_REASONS", "GATE_BACKUP", "GATE_NAMES", "GATE_OFF", "GATE_TOWARD_BACKUP",
+    "ACTIVE_SET", "FALLBACK", "FALLBACK_REASONS", "GATE_BACKUP", "GATE_FILTERED_BACKUP", "GATE_NAMES", "GATE_OFF",
+    "GATE_TOWARD_BACKUP",
     "GATE_UNVERIFIED", "GATE_VERIFIED", "HOLD", "INVALID_STATE", "NON_FINITE_U_DES", "NOT_SOLVED",
     "NO_BACKUP", "NO_FALLBACK", "OUTPUT_GUARD", "PASS", "PASS_THROUGH", "POLICY_ACTED", "PRIORITIZE", "PROXSUITE",
     "QUADPROG",

@@ -31,7 +31,7 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
-from rta_attitude.config.schema import CONSTRAINT_NAMES, Config
+from rta_attitude.config.schema import CONSTRAINT_NAMES, MAX_NOMINAL_STEPS, Config
 from rta_attitude.constraints.base import (
     CONSTRAINT_DTYPE,
     N_CONSTRAINTS,
@@ -48,11 +48,13 @@ from rta_attitude.dynamics.state import STATE_SIZE
 from rta_attitude.filter import active_set, outcome, proxsuite_qp
 from rta_attitude.filter.backup import (
     BACKUP_DTYPE,
+    FAILED,
     GATE_DTYPE,
     HORIZON,
     NO_LAW,
     SETTLED,
     SUN_SAFE_VARIANT,
+    VARIANTS,
     apply_measurement_margins,
     backup_record,
     backup_tail,
@@ -64,14 +66,18 @@ from rta_attitude.filter.backup import (
     predict,
     predicted,
     same_answer,
+    settled,
+    sun_safe_command,
     verify,
 )
 from rta_attitude.filter.outcome import (
     ACTIVE_SET,
     FALLBACK,
     GATE_BACKUP,
+    GATE_FILTERED_BACKUP,
     GATE_OFF,
     GATE_TOWARD_BACKUP,
+    GATE_UNVERIFIED,
     GATE_VERIFIED,
     HOLD,
     INVALID_STATE,
@@ -657,6 +663,66 @@ def plan_nominal(x: Array, u: Array, u_des: Array, N: int, f: np.void, wsa: NDAr
     return True
 
 
+@numba.njit(**JIT)
+def plan_filtered(x: Array, f: np.void, wsa: NDArray[np.void], u: Array) -> bool:
+    """The backup law filtered by the ASIF: for each variant in `verify`'s order, a rollout from the state x
+    (19,) as received whose every sample holds the filter's answer (`answer`) to the law's command, both at
+    the state as the filter will receive it (`predict`), checked at every substep (`hold_sample`), to the
+    terminal set or (large momentum) to the horizon with the energy reserve. The law knows nothing of the
+    keep-out cone and the other rows; the ASIF's rows steer its slew round them. On success the first
+    nominal_steps samples are committed as a plan (plan_x, plan_u: later calls at those states apply its
+    commands, `gate_call`) and u := its first command."""
+    b = f.backup
+    p = f.plant
+    g, inner = wsa[0].gate, wsa[1]
+    large = large_momentum(x, p, b)
+    n = min(max(b.nominal_steps, 1), MAX_NOMINAL_STEPS)
+    xr = np.empty(STATE_SIZE)
+    ul = np.empty(3)
+    for t in range(len(VARIANTS)):
+        law = g.plan_law if t == 0 else (t - 1 if t - 1 < g.plan_law else t)
+        if law != SUN_SAFE_VARIANT and not large:
+            continue
+        g.law = law
+        g.candidate = 0
+        g.checked = 0
+        for i in range(STATE_SIZE):
+            g.x[i] = x[i]
+        found = HORIZON
+        for j in range(b.horizon_steps + 1):
+            if j > 0 and settled(g.x, p, b, g):
+                found = SETTLED
+                break
+            if j == 0:
+                for i in range(STATE_SIZE):
+                    xr[i] = x[i]
+            else:
+                predict(g.x, b, g, xr)
+            g.law = law
+            sun_safe_command(xr, p, f.constraints, b, g, ul)
+            if not answer(xr, ul, f, inner, inner.result):
+                found = FAILED
+                break
+            if j < n:
+                for i in range(STATE_SIZE):
+                    g.plan_x[j, i] = xr[i]
+                for a in range(3):
+                    g.plan_u[j, a] = inner.result.u[a]
+            if not hold_sample(inner.result.u, f, g, g.subs, False):
+                found = FAILED
+                break
+        if found == SETTLED or (found == HORIZON and large and energy_reserve(g.x, p, f.constraints, b, g)):
+            for a in range(3):
+                u[a] = g.plan_u[0, a]
+            g.plan_n = min(n, b.horizon_steps + 1)
+            g.plan_at = 1
+            g.plan_steps = 0
+            g.has_next = 0
+            g.plan_law = law
+            return True
+    return False
+
+
 UNIT_TOLERANCE = 1e-12
 """The gatekeeper's rollouts start from the state as received where its quaternion's norm is within this of
 1 (the plant's always is: it renormalises at every substep), so that they predict the plant bit for bit;
@@ -665,7 +731,7 @@ from the normalised state otherwise."""
 
 @numba.njit(**JIT)
 def gate_call(x: Array, u_des: Array, f: np.void, wsa: NDArray[np.void], r: np.void) -> int:
-    """The gatekeeper at the state x (19,, as received) with the filter's answer r.u (replaced in place by
+    """The gatekeeper at the state x (19,) as received with the filter's answer r.u (replaced in place by
     the command to apply); returns its GATE_NAMES code. In order:
 
     - on a committed nominal plan (x and r.u are the state and answer it predicted for this sample:
@@ -676,7 +742,9 @@ def gate_call(x: Array, u_des: Array, f: np.void, wsa: NDArray[np.void], r: np.v
       calls: halving the plan after a failure saved 10 % of the CPU and lost one more of 1,000 runs);
     - on the plan's state but with another answer (u_des changed) -> that answer alone (`backup.verify`),
       else the plan's own answer for this sample, and the plan goes on;
-    - otherwise `backup.gate` (the answer held a sample then the backup law)."""
+    - otherwise `backup.gate` (the answer held a sample then the backup law); where that finds nothing
+      verified (`unverified`, `toward_backup`), the backup law through the filter (`plan_filtered`) ->
+      its first command (`filtered_backup`)."""
     b = f.backup
     if b.law == NO_LAW:
         return GATE_OFF
@@ -718,7 +786,10 @@ def gate_call(x: Array, u_des: Array, f: np.void, wsa: NDArray[np.void], r: np.v
             return GATE_VERIFIED
         else:
             g.nominal_wait = b.nominal_steps
-    return gate(xs, f, g, r.u)
+    code = gate(xs, f, g, r.u)
+    if (code == GATE_UNVERIFIED or code == GATE_TOWARD_BACKUP) and plan_filtered(xs, f, wsa, r.u):
+        return GATE_FILTERED_BACKUP
+    return code
 
 
 @numba.njit(**JIT)

@@ -16,7 +16,13 @@ from rta_attitude.config.schema import CONSTRAINT_NAMES, Config
 from rta_attitude.constraints import ConstraintSet
 from rta_attitude.dynamics.state import STATE_NAMES
 from rta_attitude.files import atomic, output_dir, write_text
-from rta_attitude.filter.outcome import GATE_BACKUP, GATE_NAMES, GATE_TOWARD_BACKUP, GATE_UNVERIFIED
+from rta_attitude.filter.outcome import (
+    GATE_BACKUP,
+    GATE_FILTERED_BACKUP,
+    GATE_NAMES,
+    GATE_TOWARD_BACKUP,
+    GATE_UNVERIFIED,
+)
 from rta_attitude.montecarlo.classify import UNRECOVERABLE_RULES
 from rta_attitude.montecarlo.runner import BatchOutcome
 from rta_attitude.simulation.metrics import H_UNITS
@@ -125,6 +131,7 @@ def summary(result: MonteCarloResult) -> dict[str, Any]:
             "backup_horizon_s": result.cfg.filter.backup_horizon_s,
             "gate_state_steps": {name: int(o.gate_steps[:, i].sum()) for i, name in enumerate(GATE_NAMES)},
             "runs_with_backup": int((o.gate_steps[:, GATE_BACKUP] > 0).sum()),
+            "runs_with_filtered_backup": int((o.gate_steps[:, GATE_FILTERED_BACKUP] > 0).sum()),
             # runs with a step no plan verified (the answer, or the answer to a backup command, applied)
             "runs_with_unverified": int((o.gate_steps[:, [GATE_UNVERIFIED, GATE_TOWARD_BACKUP]] > 0).any(axis=1).sum()),
         },
@@ -185,7 +192,8 @@ def format_table(s: dict[str, Any]) -> str:
     if f["backup_law"] != "none":
         g = f["gate_state_steps"]
         lines.append(f"gatekeeper ({f['backup_law']}, {f['backup_horizon_s']:g} s): {g['verified']} verified, "
-                     f"{g['backup']} backup steps in {f['runs_with_backup']} runs, {g['unverified']} unverified and "
+                     f"{g['backup']} backup steps in {f['runs_with_backup']} runs, {g['filtered_backup']} through the "
+                     f"filter in {f['runs_with_filtered_backup']} runs, {g['unverified']} unverified and "
                      f"{g['toward_backup']} toward the backup law in {f['runs_with_unverified']} runs")
     return "\n".join(lines)
 
