@@ -664,63 +664,85 @@ def plan_nominal(x: Array, u: Array, u_des: Array, N: int, f: np.void, wsa: NDAr
 
 
 @numba.njit(**JIT)
+def _filtered_rollout(x: Array, law: int, n: int, f: np.void, wsa: NDArray[np.void], xr: Array, ul: Array) -> int:
+    """One rollout of `plan_filtered` for the variant law from x: FAILED, HORIZON or SETTLED; its first n
+    samples' states (as received) and commands into plan_x, plan_u; g.x its last state."""
+    b = f.backup
+    p = f.plant
+    g, inner = wsa[0].gate, wsa[1]
+    g.law = law
+    g.candidate = 0
+    g.checked = 0
+    for i in range(STATE_SIZE):
+        g.x[i] = x[i]
+    for j in range(b.horizon_steps + 1):
+        if j > 0 and settled(g.x, p, b, g):
+            return SETTLED
+        if j == 0:
+            for i in range(STATE_SIZE):
+                xr[i] = x[i]
+        else:
+            predict(g.x, b, g, xr)
+        g.law = law
+        sun_safe_command(xr, p, f.constraints, b, g, ul)
+        if not answer(xr, ul, f, inner, inner.result):
+            return FAILED
+        if j < n:
+            for i in range(STATE_SIZE):
+                g.plan_x[j, i] = xr[i]
+            for a in range(3):
+                g.plan_u[j, a] = inner.result.u[a]
+        if not hold_sample(inner.result.u, f, g, g.subs, False):
+            return FAILED
+    return HORIZON
+
+
+@numba.njit(**JIT)
 def plan_filtered(x: Array, f: np.void, wsa: NDArray[np.void], u: Array) -> bool:
     """The backup law filtered by the ASIF: for each variant in `verify`'s order, a rollout from the state x
     (19,) as received whose every sample holds the filter's answer (`answer`) to the law's command, both at
     the state as the filter will receive it (`predict`), checked at every substep (`hold_sample`), to the
-    terminal set or (large momentum) to the horizon with the energy reserve. The law knows nothing of the
-    keep-out cone and the other rows; the ASIF's rows steer its slew round them. On success the first
-    nominal_steps samples are committed as a plan (plan_x, plan_u: later calls at those states apply its
-    commands, `gate_call`) and u := its first command."""
+    terminal set or (large momentum) to the horizon with the energy reserve; failing that, the first variant
+    safe to the horizon without the reserve (as `backup.commit_weak` for the law's own plans). The law knows
+    nothing of the keep-out cone and the other rows; the ASIF's rows steer its slew round them. On success
+    the first nominal_steps samples are committed as a plan (plan_x, plan_u: later calls at those states
+    apply its commands, `gate_call`) and u := its first command."""
     b = f.backup
     p = f.plant
-    g, inner = wsa[0].gate, wsa[1]
+    g = wsa[0].gate
     large = large_momentum(x, p, b)
     n = min(max(b.nominal_steps, 1), MAX_NOMINAL_STEPS)
     xr = np.empty(STATE_SIZE)
     ul = np.empty(3)
+    weak = -1
+    chosen = -1
     for t in range(len(VARIANTS)):
         law = g.plan_law if t == 0 else (t - 1 if t - 1 < g.plan_law else t)
         if law != SUN_SAFE_VARIANT and not large:
             continue
-        g.law = law
-        g.candidate = 0
-        g.checked = 0
-        for i in range(STATE_SIZE):
-            g.x[i] = x[i]
-        found = HORIZON
-        for j in range(b.horizon_steps + 1):
-            if j > 0 and settled(g.x, p, b, g):
-                found = SETTLED
+        found = _filtered_rollout(x, law, n, f, wsa, xr, ul)
+        if found == SETTLED:
+            chosen = law
+            break
+        if found == HORIZON and large:
+            if energy_reserve(g.x, p, f.constraints, b, g):
+                chosen = law
                 break
-            if j == 0:
-                for i in range(STATE_SIZE):
-                    xr[i] = x[i]
-            else:
-                predict(g.x, b, g, xr)
-            g.law = law
-            sun_safe_command(xr, p, f.constraints, b, g, ul)
-            if not answer(xr, ul, f, inner, inner.result):
-                found = FAILED
-                break
-            if j < n:
-                for i in range(STATE_SIZE):
-                    g.plan_x[j, i] = xr[i]
-                for a in range(3):
-                    g.plan_u[j, a] = inner.result.u[a]
-            if not hold_sample(inner.result.u, f, g, g.subs, False):
-                found = FAILED
-                break
-        if found == SETTLED or (found == HORIZON and large and energy_reserve(g.x, p, f.constraints, b, g)):
-            for a in range(3):
-                u[a] = g.plan_u[0, a]
-            g.plan_n = min(n, b.horizon_steps + 1)
-            g.plan_at = 1
-            g.plan_steps = 0
-            g.has_next = 0
-            g.plan_law = law
-            return True
-    return False
+            if weak < 0:
+                weak = law
+    if chosen < 0 and weak >= 0:
+        chosen = weak
+        _filtered_rollout(x, weak, n, f, wsa, xr, ul)  # its plan again (a later variant's overwrote it)
+    if chosen < 0:
+        return False
+    for a in range(3):
+        u[a] = g.plan_u[0, a]
+    g.plan_n = min(n, b.horizon_steps + 1)
+    g.plan_at = 1
+    g.plan_steps = 0
+    g.has_next = 0
+    g.plan_law = chosen
+    return True
 
 
 UNIT_TOLERANCE = 1e-12
