@@ -664,9 +664,11 @@ def plan_nominal(x: Array, u: Array, u_des: Array, N: int, f: np.void, wsa: NDAr
 
 
 @numba.njit(**JIT)
-def _filtered_rollout(x: Array, law: int, n: int, f: np.void, wsa: NDArray[np.void], xr: Array, ul: Array) -> int:
-    """One rollout of `plan_filtered` for the variant law from x: FAILED, HORIZON or SETTLED; its first n
-    samples' states (as received) and commands into plan_x, plan_u; g.x its last state."""
+def _filtered_rollout(x: Array, law: int, n: int, f: np.void, wsa: NDArray[np.void], xr: Array, ul: Array
+                      ) -> tuple[int, int]:
+    """One rollout of `plan_filtered` for the variant law from x: (FAILED, HORIZON or SETTLED; how many
+    samples went to plan_x, plan_u: its first n samples' states as received and commands); g.x its last
+    state."""
     b = f.backup
     p = f.plant
     g, inner = wsa[0].gate, wsa[1]
@@ -677,7 +679,7 @@ def _filtered_rollout(x: Array, law: int, n: int, f: np.void, wsa: NDArray[np.vo
         g.x[i] = x[i]
     for j in range(b.horizon_steps + 1):
         if j > 0 and settled(g.x, p, b, g):
-            return SETTLED
+            return SETTLED, min(j, n)
         if j == 0:
             for i in range(STATE_SIZE):
                 xr[i] = x[i]
@@ -686,15 +688,15 @@ def _filtered_rollout(x: Array, law: int, n: int, f: np.void, wsa: NDArray[np.vo
         g.law = law
         sun_safe_command(xr, p, f.constraints, b, g, ul)
         if not answer(xr, ul, f, inner, inner.result):
-            return FAILED
+            return FAILED, min(j, n)
         if j < n:
             for i in range(STATE_SIZE):
                 g.plan_x[j, i] = xr[i]
             for a in range(3):
                 g.plan_u[j, a] = inner.result.u[a]
         if not hold_sample(inner.result.u, f, g, g.subs, False):
-            return FAILED
-    return HORIZON
+            return FAILED, min(j + 1, n)
+    return HORIZON, min(b.horizon_steps + 1, n)
 
 
 @numba.njit(**JIT)
@@ -716,11 +718,12 @@ def plan_filtered(x: Array, f: np.void, wsa: NDArray[np.void], u: Array) -> bool
     ul = np.empty(3)
     weak = -1
     chosen = -1
+    recorded = 0
     for t in range(len(VARIANTS)):
         law = g.plan_law if t == 0 else (t - 1 if t - 1 < g.plan_law else t)
         if law != SUN_SAFE_VARIANT and not large:
             continue
-        found = _filtered_rollout(x, law, n, f, wsa, xr, ul)
+        found, recorded = _filtered_rollout(x, law, n, f, wsa, xr, ul)
         if found == SETTLED:
             chosen = law
             break
@@ -732,12 +735,12 @@ def plan_filtered(x: Array, f: np.void, wsa: NDArray[np.void], u: Array) -> bool
                 weak = law
     if chosen < 0 and weak >= 0:
         chosen = weak
-        _filtered_rollout(x, weak, n, f, wsa, xr, ul)  # its plan again (a later variant's overwrote it)
+        _, recorded = _filtered_rollout(x, weak, n, f, wsa, xr, ul)  # its plan again (a later one overwrote it)
     if chosen < 0:
         return False
     for a in range(3):
         u[a] = g.plan_u[0, a]
-    g.plan_n = min(n, b.horizon_steps + 1)
+    g.plan_n = recorded  # (a plan that settles within n samples holds fewer)
     g.plan_at = 1
     g.plan_steps = 0
     g.has_next = 0
