@@ -767,6 +767,15 @@ def commit(first_x: Array, law: int, settled_: bool, weak: bool, b: np.void, g: 
 
 
 @numba.njit(**LEAF)
+def variant_at(t: int, plan_law: int, large: bool) -> int:
+    """The t-th variant (0 <= t < len(VARIANTS)) the gate tries: the committed plan's first, then the others in
+    VARIANTS order; -1 for one it does not try (all but the sun-safe one only with a large momentum: the
+    sun-safe attitude holds a small momentum, and the panel charges there)."""
+    law = plan_law if t == 0 else (t - 1 if t - 1 < plan_law else t)
+    return law if (law == SUN_SAFE_VARIANT or large) else -1
+
+
+@numba.njit(**LEAF)
 def verify(x: Array, u: Array, candidate: bool, f: np.void, g: np.void) -> bool:
     """Roll out from x with each variant of the backup law in turn, the committed plan's first, then the
     others in VARIANTS order (all but the sun-safe one only with a momentum |H| / D above psi_max - max
@@ -784,10 +793,10 @@ def verify(x: Array, u: Array, candidate: bool, f: np.void, g: np.void) -> bool:
     g.weak_law = -1
     g.candidate = candidate
     for t in range(len(VARIANTS)):
-        # the plan's variant, then the others in VARIANTS order
-        g.law = g.plan_law if t == 0 else (t - 1 if t - 1 < g.plan_law else t)
-        if g.law != SUN_SAFE_VARIANT and not large:  # the sun-safe attitude holds a small momentum: charge there
+        law = variant_at(t, g.plan_law, large)
+        if law < 0:
             continue
+        g.law = law
         if not candidate:
             sun_safe_command(x, f.plant, f.constraints, b, g, u)
         found = rollout(x, u, f, g, g.subs, False)
@@ -1068,5 +1077,5 @@ __all__ = [
     "SETTLED_RATE_FRACTION", "SUN_SAFE", "SUN_SAFE_VARIANT", "TIGHT", "VARIANTS", "apply_measurement_margins",
     "backup_command", "backup_record", "backup_rollout", "backup_tail", "check_margins", "commit", "commit_weak",
     "energy_reserve", "gate", "hold_sample", "is_settled", "large_momentum", "predict", "predicted", "reset",
-    "rollout", "same_answer", "settled", "sun_safe_command", "sun_safe_error", "verify",
+    "rollout", "same_answer", "settled", "sun_safe_command", "sun_safe_error", "variant_at", "verify",
 ]  # fmt: skip

@@ -68,6 +68,7 @@ from rta_attitude.filter.backup import (
     same_answer,
     settled,
     sun_safe_command,
+    variant_at,
     verify,
 )
 from rta_attitude.filter.outcome import (
@@ -720,8 +721,8 @@ def plan_filtered(x: Array, f: np.void, wsa: NDArray[np.void], u: Array) -> bool
     chosen = -1
     recorded = 0
     for t in range(len(VARIANTS)):
-        law = g.plan_law if t == 0 else (t - 1 if t - 1 < g.plan_law else t)
-        if law != SUN_SAFE_VARIANT and not large:
+        law = variant_at(t, g.plan_law, large)
+        if law < 0:
             continue
         found, recorded = _filtered_rollout(x, law, n, f, wsa, xr, ul)
         if found == SETTLED:
