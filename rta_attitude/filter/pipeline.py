@@ -686,7 +686,6 @@ def _filtered_rollout(x: Array, law: int, n: int, f: np.void, wsa: NDArray[np.vo
                 xr[i] = x[i]
         else:
             predict(g.x, b, g, xr)
-        g.law = law
         sun_safe_command(xr, p, f.constraints, b, g, ul)
         if not answer(xr, ul, f, inner, inner.result):
             return FAILED, min(j, n)
