@@ -712,12 +712,15 @@ def test_rollout_margins_cover_the_measurement_errors(cfg: Config) -> None:
             assert kept.any() and np.all(limit**2 - true[kept] ** 2 >= 0.0), name
 
 
-def test_a_candidate_keeps_the_reading_errors_twice_and_the_backup_law_once(cfg: Config, states: Array) -> None:
+def test_a_candidate_keeps_the_reading_errors_three_times_and_the_backup_law_once(cfg: Config, states: Array) -> None:
     """Hysteresis (sensor errors on): a candidate's rollout keeps the keep-out cone's, the temperature's and the
-    charge's reading errors twice, the backup law's once; without sensor errors both margins are equal. A
+    charge's reading errors three times, the backup law's once; without sensor errors both margins are equal. A
     backup path whose lowest charge lies between the two floors (E's dynamics do not depend on E: the
     path is shifted, checked here) is accepted as the backup law's and refused as a candidate's, at the
-    battery."""
+    battery. And the extra is what the hand-over needs, no less: a candidate accepted at its floor from a
+    reading e above the truth, then a next reading e below it (the worst two readings), leaves the backup
+    law's path from that reading exactly at the backup law's floor; with one reading's extra (the rule
+    before 2026-11-27) it would fall e below it and be refused."""
     from rta_attitude.constraints.base import measurement_errors
 
     col = {n: i for i, n in enumerate(CONSTRAINT_NAMES)}
@@ -728,18 +731,20 @@ def test_a_candidate_keeps_the_reading_errors_twice_and_the_backup_law_once(cfg:
     b = f[0]["backup"]
     err = measurement_errors(noisy)
     extra = b["candidate_margin"] - b["margin"]
-    assert extra[col["exclusion_zone"]] == err["err_att_rad"] > 0
-    assert extra[col["temperature"]] == err["err_T_K"] > 0
-    assert extra[col["battery"]] == pytest.approx(err["err_E_J"], rel=1e-12) and err["err_E_J"] > 0
+    assert extra[col["exclusion_zone"]] == pytest.approx(2.0 * err["err_att_rad"], rel=1e-12) and err["err_att_rad"] > 0
+    assert extra[col["temperature"]] == pytest.approx(2.0 * err["err_T_K"], rel=1e-12) and err["err_T_K"] > 0
+    assert extra[col["battery"]] == pytest.approx(2.0 * err["err_E_J"], rel=1e-12) and err["err_E_J"] > 0
     np.testing.assert_array_equal(np.delete(extra, [col["exclusion_zone"], col["temperature"], col["battery"]]), 0.0)
     E = 11
+    S = noisy.substeps
+    e = err["err_E_J"]  # one reading's error bound of the charge
     floor = noisy.limits.energy_min_J + b["margin"][col["battery"]]
     tried = 0
     for x in states:
         u = backup_command(x, f)
         found, path = backup_rollout(x, u, f)
-        if found == "failed" or path[:, E].argmin() == 0:
-            continue  # a path whose charge falls, then rises
+        if found == "failed" or path[:, E].argmin() < S:
+            continue  # a path whose charge falls after its first sample, then rises
         tried += 1
         y = x.copy()
         y[E] += floor + 0.5 * extra[col["battery"]] - path[:, E].min()
@@ -752,6 +757,19 @@ def test_a_candidate_keeps_the_reading_errors_twice_and_the_backup_law_once(cfg:
         c_rows = ConstraintSet(noisy).safety_values(path_c[-1])
         assert c_rows[col["battery"]] < b["candidate_margin"][col["battery"]]
         assert np.all(np.delete(c_rows >= b["candidate_margin"], [col["battery"], col["communication"]]))
+        # the hand-over: the candidate (the law's own command here) accepted with its lowest charge at its floor
+        y = x.copy()
+        y[E] += floor + extra[col["battery"]] + 1e-6 - path[:, E].min()
+        found_c, path_c = backup_rollout(y, u, f, candidate=True)
+        assert found_c == found
+        nxt = path_c[S - 1].copy()  # one sample on, as the reading predicted it
+        nxt[E] -= 2.0 * e  # the truth e below that reading, the next reading e below the truth
+        u1 = backup_command(nxt, f)
+        found_1, path_1 = backup_rollout(nxt, u1, f)
+        assert found_1 == found, "the backup law from the worst next reading must still pass"
+        assert path_1[:, E].min() == pytest.approx(floor + 1e-6, abs=1e-6)
+        n = min(len(path_1), len(path_c) - S)  # the law's path from there: the candidate's, shifted
+        np.testing.assert_allclose(path_1[:n, E], path_c[S:S + n, E] - 2.0 * e, atol=1e-6)
         if tried == 3:
             break
     assert tried == 3

@@ -985,10 +985,11 @@ def apply_measurement_margins(rec: NDArray[np.void], cfg: Config) -> None:
     place; without rate and wheel-speed errors (their margins 0: no sensor errors) the law is unchanged.
 
     A candidate's rollout keeps the errors of the keep-out cone's angle, the temperature and the charge
-    twice (candidate_margin; docs/backup.md, "Hysteresis and the law's hold"): the gate falls back to the
-    backup law at the next sample, from the next reading, whose own errors shift that path's angles, T and E
-    by up to as much again (E's and nearly T's dynamics do not depend on them: the path moves by the
-    offset). Without sensor errors the two margins are equal.
+    three times (candidate_margin; docs/backup.md, "Hysteresis and the law's hold"): the gate falls back to
+    the backup law at the next sample, from the next reading, and that path sits below the candidate's by the
+    two readings' errors, up to twice one (E's and nearly T's dynamics do not depend on them: the path moves by
+    the offset); the backup law's own check then needs its one error on top. Without sensor errors the two
+    margins are equal.
 
     Likewise the law's command holds each wheel within psi_hold = psi_limit less one reading's error (the
     tachometer's and the actuator's over a hold, as in `check_margins`): a plan that parks a wheel at
@@ -999,10 +1000,10 @@ def apply_measurement_margins(rec: NDArray[np.void], cfg: Config) -> None:
     b = rec["backup"]
     b["margin"][0] = m
     c = rec["constraints"][0]
-    extra = np.zeros(M)
-    extra[EXCLUSION_ZONE] = float(c["err_att_rad"])
-    extra[TEMPERATURE] = float(c["err_T_K"])
-    extra[BATTERY] = max(0.0, float(c["err_E_J"]) - (interface_energy_error(cfg) if c["robust"] else 0.0))
+    extra = np.zeros(M)  # two readings' errors: the candidate's (above the truth) and the next (below it)
+    extra[EXCLUSION_ZONE] = 2.0 * float(c["err_att_rad"])
+    extra[TEMPERATURE] = 2.0 * float(c["err_T_K"])
+    extra[BATTERY] = 2.0 * max(0.0, float(c["err_E_J"]) - (interface_energy_error(cfg) if c["robust"] else 0.0))
     b["candidate_margin"][0] = m + extra
     w_max, psi_max = float(b["omega_max_rad_s"][0]), float(b["psi_max_rad_s"][0])
     rate_margin, speed_margin = float(np.max(m[OMEGA_X:OMEGA_X + 3])), float(np.max(m[PSI_X:PSI_X + 3]))
