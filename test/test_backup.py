@@ -920,8 +920,9 @@ def _projected_threshold(x: Array, cfg: Config, floor_J: float) -> float:
     return floor_J - float(gain.min())
 
 
-def _kernel_threshold(x: Array, f: np.ndarray) -> float:
+def _kernel_threshold(x: Array, f: np.ndarray, candidate: bool = False) -> float:
     g = np.zeros(1, GATE_DTYPE)
+    g[0]["candidate"] = candidate
     y = x.copy()
     lo, hi = -1e5, 1e5
     for _ in range(80):
@@ -971,6 +972,26 @@ def test_the_energy_reserve_is_the_projection_of_the_tilted_panel(cfg: Config, r
     assert seen[0][1] == pytest.approx(floor - 10.0 * (f[0]["plant"]["panel_peak_W"] - c.power.load_W))
     if not rotating:  # the sun turning past a fixed H: some momenta need a real reserve
         assert max(w for _, w in seen) > floor + 1000.0
+
+
+def test_a_candidates_energy_reserve_keeps_the_candidates_floor(cfg: Config) -> None:
+    """The reserve's projection keeps the floor of the rollout it ends: a candidate's (candidate_margin, the
+    hand-over's three reading errors) or the backup law's (one): with sensor errors the least accepted charge
+    at the same state is higher for a candidate by exactly the difference of the two battery margins; without
+    them the two are the same. Large momenta (the reserve applies only there) from seed 1's states."""
+    k = CONSTRAINT_NAMES.index("battery")
+    x0, _ = sample_initial_states(400, 1, cfg)
+    large = [x for x in x0 if 600.0 < momentum_rad_s(x, cfg) < 830.0][:4]
+    assert len(large) == 4
+    for noisy in (False, True):
+        c = with_lookahead(cfg.with_noise(noisy), 3000.0)
+        f = filter_record(c)
+        b = f[0]["backup"]
+        extra = float(b["candidate_margin"][k] - b["margin"][k])
+        assert (extra > 39.0) if noisy else (extra == 0.0)
+        for x in large:
+            law, cand = _kernel_threshold(x, f), _kernel_threshold(x, f, candidate=True)
+            assert cand - law == pytest.approx(extra, abs=1e-6)
 
 
 def test_short_of_the_energy_reserve_the_gate_applies_the_backup_law_and_follows_it(cfg: Config) -> None:

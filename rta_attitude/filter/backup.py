@@ -371,8 +371,9 @@ def _momentum(x: Array, p: np.void, g: np.void) -> tuple[float, float, float]:
 @numba.njit(**LEAF)
 def energy_reserve(x: Array, p: np.void, c: np.void, b: np.void, g: np.void) -> bool:
     """From the state x (19,) (a rollout's end, a large momentum), the battery stays at or above E_min (plus
-    the rollouts' battery margin) for b.reserve_steps steps of b.reserve_step_s with the panel held at the
-    tilted target's angle to the sun (`_tilt`: as near the sun as the wheels can hold the momentum at rest)
+    the battery margin of the rollout it ends: a candidate's if g.candidate, else the backup law's) for
+    b.reserve_steps steps of b.reserve_step_s with the panel held at the tilted target's angle to the sun
+    (`_tilt`: as near the sun as the wheels can hold the momentum at rest)
     while the sun moves on: E_dot = `net_power` at that angle (midpoint rule). H is conserved in an inertial
     frame (no gravity gradient: its torque changes H by ~2 % an orbit), so in Hill it turns at -frame_rate
     about z_Hill as the sun turns at -n. A projection of what the backup law could keep, not a check of it:
@@ -386,7 +387,8 @@ def energy_reserve(x: Array, p: np.void, c: np.void, b: np.void, g: np.void) -> 
     if not hn > 0.0:
         return True
     E = x[ENERGY]
-    floor = c.energy_min_J + b.margin[BATTERY]
+    # the floor of the rollout it ends: a candidate's (the hand-over's margin) or the backup law's
+    floor = c.energy_min_J + (b.candidate_margin[BATTERY] if g.candidate else b.margin[BATTERY])
     dt = b.reserve_step_s
     for k in range(b.reserve_steps):
         t = (k + 0.5) * dt
