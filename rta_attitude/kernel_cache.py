@@ -9,9 +9,10 @@ the one recorded next to the caches, deletes those modules' cache files so every
 together.
 
 Nothing runs at import: the entry points that compile or load kernels call it first (`AsifFilter`,
-the plant node, every `rta-attitude` command (cli.main), the test session). A fresh installation has
-no cache, so only a developer who edits kernel sources and then calls a kernel without one of those
-entry points can meet a stale cache.
+the plant node, every `rta-attitude` command (cli.main), the Monte Carlo's `run_runs` and
+`sample_initial_states`, the test session). A fresh installation has no cache, so only a developer who
+edits kernel sources and then calls a kernel without one of those entry points can meet a stale cache
+(a script calling `run_runs` after an edit of `filter/backup.py` did, before it was an entry point).
 """
 
 from __future__ import annotations

@@ -44,6 +44,7 @@ from rta_attitude.filter.backup import reset
 from rta_attitude.filter.outcome import FALLBACK, GATE_NAMES, PASS
 from rta_attitude.filter.pipeline import RESULT_DTYPE, WORKSPACE_DTYPE, WORKSPACES
 from rta_attitude.jit import JIT, LEAF
+from rta_attitude.kernel_cache import drop_stale_caches
 from rta_attitude.montecarlo import DEFAULT_CHUNK_RUNS
 from rta_attitude.simulation.closed_loop import advance, loop_record
 
@@ -189,6 +190,7 @@ def run_runs(cfg: Config, x0: Array, duration_s: float, record: bool = False,
     """Run initial states x0 (N, 19) for duration_s in this process; progress(runs done) after each
     group of PROGRESS_RUNS runs (each run with another simulator than the compiled one). x0[k] is run
     first_run + k of its campaign (its sensor noise sequence)."""
+    drop_stale_caches()  # a library entry point: its kernels inline other modules' (kernel_cache)
     if cfg.plant.simulator != "compiled":
         return run_runs_stepped(cfg, x0, duration_s, record=record, progress=progress, first_run=first_run)
     x0 = _check_states(x0)

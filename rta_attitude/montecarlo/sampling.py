@@ -19,6 +19,7 @@ from rta_attitude.config.schema import PRESETS, Config
 from rta_attitude.constraints import ConstraintSet
 from rta_attitude.dynamics.state import ENERGY, OMEGA, PSI, STATE_SIZE, TEMP, THETA_S, Q
 from rta_attitude.errors import ConfigError, RtaError
+from rta_attitude.kernel_cache import drop_stale_caches
 
 Array = NDArray[np.float64]
 
@@ -94,6 +95,7 @@ def sample_initial_states(runs: int, seed: int, cfg: Config) -> tuple[Array, NDA
     Raises:
         RtaError: states still rejected after MAX_REDRAW_ROUNDS rounds.
     """
+    drop_stale_caches()  # a library entry point (kernel_cache)
     from scipy.stats import qmc
 
     if runs < 1:
