@@ -387,8 +387,7 @@ def energy_reserve(x: Array, p: np.void, c: np.void, b: np.void, g: np.void) -> 
     if not hn > 0.0:
         return True
     E = x[ENERGY]
-    # the floor of the rollout it ends: a candidate's (the hand-over's margin) or the backup law's
-    floor = c.energy_min_J + (b.candidate_margin[BATTERY] if g.candidate else b.margin[BATTERY])
+    floor = c.energy_min_J + rollout_margin(b, g, BATTERY)  # the floor of the rollout it ends
     dt = b.reserve_step_s
     for k in range(b.reserve_steps):
         t = (k + 0.5) * dt
@@ -679,6 +678,14 @@ def check_margins(p: np.void, c: np.void, out: Array) -> None:
 
 
 @numba.njit(**LEAF)
+def rollout_margin(b: np.void, g: np.void, i: int) -> float:
+    """What constraint i's h must keep in the rollout g runs (and the energy reserve that ends it): a
+    candidate's margin where g.candidate (the hand-over's, `apply_measurement_margins`), else the backup
+    law's (`check_margins`); the two are equal without sensor errors."""
+    return b.candidate_margin[i] if g.candidate else b.margin[i]
+
+
+@numba.njit(**LEAF)
 def hold_sample(u: Array, f: np.void, g: np.void, traj: Array, record: bool) -> bool:
     """One sample of a rollout from g.x (19,): u (3,) held (across the torque interface, saturated, as the
     loop applies it), `substeps` RK4 steps of the filter's model, every enabled, non-slacked constraint
@@ -693,7 +700,6 @@ def hold_sample(u: Array, f: np.void, g: np.void, traj: Array, record: bool) -> 
     torque_round_trip(u, p, g.us)
     saturate(g.us, p, g.us)
     rk4_hold(x, g.us, c.dt_s, S, p, subs, g.work)
-    margin = b.candidate_margin if g.candidate else b.margin
     for j in range(S):
         if record:
             for i in range(STATE_SIZE):
@@ -702,7 +708,7 @@ def hold_sample(u: Array, f: np.void, g: np.void, traj: Array, record: bool) -> 
         safety_values(subs[j], p, c, g.ctx, g.h)
         for i in range(M):
             gi = c.gains[i]
-            if gi.enabled != 0 and gi.slack_weight == 0.0 and not g.h[i] >= margin[i]:
+            if gi.enabled != 0 and gi.slack_weight == 0.0 and not g.h[i] >= rollout_margin(b, g, i):
                 return False
     for i in range(STATE_SIZE):
         x[i] = subs[S - 1, i]
@@ -1080,5 +1086,5 @@ __all__ = [
     "SETTLED_RATE_FRACTION", "SUN_SAFE", "SUN_SAFE_VARIANT", "TIGHT", "VARIANTS", "apply_measurement_margins",
     "backup_command", "backup_record", "backup_rollout", "backup_tail", "check_margins", "commit", "commit_weak",
     "energy_reserve", "gate", "hold_sample", "is_settled", "large_momentum", "predict", "predicted", "reset",
-    "rollout", "same_answer", "settled", "sun_safe_command", "sun_safe_error", "variant_at", "verify",
+    "rollout", "rollout_margin", "same_answer", "settled", "sun_safe_command", "sun_safe_error", "variant_at", "verify",
 ]  # fmt: skip
