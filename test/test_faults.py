@@ -57,15 +57,18 @@ REC = sensors_record(CFG)
 
 
 class Collector:
-    """Stands in for a PublishGate: keeps what the node publishes, serialised at publish as rclpy does
-    (a node may reuse its message object once published)."""
+    """Stands in for a PublishGate: keeps what the node publishes as rclpy messages of the topic's type,
+    deserialised by rclpy from the bytes the node sends (a message object is serialised at publish, as rclpy
+    does: a node may reuse it once published)."""
 
-    def __init__(self) -> None:
+    def __init__(self, topic: str) -> None:
         self.msgs: list[Any] = []
         self.sent = 0
+        self.msg_type = interface.msg_class(topics.TOPICS[topic].type_name)
 
     def publish(self, msg: Any) -> None:
-        self.msgs.append(deserialize_message(serialize_message(msg), type(msg)))
+        data = msg if isinstance(msg, bytes) else serialize_message(msg)
+        self.msgs.append(deserialize_message(data, self.msg_type))
         self.sent += 1
 
 
@@ -114,7 +117,7 @@ def _reset(node: FilterNode, gone: bool = False, **knobs: Any) -> dict[str, Coll
     node.faults.episodes.clear()
     node.knobs.update(knobs)
     node._controller_gone = lambda: gone and node.heard_controller  # type: ignore[method-assign]
-    node.out = {topics.TORQUE_CMD: Collector(), topics.FILTER_STATUS: Collector()}
+    node.out = {topics.TORQUE_CMD: Collector(topics.TORQUE_CMD), topics.FILTER_STATUS: Collector(topics.FILTER_STATUS)}
     return node.out
 
 
@@ -138,8 +141,13 @@ def _state(t_ns: int, x: np.ndarray | list[float] = X0, kind: str = "good") -> l
 
 
 def _feed(node: FilterNode, msgs: list[tuple[str, Any]]) -> None:
+    """Hand the messages to the node as its raw subscriptions do: serialised by rclpy (spoiled ones too)."""
     for topic, msg in msgs:
-        node._on_input(topic, msg)
+        node._on_input(topic, serialize_message(msg))
+
+
+def _desired(node: FilterNode, msg: Any) -> None:
+    node._on_desired(serialize_message(msg))
 
 
 def _torque(t_ns: int, tau: np.ndarray | list[float], frame: str = topics.BODY_FRAME) -> Any:
@@ -209,7 +217,7 @@ def test_filter_node_answers_any_input_with_a_finite_command_inside_U(filter_nod
             msg = item[0][1]
             whole = len(item) == len(topics.STATE_INPUTS)
         else:
-            node._on_desired(item)
+            _desired(node, item)
             msg, whole = item, True
         if msg.header.stamp.sec >= 0 and whole:
             fed[topic].add(msg.header.stamp.sec * S + msg.header.stamp.nanosec)
@@ -230,12 +238,12 @@ def test_filter_node_counts_and_logs_each_fault_once_per_episode(filter_node: An
     nan[5] = math.nan
     for k in range(50):  # 50 NaN states, each answered with the invalid-state fallback
         _feed(node, _state(k * S, nan))
-        node._on_desired(_torque(k * S, [1e-4, 0.0, 0.0]))
+        _desired(node, _torque(k * S, [1e-4, 0.0, 0.0]))
     _feed(node, _state(50 * S))  # a good one ends the episode
-    node._on_desired(_torque(50 * S, [1e-4, 0.0, 0.0]))
+    _desired(node, _torque(50 * S, [1e-4, 0.0, 0.0]))
     for k in range(51, 61):  # a second episode
         _feed(node, _state(k * S, nan))
-        node._on_desired(_torque(k * S, [0.0, 0.0, 0.0]))
+        _desired(node, _torque(k * S, [0.0, 0.0, 0.0]))
     stamps = _check_outputs(out)
     assert stamps == [k * S for k in range(61)]
     assert node.counts["state_rejected"] == 60 and node.faults.episodes["state_rejected"] == 2
@@ -248,25 +256,25 @@ def test_filter_node_counts_and_logs_each_fault_once_per_episode(filter_node: An
     # duplicates, out-of-order and late messages are dropped, counted, logged once
     _feed(node, _state(60 * S))
     _feed(node, _state(59 * S))
-    node._on_desired(_torque(60 * S, [0.0, 0.0, 0.0]))
-    node._on_desired(_torque(60 * S, [0.0, 0.0, 0.0]))
-    node._on_desired(_torque(58 * S, [0.0, 0.0, 0.0]))
+    _desired(node, _torque(60 * S, [0.0, 0.0, 0.0]))
+    _desired(node, _torque(60 * S, [0.0, 0.0, 0.0]))
+    _desired(node, _torque(58 * S, [0.0, 0.0, 0.0]))
     assert (node.counts["state_duplicate"], node.counts["state_out_of_order"]) == (1, 1)
     assert (node.counts["torque_des_duplicate"], node.counts["torque_des_out_of_order"]) == (2, 1)
     assert node.faults.episodes["torque_des_duplicate"] == 1  # two in a row: one line
     # a NaN torque_des with a valid stamp: the core's non-finite-u_des fallback answers it
     _feed(node, _state(61 * S))
-    node._on_desired(_torque(61 * S, [math.nan, 0.0, 0.0]))
+    _desired(node, _torque(61 * S, [math.nan, 0.0, 0.0]))
     rec = convert.filter_record(out[topics.FILTER_STATUS].msgs[-1], node.filter.names)
     assert rec["fallback"] == "non_finite_u_des" and node.counts["torque_des_rejected"] == 1
     # a quaternion slightly off unit is renormalised (counted), far off rejected (invalid state, u = 0)
     x = X0.copy()
     x[0:4] *= 1.005
     _feed(node, _state(62 * S, x))
-    node._on_desired(_torque(62 * S, [0.0, 0.0, 0.0]))
+    _desired(node, _torque(62 * S, [0.0, 0.0, 0.0]))
     x[0:4] *= 1.1
     _feed(node, _state(63 * S, x))
-    node._on_desired(_torque(63 * S, [0.0, 0.0, 0.0]))
+    _desired(node, _torque(63 * S, [0.0, 0.0, 0.0]))
     assert node.counts["state_renormalised"] == 1 and node.counts["state_rejected"] == 61
     recs = [convert.filter_record(m, node.filter.names) for m in out[topics.FILTER_STATUS].msgs[-2:]]
     assert recs[0]["fallback"] == "" and recs[1]["fallback"] == "invalid_state"
@@ -282,7 +290,7 @@ def test_filter_node_answers_a_state_without_torque_des_with_u_des_zero(filter_n
     time.sleep(0.08)
     node._expire()
     assert out[topics.TORQUE_CMD].msgs == []  # not armed yet: the controller may still be starting
-    node._on_desired(_torque(0, [1e-4, 0.0, 0.0]))
+    _desired(node, _torque(0, [1e-4, 0.0, 0.0]))
     _feed(node, _state(1 * S))
     node._expire()
     assert len(out[topics.TORQUE_CMD].msgs) == 1  # within the timeout: still waiting
@@ -292,7 +300,7 @@ def test_filter_node_answers_a_state_without_torque_des_with_u_des_zero(filter_n
     values = convert.diagnostic_values(out[topics.FILTER_STATUS].msgs[-1])[topics.QP_STATUS_NAME]
     assert values[topics.INPUT_SOURCE_KEY] == "missing" and values["torque_des_missing"] == 1
     assert values["u_des_x"] == values["u_des_y"] == values["u_des_z"] == 0.0
-    node._on_desired(_torque(1 * S, [1e-4, 0.0, 0.0]))
+    _desired(node, _torque(1 * S, [1e-4, 0.0, 0.0]))
     assert node.counts["torque_des_late"] == 1 and len(out[topics.TORQUE_CMD].msgs) == 2
     _check_outputs(out)
 
@@ -312,7 +320,7 @@ def test_output_guard_replaces_an_invalid_filter_output_with_zero(filter_node: A
         monkeypatch.setattr(node.filter, "filter", lambda x, u, bad=bad: corrupted(x, u, bad))
         t_ns = (node.answered_ns // S + 1) * S
         _feed(node, _state(t_ns))
-        node._on_desired(_torque(t_ns, [0.0, 0.0, 0.0]))
+        _desired(node, _torque(t_ns, [0.0, 0.0, 0.0]))
     _check_outputs(out)
     recs = [convert.filter_record(m, node.filter.names) for m in out[topics.FILTER_STATUS].msgs]
     assert [r["fallback"] for r in recs] == ["output_guard"] * 2 and node.counts["output_guard"] == 2
@@ -340,7 +348,7 @@ def test_stale_states_are_dropped_against_the_sim_clock(filter_node: Any) -> Non
             executor.spin_once(timeout_sec=0.05)
         _feed(node, _state(97 * S))  # 3 s old: stale
         _feed(node, _state(99 * S))  # 1 s old: taken
-        node._on_desired(_torque(99 * S, [0.0, 0.0, 0.0]))
+        _desired(node, _torque(99 * S, [0.0, 0.0, 0.0]))
     finally:
         executor.remove_node(node)
         executor.shutdown()

@@ -329,6 +329,98 @@ def test_filter_status_round_trips_every_field_exactly() -> None:
     assert set(values["battery"]) - {"_message"} == set(topics.CONSTRAINT_KEYS)
 
 
+def _rosbags_store() -> Any:
+    from rosbags.typesys import Stores, get_typestore
+
+    return get_typestore(Stores.ROS2_JAZZY)
+
+
+def test_fixed_layouts_write_what_rclpy_writes_and_read_what_rclpy_reads() -> None:
+    """The loop's per-step messages go out as bytes written into templates (`convert.CdrLayout`) and come in
+    through raw subscriptions: rclpy and rosbags (an independent CDR decoder, which also checks the length)
+    read our bytes as the messages the object builders make; our readers read rclpy's bytes (whose padding is
+    whatever its buffer held) as the object parsers read the messages; other layouts fall back to rclpy."""
+    from rclpy.serialization import deserialize_message, serialize_message
+
+    store = _rosbags_store()
+    rng = np.random.default_rng(7)
+    x0 = CFG.scenario("paper_example").x0
+    for _trial in range(40):
+        x = x0 + rng.normal(size=x0.size) * 10.0 ** rng.uniform(-4, 2)
+        f = message_fields(x, sensors_record(CFG))
+        t = int(rng.integers(0, 2**41))
+        current, effort = float(rng.normal()), rng.normal(size=3) * 1e-4
+        objs = convert.state_messages(f, t, 8.0, current, effort)
+        ours = convert.state_messages_cdr(f, t, 8.0, current, effort)
+        pairs = [*((objs[k], ours[k]) for k in objs), (convert.state_msg(x, t), convert.state_cdr(x, t)),
+                 (convert.torque_msg(effort, t), convert.torque_cdr(effort, t)),
+                 (convert.clock_msg(t), convert.clock_cdr(t))]
+        for obj, data in pairs:
+            theirs = bytes(serialize_message(obj))
+            kind = type(obj)
+            assert repr(deserialize_message(data, kind)) == repr(deserialize_message(theirs, kind))
+            name = f"{kind.__module__.split('.')[0]}/msg/{kind.__name__}"
+            assert repr(store.deserialize_cdr(data, name)) == repr(store.deserialize_cdr(theirs[:len(data)], name))
+        for views in (ours, {k: bytes(serialize_message(m)) for k, m in objs.items()}):
+            assert np.array_equal(convert.state_fields(views), convert.state_fields(objs))
+            out, ref = np.zeros(len(f)), np.zeros(len(f))
+            convert.odometry_fields(views[topics.ODOMETRY], out)
+            convert.odometry_fields(objs[topics.ODOMETRY], ref)
+            assert np.array_equal(out, ref)
+        for data in (convert.torque_cdr(effort, t), bytes(serialize_message(convert.torque_msg(effort, t)))):
+            t_read, tau = convert.torque_from_msg(data)
+            assert t_read == t and np.array_equal(tau, effort)
+    # other layouts (a frame id, reversed or fewer joints, a frame of the same length): rclpy's path, same errors
+    objs = convert.state_messages(message_fields(x0, sensors_record(CFG)), 5, 8.0, -1.0, np.zeros(3))
+    odometry = convert.layouts().odometry.message(convert.state_messages_cdr(
+        message_fields(x0, sensors_record(CFG)), 5, 8.0, -1.0, np.zeros(3))[topics.ODOMETRY])
+    odometry.header.frame_id = "body"
+    wheels_reversed = convert.layouts().wheels.message(serialize_message(objs[topics.WHEELS]))
+    wheels_reversed.name = list(reversed(topics.WHEEL_JOINTS))
+    wheels_short = convert.layouts().wheels.message(serialize_message(objs[topics.WHEELS]))
+    wheels_short.velocity = [0.0, 0.0]
+    for topic, spoiled, match in ((topics.ODOMETRY, odometry, "frame_id"), (topics.WHEELS, wheels_reversed, "joints"),
+                                  (topics.WHEELS, wheels_short, "joints")):
+        data = bytes(serialize_message(spoiled))
+        assert convert.layouts().by_topic[topic].unpack(data) is None
+        for views in ({**objs, topic: spoiled}, {**objs, topic: data}):
+            with pytest.raises(MessageError, match=match):
+                convert.state_fields(views)
+    torque = convert.torque_msg(np.ones(3), 5)
+    torque.header.frame_id = "hill"
+    with pytest.raises(MessageError, match="frame_id"):
+        convert.torque_from_msg(bytes(serialize_message(torque)))
+    with pytest.raises(MessageError, match="not a Vector3Stamped"):
+        convert.torque_from_msg(convert.torque_cdr(np.ones(3), 5)[:30])
+    with pytest.raises(MessageError, match="not finite"):
+        convert.torque_from_msg(convert.torque_cdr(np.array([math.nan, 0.0, 0.0]), 5))
+
+
+def test_filter_status_bytes_are_the_message() -> None:
+    """`build_cdr` (what the filter node publishes) is `build`'s message: rclpy and rosbags decode its bytes
+    into the same fields, for a passing, an intervening and a fallback result."""
+    from diagnostic_msgs.msg import DiagnosticArray
+    from rclpy.serialization import deserialize_message
+
+    store = _rosbags_store()
+    traj = ClosedLoop(CFG, replace(CFG.scenario("paper_example"), duration_s=5.0)).run()
+    filt = AsifFilter(CFG)
+    results = [filt.filter(traj.x[k], traj.u_des[k]) for k in range(3)]
+    results.append(filt.filter(np.full(traj.x.shape[1], math.nan), traj.u_des[0]))  # the invalid-state fallback
+    assert {str(r.status) for r in results} >= {"solved", "fallback"}
+    builder = convert.FilterStatusBuilder(results[0].names)
+    for i, res in enumerate(results):
+        t = 10**9 * i + 7
+        data = builder.build_cdr(res, t, filt.counters, "robust", ("communication",), {"state_rejected": i}, "missing")
+        msg = builder.build(res, t, filt.counters, "robust", ("communication",), {"state_rejected": i}, "missing")
+        assert deserialize_message(data, DiagnosticArray) == msg
+        decoded = store.deserialize_cdr(data, "diagnostic_msgs/msg/DiagnosticArray")
+        assert [(st.level, st.name, st.message, [(kv.key, kv.value) for kv in st.values]) for st in decoded.status] == [
+            (int.from_bytes(st.level, "little"), st.name, st.message, [(kv.key, kv.value) for kv in st.values])
+            for st in msg.status]
+        assert convert.cdr_stamp_ns(data) == t
+
+
 def test_wiring_counts_every_reader_of_the_run() -> None:
     # the loop reads the state on its STATE_INPUTS (controller: odometry; filter: all five); `state` is the record's
     assert topics.expected_readers(topics.ODOMETRY, rta=True, record=True) == 3

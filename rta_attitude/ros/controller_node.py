@@ -57,7 +57,7 @@ class ControllerNode(RtaNode):
         spec = topics.TOPICS[topics.TORQUE_DES]
         pub = self.create_publisher(interface.msg_class(spec.type_name), spec.name, self.qos(topics.TORQUE_DES))
         self.out = self.gate(topics.TORQUE_DES, pub)
-        self.subscribe(topics.ODOMETRY, self._on_state, peer=topics.PLANT)
+        self.subscribe(topics.ODOMETRY, self._on_state, peer=topics.PLANT, raw=True)
         self.subscribe(topics.ATTITUDE_COMMAND, self._on_command)
         self.get_logger().info(f"scenario {self.scenario.name}: controller {self.scenario.controller}")
 
@@ -100,11 +100,11 @@ class ControllerNode(RtaNode):
             x = self.unit_state(x, t_ns)
         except MessageError as exc:
             self.faults.fault("state_rejected", f"{exc}; answered with zero torque")
-            self.out.publish(convert.torque_msg(np.zeros(3), t_ns))
+            self.out.publish(convert.torque_cdr(np.zeros(3), t_ns))
             return
         self.faults.clear("state_rejected")
         u_des = desired_command(x, self.reference(t_ns), self.law)
-        self.out.publish(convert.torque_msg(wheel_accel_to_torque(u_des, self.cfg.spacecraft.wheel_inertia_kgm2), t_ns))
+        self.out.publish(convert.torque_cdr(wheel_accel_to_torque(u_des, self.cfg.spacecraft.wheel_inertia_kgm2), t_ns))
 
 
 def main(args: Sequence[str] | None = None) -> None:

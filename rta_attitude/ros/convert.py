@@ -1,9 +1,11 @@
 """Messages <-> numpy at the node boundary, with validation. No physics here: where a view needs a
 rotation or the sun direction, it calls the core.
 
-Builders return rclpy message objects. Parsers take any object with the message's attributes, so
-they read rclpy messages and the objects that mcap_ros2 decodes from a bag alike, and raise
-`MessageError` (one line naming what is wrong) on malformed input.
+Builders return rclpy message objects; the loop's per-step messages are also written straight into CDR
+bytes (`CdrLayout`, `FilterStatusBuilder.build_cdr`), which is what the nodes publish. Parsers take any
+object with the message's attributes, so they read rclpy messages and the objects that mcap_ros2 decodes
+from a bag alike (the loop's parsers also the CDR bytes of a raw subscription), and raise `MessageError`
+(one line naming what is wrong) on malformed input.
 
 Floats in DiagnosticStatus values are written with `repr`, which round-trips float64 exactly.
 
@@ -17,7 +19,7 @@ from __future__ import annotations
 
 import math
 import struct
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -147,10 +149,18 @@ def _frame(msg: Any, what: str, frame_id: str) -> None:
 
 
 def torque_from_msg(msg: Any) -> tuple[int, Array]:
-    """(stamp [ns], torque (3,) [N m]) of a Vector3Stamped; frame must be `body`, values finite."""
-    t_ns = stamp_ns(msg.header.stamp)
-    _frame(msg, "torque", topics.BODY_FRAME)
-    tau = np.array([msg.vector.x, msg.vector.y, msg.vector.z], dtype=float)
+    """(stamp [ns], torque (3,) [N m]) of a Vector3Stamped (a message, or its CDR bytes as a raw subscription
+    takes them); frame must be `body`, values finite."""
+    if isinstance(msg, bytes):
+        got = layouts().torque.unpack(msg)
+        if got is None:
+            return torque_from_msg(layouts().torque.message(msg))
+        t_ns, (v,) = got
+        tau = np.array(v)
+    else:
+        t_ns = stamp_ns(msg.header.stamp)
+        _frame(msg, "torque", topics.BODY_FRAME)
+        tau = np.array([msg.vector.x, msg.vector.y, msg.vector.z], dtype=float)
     if not np.all(np.isfinite(tau)):
         raise MessageError(f"torque is not finite: {tau.tolist()}")
     return t_ns, tau
@@ -267,22 +277,58 @@ def state_messages(f: Array, t_ns: int, voltage_V: float, current_A: float, effo
             topics.SUN_VECTOR: sun_vector_msg(f, t_ns)}
 
 
+def state_messages_cdr(f: Array, t_ns: int, voltage_V: float, current_A: float, effort_Nm: Array
+                       ) -> dict[str, bytes]:  # fmt: skip
+    """`state_messages` serialized (`CdrLayout`): the same bytes rclpy makes of those messages, by topic."""
+    L = layouts()
+    status = (BatteryState.POWER_SUPPLY_STATUS_CHARGING if current_A > 0
+              else BatteryState.POWER_SUPPLY_STATUS_DISCHARGING)
+    fl = f.tolist()
+    return {topics.ODOMETRY: L.odometry.pack(t_ns, fl[F_Q:F_Q + 4], fl[F_POS:F_POS + 3],
+                                             fl[F_VEL_BODY:F_VEL_BODY + 3], fl[F_OMEGA:F_OMEGA + 3]),
+            topics.WHEELS: L.wheels.pack(t_ns, fl[F_WHEEL:F_WHEEL + 3], [float(c) for c in effort_Nm]),
+            topics.TEMPERATURE: L.temperature.pack(t_ns, (fl[F_TEMP_C],)),
+            topics.BATTERY: L.battery.pack(t_ns, (float(voltage_V),), (float(current_A), fl[F_CHARGE_AH]), (status,)),
+            topics.SUN_VECTOR: L.sun.pack(t_ns, fl[F_SUN:F_SUN + 3])}
+
+
+def state_cdr(x: Array, t_ns: int) -> bytes:
+    """`state_msg` serialized (`CdrLayout`)."""
+    return layouts().state.pack(t_ns, np.asarray(x, dtype=float).tolist())
+
+
+def torque_cdr(tau_Nm: Array, t_ns: int) -> bytes:
+    """`torque_msg` serialized (`CdrLayout`)."""
+    return layouts().torque.pack(t_ns, [float(c) for c in tau_Nm])
+
+
+def clock_cdr(t_ns: int) -> bytes:
+    """`clock_msg` serialized (`CdrLayout`)."""
+    return layouts().clock.pack(t_ns)
+
+
 ODOMETRY_FIELDS = tuple(name for name in FIELD_MESSAGES if name.startswith("Odometry."))
 """The fields an Odometry carries (`odometry_fields` checks them)."""
 
 
 def odometry_fields(msg: Any, out: Array) -> None:
-    """Attitude, rates, CW position and velocity of an Odometry into the fields out (`sensors.decode`'s
-    layout); MessageError if its frames are not hill -> body."""
-    _frame(msg, "odometry", topics.HILL_FRAME)
-    if msg.child_frame_id != topics.BODY_FRAME:
-        raise MessageError(f"odometry child_frame_id must be {topics.BODY_FRAME!r}, got {msg.child_frame_id!r}")
-    p, o = msg.pose.pose.position, msg.pose.pose.orientation
-    lin, ang = msg.twist.twist.linear, msg.twist.twist.angular
-    out[F_Q:F_Q + 4] = (o.x, o.y, o.z, o.w)
-    out[F_POS:F_POS + 3] = (p.x, p.y, p.z)
-    out[F_VEL_BODY:F_VEL_BODY + 3] = (lin.x, lin.y, lin.z)
-    out[F_OMEGA:F_OMEGA + 3] = (ang.x, ang.y, ang.z)
+    """Attitude, rates, CW position and velocity of an Odometry (a message or its CDR bytes) into the fields
+    out (`sensors.decode`'s layout); MessageError if its frames are not hill -> body."""
+    got = layouts().odometry.unpack(msg) if isinstance(msg, bytes) else None
+    if got is not None:
+        out[F_Q:F_Q + 4], out[F_POS:F_POS + 3], out[F_VEL_BODY:F_VEL_BODY + 3], out[F_OMEGA:F_OMEGA + 3] = got[1]
+    else:
+        if isinstance(msg, bytes):
+            msg = layouts().odometry.message(msg)
+        _frame(msg, "odometry", topics.HILL_FRAME)
+        if msg.child_frame_id != topics.BODY_FRAME:
+            raise MessageError(f"odometry child_frame_id must be {topics.BODY_FRAME!r}, got {msg.child_frame_id!r}")
+        p, o = msg.pose.pose.position, msg.pose.pose.orientation
+        lin, ang = msg.twist.twist.linear, msg.twist.twist.angular
+        out[F_Q:F_Q + 4] = (o.x, o.y, o.z, o.w)
+        out[F_POS:F_POS + 3] = (p.x, p.y, p.z)
+        out[F_VEL_BODY:F_VEL_BODY + 3] = (lin.x, lin.y, lin.z)
+        out[F_OMEGA:F_OMEGA + 3] = (ang.x, ang.y, ang.z)
     for name in ODOMETRY_FIELDS:
         i, k = FIELD_MESSAGES[name]
         if not np.all(np.isfinite(out[i:i + k])):
@@ -295,25 +341,316 @@ def state_fields(msgs: Mapping[str, Any]) -> Array:
     is not finite."""
     f = np.empty(FIELD_SIZE)
     odometry_fields(msgs[topics.ODOMETRY], f)
+    L = layouts()
     wheels = msgs[topics.WHEELS]
-    _frame(wheels, "wheels", topics.BODY_FRAME)
-    if list(wheels.name) != list(topics.WHEEL_JOINTS) or len(wheels.velocity) != 3:
-        raise MessageError(f"wheels must be joints {topics.WHEEL_JOINTS} with a velocity each, got "
-                           f"{tuple(wheels.name)} with {len(wheels.velocity)} velocities")
-    f[F_WHEEL:F_WHEEL + 3] = wheels.velocity
+    got = L.wheels.unpack(wheels) if isinstance(wheels, bytes) else None
+    if got is not None:
+        f[F_WHEEL:F_WHEEL + 3] = got[1][0]
+    else:
+        wheels = L.wheels.message(wheels) if isinstance(wheels, bytes) else wheels
+        _frame(wheels, "wheels", topics.BODY_FRAME)
+        if list(wheels.name) != list(topics.WHEEL_JOINTS) or len(wheels.velocity) != 3:
+            raise MessageError(f"wheels must be joints {topics.WHEEL_JOINTS} with a velocity each, got "
+                               f"{tuple(wheels.name)} with {len(wheels.velocity)} velocities")
+        f[F_WHEEL:F_WHEEL + 3] = wheels.velocity
     temperature = msgs[topics.TEMPERATURE]
-    _frame(temperature, "temperature", topics.BODY_FRAME)
-    f[F_TEMP_C] = temperature.temperature
+    got = L.temperature.unpack(temperature) if isinstance(temperature, bytes) else None
+    if got is not None:
+        f[F_TEMP_C] = got[1][0][0]
+    else:
+        temperature = L.temperature.message(temperature) if isinstance(temperature, bytes) else temperature
+        _frame(temperature, "temperature", topics.BODY_FRAME)
+        f[F_TEMP_C] = temperature.temperature
     battery = msgs[topics.BATTERY]
-    _frame(battery, "battery", topics.BODY_FRAME)
-    f[F_CHARGE_AH] = battery.charge
+    got = L.battery.unpack(battery) if isinstance(battery, bytes) else None
+    if got is not None:
+        f[F_CHARGE_AH] = got[1][1][1]
+    else:
+        battery = L.battery.message(battery) if isinstance(battery, bytes) else battery
+        _frame(battery, "battery", topics.BODY_FRAME)
+        f[F_CHARGE_AH] = battery.charge
     sun = msgs[topics.SUN_VECTOR]
-    _frame(sun, "sun vector", topics.HILL_FRAME)
-    f[F_SUN:F_SUN + 3] = (sun.vector.x, sun.vector.y, sun.vector.z)
+    got = L.sun.unpack(sun) if isinstance(sun, bytes) else None
+    if got is not None:
+        f[F_SUN:F_SUN + 3] = got[1][0]
+    else:
+        sun = L.sun.message(sun) if isinstance(sun, bytes) else sun
+        _frame(sun, "sun vector", topics.HILL_FRAME)
+        f[F_SUN:F_SUN + 3] = (sun.vector.x, sun.vector.y, sun.vector.z)
     if not np.all(np.isfinite(f)):
         names = [n for n, (i, k) in FIELD_MESSAGES.items() if not np.all(np.isfinite(f[i:i + k]))]
         raise MessageError(f"{names[0]} is not finite")
     return f
+
+
+# ----------------------------------------------------------------------------- fixed layouts (the loop's bytes)
+
+_STAMP = struct.Struct("<iI")
+
+
+def _sentinels(fmt: str, first: int) -> tuple[float, ...]:
+    """Values no real field holds, one per item of a struct format ('3d', 'f', ...), numbered from `first`:
+    large float64 (or float32-exact) numbers that occur nowhere else in a serialized message."""
+    n, code = int(fmt[:-1] or 1), fmt[-1]
+    big = 1.0e300 if code == "d" else 3.0e38
+    vals = tuple(big / (7 + first + i) for i in range(n))
+    return vals if code == "d" else struct.unpack(f"<{n}f", struct.pack(f"<{n}f", *vals))
+
+
+_CDR_SIZES = {"double": 8, "float": 4, "int64": 8, "uint64": 8, "int32": 4, "uint32": 4, "int16": 2, "uint16": 2,
+              "int8": 1, "uint8": 1, "char": 1, "octet": 1, "boolean": 1}
+
+
+def cdr_spans(msg: Any) -> tuple[int, list[tuple[int, int]], list[tuple[int, int]]]:
+    """Where a message's items lie in its little-endian CDR (offsets from the start of the serialized bytes,
+    the 4-byte encapsulation header included), walked from its type (rosidl SLOT_TYPES): (size, the spans that
+    fix the layout: every string with its length and NUL, every sequence's count; the spans of the values).
+    The bytes in neither are alignment padding, which rclpy's serializer leaves as it finds them."""
+    from rosidl_parser.definition import AbstractSequence, AbstractString, Array, BasicType, NamespacedType
+
+    layout: list[tuple[int, int]] = []
+    values: list[tuple[int, int]] = []
+
+    def align(off: int, n: int) -> int:
+        return 4 + -(-(off - 4) // n) * n
+
+    def item(t: Any, v: Any, off: int) -> int:
+        if isinstance(t, NamespacedType):
+            for name, st in zip(v.get_fields_and_field_types(), type(v).SLOT_TYPES, strict=True):
+                off = item(st, getattr(v, name), off)
+            return off
+        if isinstance(t, BasicType):
+            n = _CDR_SIZES[t.typename]
+            off = align(off, n)
+            values.append((off, off + n))
+            return off + n
+        if isinstance(t, AbstractString):
+            off = align(off, 4)
+            end = off + 4 + len(v.encode()) + 1
+            layout.append((off, end))
+            return end
+        if isinstance(t, (AbstractSequence, Array)):
+            if isinstance(t, AbstractSequence):
+                off = align(off, 4)
+                layout.append((off, off + 4))
+                off += 4
+            for e in v:
+                off = item(t.value_type, e, off)
+            return off
+        raise TypeError(f"cdr_spans: {type(t).__name__} is not handled")
+
+    size = item(NamespacedType([], type(msg).__name__), msg, 4)
+    return size, layout, values
+
+
+class CdrLayout:
+    """One message type whose frame ids and sequence lengths are fixed (the plant's state views, the
+    torque commands, /clock): serialized once by rclpy into a template, then written and read as bytes.
+
+    The loop sends ~12 such messages a step, and through rclpy each is a Python object built field by field,
+    then converted by rclpy's C layer, and each received one is converted back into an object: in the
+    lockstep loop that Python work was most of the nodes' CPU beyond what DDS itself costs. `pack` copies the
+    template and writes the stamp and the slots' values at offsets found once (by serializing sentinel
+    values, cross-checked against the offsets `cdr_spans` walks from the type); `unpack` reads them back from
+    bytes that have the template's layout (little-endian, the same length, every string and sequence length
+    equal: frame ids, joint names; then every value sits where the template has it) and returns None for
+    anything else (another writer's frame id or joints, big-endian data), which the callers then deserialize
+    through rclpy and parse as before, with the same errors. Values no reader uses (covariances, constants)
+    and the padding are not compared. Tests: rclpy and rosbags decode `pack`'s bytes as the builders'
+    messages; `unpack` reads rclpy's bytes as the parsers read the messages.
+
+    Args:
+        make: a new message with the fixed fields set (frame ids, names, sequence lengths, constants).
+        slots: name -> (struct format of its consecutive fields, e.g. '4d'; a setter writing values into a
+            message), in the order `pack` takes and `unpack` returns them.
+    """
+
+    def __init__(self, make: Callable[[], Any], slots: Mapping[str, tuple[str, Callable[[Any, Sequence[Any]], None]]]
+                 ) -> None:  # fmt: skip
+        from rclpy.serialization import serialize_message  # here: this module is read without rclpy (bags)
+
+        probe, plain = make(), make()
+        self.msg_type = type(plain)
+        marks: list[tuple[struct.Struct, bytes | None, Callable[[Any, Sequence[Any]], None]]] = []
+        first = 0
+        for fmt, setter in slots.values():
+            if fmt[-1] in "df":
+                vals = _sentinels(fmt, first)
+                first += len(vals)
+                setter(probe, vals)
+                marks.append((struct.Struct("<" + fmt), struct.pack("<" + fmt, *vals), setter))
+            else:  # an integer (one uint8 here): found as the bytes that change with its value
+                setter(probe, (0xC3,))
+                marks.append((struct.Struct("<" + fmt), None, setter))
+        stamp_of = (lambda m: m.clock) if isinstance(probe, Clock) else (lambda m: m.header.stamp)
+        stamp_of(probe).sec, stamp_of(probe).nanosec = 0x5CE7F00D, 0x0A0B0C0D
+        probed = bytes(serialize_message(probe))
+        size, fixed, values = cdr_spans(plain)
+        serialized = bytes(serialize_message(plain))
+        # serialize_message's buffer may run a few bytes past the last item (DDS sends `size` bytes)
+        self.longest = len(serialized)
+        template = bytearray(size)  # padding zeroed: rclpy leaves whatever its buffer held
+        for a, b in [(0, 4), *fixed, *values]:
+            template[a:b] = serialized[a:b]
+        self.template = bytes(template)
+        if (len(probed) != self.longest or size > self.longest or probed[:2] != b"\x00\x01"
+                or probed[4:12] != _STAMP.pack(0x5CE7F00D, 0x0A0B0C0D) or cdr_spans(probe)[1] != fixed):  # fmt: skip
+            raise RuntimeError(f"{self.msg_type.__name__}: not a fixed little-endian layout with a leading stamp")
+        self.names = tuple(slots)
+        self.slots: list[tuple[struct.Struct, int]] = []
+        for st, mark, setter in marks:
+            if mark is None:
+                setter(probe, (0x3C,))
+                changed = [i for i, (a, b) in enumerate(zip(probed, serialize_message(probe), strict=True)) if a != b]
+                setter(probe, (0xC3,))
+                at = changed[0] if len(changed) == st.size else -1
+            else:
+                at = probed.find(mark)
+                at = -1 if probed.find(mark, at + 1) >= 0 else at
+            if at < 0:
+                raise RuntimeError(f"{self.msg_type.__name__}: a slot was not found exactly once")
+            self.slots.append((st, at))
+            if not any(a <= at and at + st.size <= b for a, b in _merged(values)):
+                raise RuntimeError(f"{self.msg_type.__name__}: a slot is not where its type puts values")
+        self.fixed = _merged([(0, 2), *fixed])
+        """What makes the layout: the byte order (little-endian CDR), every string (frame ids, joint names) and
+        every sequence's length. Bytes equal there put every value where the template has it."""
+        self.size = size
+
+    def pack(self, t_ns: int, *values: Sequence[Any]) -> bytes:
+        """The serialized message stamped t_ns [ns] with each slot's values (in slot order)."""
+        buf = bytearray(self.template)
+        _STAMP.pack_into(buf, 4, *divmod(t_ns, NS_PER_S))
+        for (st, at), vals in zip(self.slots, values, strict=True):
+            st.pack_into(buf, at, *vals)
+        return bytes(buf)
+
+    def unpack(self, data: bytes) -> tuple[int, list[tuple[Any, ...]]] | None:
+        """(stamp [ns], each slot's values) of bytes with this layout, else None; MessageError if the stamp
+        is not a time >= 0."""
+        if not self.size <= len(data) <= self.longest:
+            return None
+        template = self.template
+        for a, b in self.fixed:
+            if data[a:b] != template[a:b]:
+                return None
+        sec, nanosec = _STAMP.unpack_from(data, 4)
+        if sec < 0 or nanosec >= NS_PER_S:
+            raise MessageError(f"stamp {sec}.{nanosec:09d} is not a time >= 0")
+        return sec * NS_PER_S + nanosec, [st.unpack_from(data, at) for st, at in self.slots]
+
+    def message(self, data: bytes) -> Any:
+        """The rclpy message of bytes of this type in any layout (for the parsers of message objects);
+        MessageError if rclpy cannot deserialize them."""
+        from rclpy.serialization import deserialize_message
+
+        try:
+            return deserialize_message(data, self.msg_type)
+        except Exception as exc:  # rclpy raises its own error types for malformed CDR
+            raise MessageError(f"not a {self.msg_type.__name__} ({len(data)} bytes): "
+                               f"{str(exc).splitlines()[0] if str(exc) else type(exc).__name__}") from None
+
+
+def _merged(spans: Sequence[tuple[int, int]]) -> list[tuple[int, int]]:
+    out: list[tuple[int, int]] = []
+    for a, b in sorted(spans):
+        if out and a == out[-1][1]:
+            out[-1] = (out[-1][0], b)
+        else:
+            out.append((a, b))
+    return out
+
+
+def _set(path: str, fields: str) -> Callable[[Any, Sequence[Any]], None]:
+    """A slot setter: msg.<path>.<field> = value for each of `fields` (space-separated; path '' for msg)."""
+    names = fields.split()
+
+    def setter(msg: Any, vals: Sequence[Any]) -> None:
+        obj = msg
+        for part in path.split(".") if path else ():
+            obj = getattr(obj, part)
+        for name, v in zip(names, vals, strict=True):
+            setattr(obj, name, v)
+
+    return setter
+
+
+def _seq(field: str) -> Callable[[Any, Sequence[Any]], None]:
+    def setter(msg: Any, vals: Sequence[Any]) -> None:
+        setattr(msg, field, [float(v) for v in vals])
+
+    return setter
+
+
+def _make(cls: type, frame_id: str = "", **fields: Any) -> Callable[[], Any]:
+    def make() -> Any:
+        msg = cls()
+        if frame_id:
+            msg.header.frame_id = frame_id
+        for k, v in fields.items():
+            setattr(msg, k, v)
+        return msg
+
+    return make
+
+
+class Layouts:
+    """The CdrLayouts of the loop's per-step messages, made once per process (`layouts()`)."""
+
+    def __init__(self) -> None:
+        self.clock = CdrLayout(Clock, {})
+        self.state = CdrLayout(_make(JointState, name=list(STATE_NAMES), position=[0.0] * STATE_SIZE),
+                               {"position": (f"{STATE_SIZE}d", _seq("position"))})
+        self.torque = CdrLayout(_make(Vector3Stamped, topics.BODY_FRAME), {"vector": ("3d", _set("vector", "x y z"))})
+        self.sun = CdrLayout(_make(Vector3Stamped, topics.HILL_FRAME), {"vector": ("3d", _set("vector", "x y z"))})
+
+        def odometry() -> Odometry:
+            msg = Odometry()
+            msg.header.frame_id, msg.child_frame_id = topics.HILL_FRAME, topics.BODY_FRAME
+            return msg
+
+        self.odometry = CdrLayout(odometry, {
+            "orientation": ("4d", _set("pose.pose.orientation", "x y z w")),
+            "position": ("3d", _set("pose.pose.position", "x y z")),
+            "linear": ("3d", _set("twist.twist.linear", "x y z")),
+            "angular": ("3d", _set("twist.twist.angular", "x y z"))})
+        self.wheels = CdrLayout(_make(JointState, topics.BODY_FRAME, name=list(topics.WHEEL_JOINTS),
+                                      velocity=[0.0] * 3, effort=[0.0] * 3),
+                                {"velocity": ("3d", _seq("velocity")), "effort": ("3d", _seq("effort"))})
+        self.temperature = CdrLayout(_make(Temperature, topics.BODY_FRAME),
+                                     {"temperature": ("d", _set("", "temperature"))})
+
+        def battery() -> BatteryState:
+            msg = BatteryState()
+            msg.header.frame_id = topics.BODY_FRAME
+            msg.capacity = msg.design_capacity = msg.percentage = msg.temperature = math.nan
+            msg.present = True
+            msg.power_supply_technology = BatteryState.POWER_SUPPLY_TECHNOLOGY_UNKNOWN
+            return msg
+
+        def status(msg: Any, vals: Sequence[Any]) -> None:
+            msg.power_supply_status = int(vals[0])
+
+        # voltage, temperature (NaN), current, charge are consecutive float32: one slot of three read through
+        # the middle one's NaN would not be unique, so voltage and current+charge are two slots
+        self.battery = CdrLayout(battery, {
+            "voltage": ("f", _set("", "voltage")), "current_charge": ("2f", _set("", "current charge")),
+            "status": ("B", status)})
+        self.by_topic = {topics.ODOMETRY: self.odometry, topics.WHEELS: self.wheels,
+                         topics.TEMPERATURE: self.temperature, topics.BATTERY: self.battery,
+                         topics.SUN_VECTOR: self.sun, topics.STATE: self.state, topics.TORQUE_DES: self.torque,
+                         topics.TORQUE_CMD: self.torque, topics.TORQUE_APPLIED: self.torque, topics.CLOCK: self.clock}
+        """The layout of each of the loop's fixed-layout topics."""
+
+
+_LAYOUTS: list[Layouts] = []
+
+
+def layouts() -> Layouts:
+    """This process's `Layouts` (made at the first call: it needs rclpy, which bag readers do without)."""
+    if not _LAYOUTS:
+        _LAYOUTS.append(Layouts())
+    return _LAYOUTS[0]
 
 
 # ----------------------------------------------------------------------------- diagnostics
@@ -343,13 +680,19 @@ def _bool(v: Any) -> str:
     return "true" if v else "false"
 
 
+_Entry = tuple[bytes, str, list[str]]
+"""One DiagnosticStatus's level, message and values (texts)."""
+
+
 class FilterStatusBuilder:
     """Builds filter_status messages: the `filter` entry (level OK pass, WARN solved, ERROR fallback),
     then one entry per constraint named like it (OK, WARN intervening, ERROR violated: h < 0).
 
-    The message's ~120 KeyValue objects are made once and their values rewritten at each `build`
-    (a message is serialised when published, so reusing it is safe): this runs at every step of the
-    loop, and constructing the objects each time cost ~0.6 ms a message.
+    This runs at every step of the loop, with ~120 KeyValues a message. `build` returns the message object
+    (its KeyValue objects made once and their values rewritten: constructing them each time cost ~0.6 ms);
+    `build_cdr` writes the same message straight into CDR bytes (what the filter node publishes: rclpy's
+    conversion of ~250 strings from Python objects cost more than making them). A test checks that rclpy
+    deserializes `build_cdr`'s bytes into `build`'s message.
     """
 
     def __init__(self, names: Sequence[str]) -> None:
@@ -364,15 +707,15 @@ class FilterStatusBuilder:
             st.values = [KeyValue(key=k) for k in topics.CONSTRAINT_KEYS]
             self.per.append(st)
         self.msg.status = [self.qp, *self.per]
+        self._hid = _cdr_text(hid)
+        self._qp_name = _cdr_text(topics.QP_STATUS_NAME)
+        self._qp_keys = [_cdr_text(k) for k in topics.QP_KEYS]
+        self._names = [_cdr_text(topics.CONSTRAINT_STATUS_PREFIX + n) for n in self.names]
+        self._keys = [_cdr_text(k) for k in topics.CONSTRAINT_KEYS]
 
-    def build(self, res: FilterResult, t_ns: int, counters: FilterCounters, preset: str, slacked: Sequence[str],
-              inputs: Mapping[str, int] | None = None, source: str = "torque_des") -> DiagnosticArray:
-        """The message of one filter result (the builder's message object, rewritten).
-
-        Args:
-            inputs: the node's input counters (topics.INPUT_COUNTERS; missing ones are 0).
-            source: where u_des came from ('torque_des', or 'missing': u_des = 0 after a timeout).
-        """
+    def _texts(self, res: FilterResult, counters: FilterCounters, preset: str, slacked: Sequence[str],
+               inputs: Mapping[str, int] | None, source: str) -> tuple[bytes, str, list[str], list[_Entry]]:
+        """(level, message, values) of the QP entry, then of each constraint's."""
         inputs = inputs or {}
         r = res.record
         status, fallback = str(res.status), str(res.fallback)
@@ -384,23 +727,85 @@ class FilterStatusBuilder:
             str(counters.solver_failures), str(counters.backup_solves), str(counters.invalid_states), source,
             *(str(inputs.get(k, 0)) for k in topics.INPUT_COUNTERS), str(res.gate), str(res.gave_way),
         ]  # fmt: skip
-        for kv, text in zip(self.qp.values, texts, strict=True):
-            kv.value = text
-        self.qp.level = _level_text(status)
-        self.qp.message = status + (f" ({fallback})" if fallback else "")
         h, psi0, psi1, bc, slack = (r[k].tolist() for k in ("h", "psi0", "psi1", "bc", "slack"))
         inter_all, unctl = r["intervening"].tolist(), r["uncontrollable"].tolist()
-        for i, st in enumerate(self.per):
+        per = []
+        for i, name in enumerate(self.names):
             violated, inter = h[i] < 0, bool(inter_all[i])
-            st.level = DiagnosticStatus.ERROR if violated else DiagnosticStatus.WARN if inter else DiagnosticStatus.OK
-            st.message = "violated" if violated else "intervening" if inter else "ok"
-            kv = st.values
-            kv[0].value, kv[1].value, kv[2].value = repr(h[i]), repr(psi0[i]), repr(psi1[i])
-            kv[3].value, kv[4].value = repr(bc[i]), repr(slack[i])
-            kv[5].value, kv[6].value = _bool(inter), _bool(unctl[i])
-            kv[7].value = _bool(self.names[i] in slacked)
+            level = DiagnosticStatus.ERROR if violated else DiagnosticStatus.WARN if inter else DiagnosticStatus.OK
+            per.append((level, "violated" if violated else "intervening" if inter else "ok",
+                        [repr(h[i]), repr(psi0[i]), repr(psi1[i]), repr(bc[i]), repr(slack[i]), _bool(inter),
+                         _bool(unctl[i]), _bool(name in slacked)]))
+        return _level_text(status), status + (f" ({fallback})" if fallback else ""), texts, per
+
+    def build(self, res: FilterResult, t_ns: int, counters: FilterCounters, preset: str, slacked: Sequence[str],
+              inputs: Mapping[str, int] | None = None, source: str = "torque_des") -> DiagnosticArray:
+        """The message of one filter result (the builder's message object, rewritten).
+
+        Args:
+            inputs: the node's input counters (topics.INPUT_COUNTERS; missing ones are 0).
+            source: where u_des came from ('torque_des', or 'missing': u_des = 0 after a timeout).
+        """
+        level, message, texts, per = self._texts(res, counters, preset, slacked, inputs, source)
+        for kv, text in zip(self.qp.values, texts, strict=True):
+            kv.value = text
+        self.qp.level, self.qp.message = level, message
+        for st, (lv, msg, vals) in zip(self.per, per, strict=True):
+            st.level, st.message = lv, msg
+            for kv, text in zip(st.values, vals, strict=True):
+                kv.value = text
         self.msg.header.stamp = stamp(t_ns)
         return self.msg
+
+    def build_cdr(self, res: FilterResult, t_ns: int, counters: FilterCounters, preset: str,
+                  slacked: Sequence[str], inputs: Mapping[str, int] | None = None, source: str = "torque_des") -> bytes:
+        """`build`'s message as little-endian CDR bytes (what rclpy would serialize, with zero padding).
+
+        Written as a str of byte values (latin-1) and encoded once: ~130 strings a message, each a length,
+        its characters, a NUL and padding. Every text here is ASCII (numbers, names, words); should one not
+        be, the message goes through rclpy's serializer instead."""
+        level, message, texts, per = self._texts(res, counters, preset, slacked, inputs, source)
+        if not (message + "".join(texts) + "".join(m + "".join(v) for _, m, v in per)).isascii():
+            from rclpy.serialization import serialize_message
+
+            return bytes(serialize_message(self.build(res, t_ns, counters, preset, slacked, inputs, source)))
+        prefix, tail = _PREFIX, _NUL_PAD_TEXT
+        parts = ["\x00\x01\x00\x00", _STAMP.pack(*divmod(t_ns, NS_PER_S)).decode("latin-1"), _cdr_text(""),
+                 _u32_text(1 + len(per))]
+        end = 24  # bytes so far; every status starts with its level byte right after the previous string's NUL
+        for lv, name, msg, keys, vals in ((level, self._qp_name, message, self._qp_keys, texts),
+                                          *((lv, n, m, self._keys, v) for n, (lv, m, v) in zip(self._names, per))):
+            pad = -(end + 1 - 4) % 4
+            body = [_LEVEL_TEXT[lv], _PAD_TEXT[pad], name, _cdr_text(msg), self._hid, _u32_text(len(vals))]
+            for key, val in zip(keys, vals, strict=True):
+                n = len(val) + 1
+                body += (key, prefix[n] if n < 256 else _u32_text(n), val, tail[n & 3])
+            body[-1] = "\x00"  # the last string unpadded: the next status's level byte follows it
+            chunk = "".join(body)
+            parts.append(chunk)
+            end += len(chunk)
+        return "".join(parts).encode("latin-1")
+
+
+_PREFIX = tuple(n.to_bytes(4, "little").decode("latin-1") for n in range(256))
+_LEVEL_TEXT = {bytes([n]): chr(n) for n in range(256)}
+_PAD_TEXT = tuple("\x00" * n for n in range(4))
+"""A CDR string's length field (length with the NUL, < 256) as 4 latin-1 characters."""
+_NUL_PAD_TEXT = tuple("\x00" * (1 + (-n) % 4) for n in range(4))
+
+
+def _u32_text(n: int) -> str:
+    """A little-endian uint32 as 4 latin-1 characters."""
+    return n.to_bytes(4, "little").decode("latin-1")
+
+
+def _cdr_text(text: str) -> str:
+    """A CDR string as latin-1 characters (text ASCII), with the padding that brings the next item to a
+    multiple of 4: uint32 length (with the NUL), the characters, NUL, zeros. Inside a DiagnosticStatus every
+    item after the level byte is a string or a count (4-aligned), so each is written whole; its last string
+    is cut after the NUL (the next status's level byte, a uint8, follows unaligned)."""
+    n = len(text) + 1
+    return _u32_text(n) + text + _NUL_PAD_TEXT[n % 4]
 
 
 def filter_status_msg(res: FilterResult, t_ns: int, counters: FilterCounters, preset: str,
@@ -683,8 +1088,8 @@ class SceneBuilder:
         return bytes(tf), bytes(mk)
 
 __all__ = [
-    "NS_PER_S", "SCENE_IDS", "SCENE_NS", "STAMP_OFFSETS", "UNIT_NORM_EPS", "FilterStatusBuilder", "SceneBuilder",
-    "cone_points",
+    "NS_PER_S", "SCENE_IDS", "SCENE_NS", "STAMP_OFFSETS", "UNIT_NORM_EPS", "CdrLayout", "FilterStatusBuilder",
+    "Layouts", "SceneBuilder", "clock_cdr", "cone_points", "layouts", "state_cdr", "state_messages_cdr", "torque_cdr",
     "x_to", "battery_msg", "cdr_stamp_ns", "clock_msg",
     "diagnostic_values", "filter_record", "filter_status_msg", "odometry_fields", "odometry_msg",
     "quaternion_from_msg", "state_fields", "state_messages", "wheels_msg",

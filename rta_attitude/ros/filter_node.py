@@ -99,10 +99,11 @@ class FilterNode(RtaNode):
         self.subs: dict[str, Any] = {}
         for spec in topics.subscribed(topics.FILTER, self.rta):
             if spec.name == topics.TORQUE_DES:
-                self.subs[spec.name] = self.subscribe(spec.name, self._on_desired)
+                self.subs[spec.name] = self.subscribe(spec.name, self._on_desired, raw=True)
             else:
                 peer = topics.PLANT if spec.name == topics.ODOMETRY else ""
-                self.subs[spec.name] = self.subscribe(spec.name, partial(self._on_input, spec.name), peer=peer)
+                self.subs[spec.name] = self.subscribe(spec.name, partial(self._on_input, spec.name), peer=peer,
+                                                      raw=True)
         if self.rta:
             self.wall_timer(min(EXPIRY_POLL_S, self.knobs["desired_timeout_s"] / 4), self._expire)
             self.get_logger().info(f"filter preset {self.cfg.filter.preset}, fallback {self.cfg.filter.fallback}, "
@@ -178,7 +179,7 @@ class FilterNode(RtaNode):
             self.faults.clear("torque_des_rejected")
         if not self.rta:
             self.answered_ns = max(self.answered_ns, t_ns)
-            self.out[topics.TORQUE_CMD].publish(convert.torque_msg(tau, t_ns))
+            self.out[topics.TORQUE_CMD].publish(convert.torque_cdr(tau, t_ns))
             return
         self.desired[t_ns] = tau
         if t_ns in self.states:
@@ -238,8 +239,8 @@ class FilterNode(RtaNode):
         res = self.filter.filter(x, torque_to_wheel_accel(tau_des, D))
         res = self._guard(res)
         self.answered_ns = max(self.answered_ns, t_ns)
-        self.out[topics.TORQUE_CMD].publish(convert.torque_msg(wheel_accel_to_torque(res.u, D), t_ns))
-        self.out[topics.FILTER_STATUS].publish(self.status_builder.build(
+        self.out[topics.TORQUE_CMD].publish(convert.torque_cdr(wheel_accel_to_torque(res.u, D), t_ns))
+        self.out[topics.FILTER_STATUS].publish(self.status_builder.build_cdr(
             res, t_ns, self.filter.counters, self.cfg.filter.preset, self.slacked, self.counts, source))
         level, text = filter_level(str(res.status), str(res.fallback), bool((res.record["slack"] > 0.0).any()))
         c = self.filter.counters

@@ -107,7 +107,7 @@ class PlantNode(RtaNode):
                      for spec in topics.published(topics.PLANT, True, self.truth)}  # fmt: skip
         self.diagnostics = DiagnosticsPublisher(self, "run")
         self.command_topic = topics.TORQUE_CMD
-        self._command_sub = self.subscribe(self.command_topic, self._on_command)
+        self._command_sub = self.subscribe(self.command_topic, self._on_command, raw=True)
         self._sent_s = 0.0
         self._progress_s = self.wall_now_s()
         self._ended = False
@@ -189,16 +189,16 @@ class PlantNode(RtaNode):
         fields = message_fields(x, self.instruments.record)
         V = self.cfg.power.bus_voltage_V
         current_A = float(spacecraft.state_derivative(x, np.zeros(3), self.plant)[ENERGY]) / V
-        inputs = convert.state_messages(fields, t_ns, V, current_A, self.wheel_effort_Nm)
-        self._publish(topics.CLOCK, convert.clock_msg(t_ns))
+        inputs = convert.state_messages_cdr(fields, t_ns, V, current_A, self.wheel_effort_Nm)
+        self._publish(topics.CLOCK, convert.clock_cdr(t_ns))
         self._diagnose(topics.RUN_RUNNING)
         self._sent_s = self.wall_now_s()
         self._progress_s = self._sent_s
         for name in topics.STATE_INPUTS:
             self._publish(name, inputs[name])
-        self._publish(topics.STATE, convert.state_msg(x, t_ns))
+        self._publish(topics.STATE, convert.state_cdr(x, t_ns))
         if self.truth:
-            self._publish(topics.STATE_TRUE, convert.state_msg(self.x, t_ns))
+            self._publish(topics.STATE_TRUE, convert.state_cdr(self.x, t_ns))
 
     def _step(self, tau_Nm: np.ndarray) -> None:
         """Hold tau over [t_k, t_k+1) through the actuator (the core saturates and integrates), publish the
@@ -215,7 +215,7 @@ class PlantNode(RtaNode):
         self.k += 1
         self.x = x_next
         self._publish_sample()
-        self._publish(topics.TORQUE_APPLIED, convert.torque_msg(tau_Nm, t_ns))
+        self._publish(topics.TORQUE_APPLIED, convert.torque_cdr(tau_Nm, t_ns))
 
     def _on_command(self, msg: Any) -> None:
         if self._ended or not self._running:
@@ -240,11 +240,11 @@ class PlantNode(RtaNode):
             return
         self.faults.clear("duplicate", "late", "future")
         u = np.abs(spacecraft.torque_to_wheel_accel(tau, self.D))
-        where = f"{self.command_topic} at t = {self.sim_s(t_ns):g} s (|u| = {np.round(u, 3).tolist()} rad/s^2)"
         for kind, limit, what in (("outside_u", self.u_admissible, "is outside U; applied"),
                                   ("saturated", self.u_actuator, "is beyond the actuator limit; saturated")):
             if np.any(u > limit * (1 + LIMIT_RTOL)):
-                self.faults.fault(kind, f"{where} {what}")
+                self.faults.fault(kind, f"{self.command_topic} at t = {self.sim_s(t_ns):g} s (|u| = "
+                                  f"{np.round(u, 3).tolist()} rad/s^2) {what}")
             else:
                 self.faults.clear(kind)
         if not self.lockstep:

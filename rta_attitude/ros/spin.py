@@ -196,9 +196,10 @@ class RtaNode(Node):
         """A fault episode of `kind` started (active) or ended; the plant republishes run_status."""
 
     def message_stamp(self, msg: Any, kind: str) -> int | None:
-        """The header stamp of msg in ns, or None (fault `kind` raised, message dropped) if unusable."""
+        """The header stamp of msg (a message, or its CDR bytes from a raw subscription) in ns, or None (fault
+        `kind` raised, message dropped) if unusable."""
         try:
-            return convert.stamp_ns(msg.header.stamp)
+            return convert.cdr_stamp_ns(msg) if isinstance(msg, bytes) else convert.stamp_ns(msg.header.stamp)
         except MessageError as exc:
             self.faults.fault(kind, f"{exc}; dropped")
             return None
