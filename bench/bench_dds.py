@@ -11,10 +11,12 @@ Runs, alternately and `--repeat` times each:
 - the same loop with the scene (`rta-attitude launch`'s default: the scene node hosted by the recorder's
   process, drawing every step into the bag and onto its topics);
 - the floor: bench/forward_chain.py, four rclpy processes with the same topics, types, QoS and
-  messages per step that only forward (no physics, no filter, no bag); the same span is timed.
+  messages per step that only forward (no physics, no filter, no bag); the same span is timed;
+- the raw floor: the same chain taking and sending bytes (`forward_chain.py --raw`), the floor of the real
+  nodes' design since they write and read the loop's messages as CDR bytes.
 
-Reports medians, the ratio real / floor without the scene (target <= 1.3), the ratio with / without the
-scene (target <= 1.1), the state -> torque_cmd latency, and checks
+Reports medians, the ratio real / floor without the scene (target <= 1.3; and against the raw floor), the
+ratio with / without the scene (target <= 1.1), the state -> torque_cmd latency, and checks
 the recorded states of every real run against `simulate` (bit for bit). Appends to
 bench/results/dds.json with the machine's load. Not collected by pytest; runs on its own
 ROS_DOMAIN_ID with localhost-only discovery.
@@ -81,12 +83,13 @@ def real_run(duration_s: float, work: Path, reference: np.ndarray, scene: bool =
             "latency_p99_s": status["latency_p99_s"], "max_abs_dx": diff}
 
 
-def floor_run(steps: int, work: Path) -> dict[str, float]:
-    """One forward-only chain: the plant's loop time and the total from start to the last exit."""
+def floor_run(steps: int, work: Path, raw: bool = False) -> dict[str, float]:
+    """One forward-only chain (`raw`: of bytes): the plant's loop time and the total from start to the last exit."""
     result = work / f"chain_{time.monotonic_ns()}.json"
     t0 = time.perf_counter()
     procs = [subprocess.Popen([sys.executable, str(HERE / "forward_chain.py"), role, "--steps", str(steps),
-                               *(["--result", str(result)] if role == topics.PLANT else [])])
+                               *(["--result", str(result)] if role == topics.PLANT else []),
+                               *(["--raw"] if raw else [])])
              for role in ROLES]  # fmt: skip
     codes = [p.wait(timeout=600) for p in procs]
     total_s = time.perf_counter() - t0
@@ -105,19 +108,22 @@ def main() -> int:
     steps = round(args.duration / cfg.filter.sample_time_s)
     reference = simulate(cfg, "paper-example", duration_s=args.duration).x
     before = machine.describe()
-    real, floor, scened = [], [], []
+    real, floor, scened, raw = [], [], [], []
     with tempfile.TemporaryDirectory(prefix="bench_dds_") as tmp:
         for i in range(args.repeat):
             floor.append(floor_run(steps, Path(tmp)))
             real.append(real_run(args.duration, Path(tmp), reference))
+            raw.append(floor_run(steps, Path(tmp), raw=True))
             scened.append(real_run(args.duration, Path(tmp), reference, scene=True))
             print(f"pass {i + 1}: real loop {real[-1]['loop_s']:.2f} s, with the scene {scened[-1]['loop_s']:.2f} s, "
-                  f"forward chain {floor[-1]['loop_s']:.2f} s, max |x_dds - x_simulate| = "
-                  f"{max(real[-1]['max_abs_dx'], scened[-1]['max_abs_dx']):.3g}", flush=True)
+                  f"forward chain {floor[-1]['loop_s']:.2f} s, raw {raw[-1]['loop_s']:.2f} s, "
+                  f"max |x_dds - x_simulate| = {max(real[-1]['max_abs_dx'], scened[-1]['max_abs_dx']):.3g}", flush=True)
     med = {k: float(np.median([r[k] for r in real])) for k in real[0]}
     smed = {k: float(np.median([r[k] for r in scened])) for k in scened[0]}
     fmed = {k: float(np.median([r[k] for r in floor])) for k in floor[0]}
+    rmed = {k: float(np.median([r[k] for r in raw])) for k in raw[0]}
     ratio = med["loop_s"] / fmed["loop_s"]
+    raw_ratio = med["loop_s"] / rmed["loop_s"]
     scene_ratio = smed["loop_s"] / med["loop_s"]
     print(f"\npaper-example, {steps} lockstep steps, medians of {args.repeat} (ROS_DOMAIN_ID "
           f"{os.environ['ROS_DOMAIN_ID']}; load average before {before['load_average']})")
@@ -128,12 +134,16 @@ def main() -> int:
           f"{smed['loop_s'] / steps * 1e3:>9.2f}ms{smed['total_s']:>8.1f}s")
     print(f"{'floor: forward-only chain (4 processes)':<44}{fmed['loop_s']:>8.2f}s"
           f"{fmed['loop_s'] / steps * 1e3:>9.2f}ms{fmed['total_s']:>8.1f}s")
+    print(f"{'raw floor: the same chain moving bytes':<44}{rmed['loop_s']:>8.2f}s"
+          f"{rmed['loop_s'] / steps * 1e3:>9.2f}ms{rmed['total_s']:>8.1f}s")
     print(f"{'ratio real / floor (target <= 1.3)':<44}{ratio:>9.2f}")
+    print(f"{'ratio real / raw floor':<44}{raw_ratio:>9.2f}")
     print(f"{'ratio with / without the scene (<= 1.1)':<44}{scene_ratio:>9.2f}")
     print(f"state -> torque_cmd latency: median {med['latency_median_s'] * 1e3:.2f} ms, p99 "
           f"{med['latency_p99_s'] * 1e3:.2f} ms; worst |x_dds - x_simulate| {max(r['max_abs_dx'] for r in real):.3g}")
     rec = {"steps": steps, "repeat": args.repeat, "real": real, "floor": floor, "real_median": med,
-           "floor_median": fmed, "ratio": ratio, "scene": scened, "scene_median": smed, "scene_ratio": scene_ratio,
+           "floor_median": fmed, "ratio": ratio, "raw_floor": raw, "raw_floor_median": rmed, "raw_ratio": raw_ratio,
+           "scene": scened, "scene_median": smed, "scene_ratio": scene_ratio,
            "machine_before": before, "machine_after": machine.describe()}
     print(f"appended to {machine.append('dds', rec, args.out)}")
     if any(r["max_abs_dx"] != 0.0 for r in real + scened):

@@ -1,7 +1,7 @@
 """The DDS loop's floor: four rclpy nodes with the run's topics, types, QoS and messages per step that
 only forward (no physics, no filter, no bag). bench_dds.py runs it beside the real loop.
 
-    python bench/forward_chain.py ROLE --steps N [--result FILE]      (ROLE: plant controller filter recorder)
+    python bench/forward_chain.py ROLE --steps N [--result FILE] [--raw]   (ROLE: plant controller filter recorder)
 
 - plant: waits until every topic it writes has the run's readers, then publishes the state of t_0; on each
   torque_cmd(t_k) publishes /clock, the five state messages (topics.STATE_INPUTS), the packed `state` and
@@ -14,12 +14,18 @@ only forward (no physics, no filter, no bag). bench_dds.py runs it beside the re
 Controller, filter and recorder run with use_sim_time (so they subscribe to /clock), as the launcher starts
 the real ones. The messages are the real nodes' messages (built once by `ros.convert` from a real state and filter
 result, then re-stamped), on the real QoS profiles, spun by the same executor (rclpy's EventsExecutor).
+
+By default the chain is what the issue names: plain rclpy nodes that take and send message objects. With
+`--raw` every node takes its messages as bytes (raw subscriptions) and sends bytes re-stamped in place, as the
+real nodes do since they write and read the loop's messages as CDR bytes (`convert.CdrLayout`): the floor of
+that design, with no message conversion at all.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import struct
 import sys
 import time
 from pathlib import Path
@@ -31,6 +37,7 @@ from rclpy.duration import Duration
 from rclpy.experimental import EventsExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+from rclpy.serialization import deserialize_message, serialize_message
 from rclpy.signals import SignalHandlerOptions
 
 from rta_attitude import config, topics
@@ -43,15 +50,21 @@ MATCH_TIMEOUT_S = 60.0
 
 
 def _stamp(msg: Any, t_ns: int) -> Any:
+    if isinstance(msg, bytes):  # every message here starts with its stamp (a Header's, or Clock's)
+        return msg[:4] + struct.pack("<iI", *divmod(t_ns, convert.NS_PER_S)) + msg[12:]
     msg.header.stamp = convert.stamp(t_ns)
     return msg
 
 
+def _stamp_ns(msg: Any) -> int:
+    return convert.cdr_stamp_ns(msg) if isinstance(msg, bytes) else convert.stamp_ns(msg.header.stamp)
+
+
 class Forwarder(Node):
-    def __init__(self, role: str, steps: int) -> None:
+    def __init__(self, role: str, steps: int, raw: bool = False) -> None:
         sim_time = [] if role == topics.PLANT else [Parameter("use_sim_time", value=True)]  # as the launcher does
         super().__init__(topics.NODE_NAMES[role], namespace=topics.DEFAULT_NAMESPACE, parameter_overrides=sim_time)
-        self.role, self.steps, self.done = role, steps, False
+        self.role, self.steps, self.done, self.raw = role, steps, False, raw
         self.result: dict[str, Any] = {}
         self.matched: set[str] = set()
         self.pubs = {s.name: self.create_publisher(interface.msg_class(s.type_name), s.name,
@@ -89,11 +102,14 @@ class Forwarder(Node):
             for spec in topics.recorded(rta=True):
                 cb = self.on_run_status if spec.name == topics.RUN_STATUS else self.on_raw
                 self.sub(spec.name, cb, raw=spec.name != topics.RUN_STATUS)
+        if raw:
+            self.msgs = {k: bytes(serialize_message(m)) for k, m in self.msgs.items()}
+            self.msgs[topics.CLOCK] = bytes(serialize_message(convert.clock_msg(0)))
 
     def sub(self, topic: str, cb: Any, raw: bool = False) -> None:
         spec = topics.TOPICS[topic]
         self.create_subscription(interface.msg_class(spec.type_name), spec.name, cb,
-                                 interface.qos_profile(spec.qos, LEASE_S), raw=raw)
+                                 interface.qos_profile(spec.qos, LEASE_S), raw=raw or self.raw)
 
     def publish(self, topic: str, t_ns: int) -> None:
         if topic not in self.matched:  # as the nodes' PublishGate: a volatile message sent before its reader
@@ -123,7 +139,7 @@ class Forwarder(Node):
         self.publish(topics.STATE, t_ns)
 
     def on_command(self, msg: Any) -> None:
-        t_ns = convert.stamp_ns(msg.header.stamp)
+        t_ns = _stamp_ns(msg)
         if t_ns != convert.seconds_to_ns(self.k):
             return
         if self.k == self.steps:
@@ -141,14 +157,14 @@ class Forwarder(Node):
 
     # controller
     def on_state_controller(self, msg: Any) -> None:
-        t_ns = convert.stamp_ns(msg.header.stamp)
+        t_ns = _stamp_ns(msg)
         self.publish(topics.TORQUE_DES, t_ns)
         if t_ns == convert.seconds_to_ns(self.steps):
             self.done = True
 
     # filter
     def on_state_filter(self, msg: Any) -> None:
-        t_ns = convert.stamp_ns(msg.header.stamp)
+        t_ns = _stamp_ns(msg)
         self.parts[t_ns] = self.parts.get(t_ns, 0) + 1
         if self.parts[t_ns] == len(topics.STATE_INPUTS):
             del self.parts[t_ns]
@@ -156,7 +172,7 @@ class Forwarder(Node):
             self.answer()
 
     def on_desired(self, msg: Any) -> None:
-        self.desired.add(convert.stamp_ns(msg.header.stamp))
+        self.desired.add(_stamp_ns(msg))
         self.answer()
 
     def answer(self) -> None:
@@ -173,6 +189,8 @@ class Forwarder(Node):
         self.count += 1
 
     def on_run_status(self, msg: Any) -> None:
+        if isinstance(msg, bytes):
+            msg = deserialize_message(msg, interface.msg_class(topics.TOPICS[topics.RUN_STATUS].type_name))
         if convert.run_status_from_msg(msg)[0] == topics.RUN_DONE:
             self.done = True
 
@@ -183,9 +201,10 @@ def main() -> int:
     ap.add_argument("--steps", type=int, required=True)
     ap.add_argument("--result", type=Path)
     ap.add_argument("--timeout", type=float, default=600.0)
+    ap.add_argument("--raw", action="store_true", help="take and send bytes (the real nodes' design since CdrLayout)")
     args = ap.parse_args()
     rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
-    node = Forwarder(args.role, args.steps)
+    node = Forwarder(args.role, args.steps, args.raw)
     ex = EventsExecutor()
     ex.add_node(node)
     deadline = time.monotonic() + args.timeout

@@ -191,7 +191,6 @@ class PlantNode(RtaNode):
         current_A = float(spacecraft.state_derivative(x, np.zeros(3), self.plant)[ENERGY]) / V
         inputs = convert.state_messages_cdr(fields, t_ns, V, current_A, self.wheel_effort_Nm)
         self._publish(topics.CLOCK, convert.clock_cdr(t_ns))
-        self._diagnose(topics.RUN_RUNNING)
         self._sent_s = self.wall_now_s()
         self._progress_s = self._sent_s
         for name in topics.STATE_INPUTS:
@@ -199,6 +198,7 @@ class PlantNode(RtaNode):
         self._publish(topics.STATE, convert.state_cdr(x, t_ns))
         if self.truth:
             self._publish(topics.STATE_TRUE, convert.state_cdr(self.x, t_ns))
+        self._diagnose(topics.RUN_RUNNING)  # after the state: the chain works on it meanwhile
 
     def _step(self, tau_Nm: np.ndarray) -> None:
         """Hold tau over [t_k, t_k+1) through the actuator (the core saturates and integrates), publish the
