@@ -151,13 +151,11 @@ def _frame(msg: Any, what: str, frame_id: str) -> None:
 def torque_from_msg(msg: Any) -> tuple[int, Array]:
     """(stamp [ns], torque (3,) [N m]) of a Vector3Stamped (a message, or its CDR bytes as a raw subscription
     takes them); frame must be `body`, values finite."""
-    if isinstance(msg, bytes):
-        got = layouts().torque.unpack(msg)
-        if got is None:
-            return torque_from_msg(layouts().torque.message(msg))
-        t_ns, (v,) = got
-        tau = np.array(v)
+    got = layouts().torque.unpack(msg) if isinstance(msg, bytes) else None
+    if got is not None:
+        t_ns, tau = got[0], np.array(got[1][0])
     else:
+        msg = _read(layouts().torque, msg)[1]
         t_ns = stamp_ns(msg.header.stamp)
         _frame(msg, "torque", topics.BODY_FRAME)
         tau = np.array([msg.vector.x, msg.vector.y, msg.vector.z], dtype=float)
@@ -314,12 +312,10 @@ ODOMETRY_FIELDS = tuple(name for name in FIELD_MESSAGES if name.startswith("Odom
 def odometry_fields(msg: Any, out: Array) -> None:
     """Attitude, rates, CW position and velocity of an Odometry (a message or its CDR bytes) into the fields
     out (`sensors.decode`'s layout); MessageError if its frames are not hill -> body."""
-    got = layouts().odometry.unpack(msg) if isinstance(msg, bytes) else None
-    if got is not None:
-        out[F_Q:F_Q + 4], out[F_POS:F_POS + 3], out[F_VEL_BODY:F_VEL_BODY + 3], out[F_OMEGA:F_OMEGA + 3] = got[1]
+    values, msg = _read(layouts().odometry, msg)
+    if values is not None:
+        out[F_Q:F_Q + 4], out[F_POS:F_POS + 3], out[F_VEL_BODY:F_VEL_BODY + 3], out[F_OMEGA:F_OMEGA + 3] = values
     else:
-        if isinstance(msg, bytes):
-            msg = layouts().odometry.message(msg)
         _frame(msg, "odometry", topics.HILL_FRAME)
         if msg.child_frame_id != topics.BODY_FRAME:
             raise MessageError(f"odometry child_frame_id must be {topics.BODY_FRAME!r}, got {msg.child_frame_id!r}")
@@ -335,6 +331,27 @@ def odometry_fields(msg: Any, out: Array) -> None:
             raise MessageError(f"{name} is not finite")
 
 
+def _read(layout: CdrLayout, msg: Any) -> tuple[list[tuple[Any, ...]] | None, Any]:
+    """(the slots' values, None) of CDR bytes in the layout; else (None, the message: deserialized by rclpy
+    if bytes of another layout, MessageError if not a message of that type)."""
+    if not isinstance(msg, bytes):
+        return None, msg
+    got = layout.unpack(msg)
+    return (got[1], None) if got is not None else (None, layout.message(msg))
+
+
+_VIEWS: tuple[tuple[str, str, str, str, slice, Callable[[Any], Any], Callable[[Any], Any]], ...] = (
+    (topics.TEMPERATURE, "temperature", "temperature", topics.BODY_FRAME, slice(F_TEMP_C, F_TEMP_C + 1),
+     lambda v: v[0], lambda m: m.temperature),
+    (topics.BATTERY, "battery", "battery", topics.BODY_FRAME, slice(F_CHARGE_AH, F_CHARGE_AH + 1),
+     lambda v: v[1][1], lambda m: m.charge),
+    (topics.SUN_VECTOR, "sun", "sun vector", topics.HILL_FRAME, slice(F_SUN, F_SUN + 3),
+     lambda v: v[0], lambda m: (m.vector.x, m.vector.y, m.vector.z)),
+)
+"""The state views read by `state_fields` alike: (topic, its `Layouts` attribute, name in errors, frame_id,
+where in the fields, the value from the layout's slots, the value from a message)."""
+
+
 def state_fields(msgs: Mapping[str, Any]) -> Array:
     """The message fields (FIELD_SIZE,) of one state from its `topics.STATE_INPUTS` messages (by topic),
     for `sensors.decode`. MessageError (one line) if a frame, a joint name or a size is wrong, or a value
@@ -342,41 +359,22 @@ def state_fields(msgs: Mapping[str, Any]) -> Array:
     f = np.empty(FIELD_SIZE)
     odometry_fields(msgs[topics.ODOMETRY], f)
     L = layouts()
-    wheels = msgs[topics.WHEELS]
-    got = L.wheels.unpack(wheels) if isinstance(wheels, bytes) else None
-    if got is not None:
-        f[F_WHEEL:F_WHEEL + 3] = got[1][0]
+    values, wheels = _read(L.wheels, msgs[topics.WHEELS])
+    if values is not None:
+        f[F_WHEEL:F_WHEEL + 3] = values[0]
     else:
-        wheels = L.wheels.message(wheels) if isinstance(wheels, bytes) else wheels
         _frame(wheels, "wheels", topics.BODY_FRAME)
         if list(wheels.name) != list(topics.WHEEL_JOINTS) or len(wheels.velocity) != 3:
             raise MessageError(f"wheels must be joints {topics.WHEEL_JOINTS} with a velocity each, got "
                                f"{tuple(wheels.name)} with {len(wheels.velocity)} velocities")
         f[F_WHEEL:F_WHEEL + 3] = wheels.velocity
-    temperature = msgs[topics.TEMPERATURE]
-    got = L.temperature.unpack(temperature) if isinstance(temperature, bytes) else None
-    if got is not None:
-        f[F_TEMP_C] = got[1][0][0]
-    else:
-        temperature = L.temperature.message(temperature) if isinstance(temperature, bytes) else temperature
-        _frame(temperature, "temperature", topics.BODY_FRAME)
-        f[F_TEMP_C] = temperature.temperature
-    battery = msgs[topics.BATTERY]
-    got = L.battery.unpack(battery) if isinstance(battery, bytes) else None
-    if got is not None:
-        f[F_CHARGE_AH] = got[1][1][1]
-    else:
-        battery = L.battery.message(battery) if isinstance(battery, bytes) else battery
-        _frame(battery, "battery", topics.BODY_FRAME)
-        f[F_CHARGE_AH] = battery.charge
-    sun = msgs[topics.SUN_VECTOR]
-    got = L.sun.unpack(sun) if isinstance(sun, bytes) else None
-    if got is not None:
-        f[F_SUN:F_SUN + 3] = got[1][0]
-    else:
-        sun = L.sun.message(sun) if isinstance(sun, bytes) else sun
-        _frame(sun, "sun vector", topics.HILL_FRAME)
-        f[F_SUN:F_SUN + 3] = (sun.vector.x, sun.vector.y, sun.vector.z)
+    for topic, layout, what, frame, at, from_bytes, from_msg in _VIEWS:
+        values, msg = _read(getattr(L, layout), msgs[topic])
+        if values is not None:
+            f[at] = from_bytes(values)
+        else:
+            _frame(msg, what, frame)
+            f[at] = from_msg(msg)
     if not np.all(np.isfinite(f)):
         names = [n for n, (i, k) in FIELD_MESSAGES.items() if not np.all(np.isfinite(f[i:i + k]))]
         raise MessageError(f"{names[0]} is not finite")
