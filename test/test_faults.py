@@ -327,6 +327,31 @@ def test_output_guard_replaces_an_invalid_filter_output_with_zero(filter_node: A
     assert all(np.array_equal(r["u"], np.zeros(3)) for r in recs)
 
 
+def test_a_lost_peer_back_for_less_than_its_confirmation_is_the_same_episode(filter_node: Any) -> None:
+    """A killed writer's late packets can assert its liveliness once more after it was reported lost, and it is
+    lost again a lease later (the flake hunt saw it): one episode, one report. Back for good only after
+    PEER_BACK_LEASES leases alive (the timer's callback, called here as its firing would)."""
+    from types import SimpleNamespace
+
+    from rta_attitude.ros.spin import PEER_BACK_LEASES
+
+    node = filter_node
+    _reset(node)
+    lost = SimpleNamespace(alive_count=0, not_alive_count=1, alive_count_change=-1, not_alive_count_change=1)
+    alive = SimpleNamespace(alive_count=1, not_alive_count=0, alive_count_change=1, not_alive_count_change=-1)
+    for info in (lost, alive, lost, alive, lost):
+        node._on_liveliness(topics.PLANT, info)
+    assert node.faults.episodes["plant_lost"] == 1 and node.counts["plant_lost"] == 1
+    assert topics.PLANT in node.lost and not node.returning
+    node._on_liveliness(topics.PLANT, alive)
+    timer = node.returning[topics.PLANT]
+    assert timer.timer_period_ns == round(PEER_BACK_LEASES * node.knobs["liveliness_lease_s"] * 1e9)
+    node._peer_back(topics.PLANT)  # alive for the whole confirmation: back
+    assert topics.PLANT not in node.lost and "plant_lost" not in node.faults.active and not node.returning
+    node._on_liveliness(topics.PLANT, lost)  # a new loss is a new episode
+    assert node.faults.episodes["plant_lost"] == 2
+
+
 def test_stale_states_are_dropped_against_the_sim_clock(filter_node: Any) -> None:
     """With use_sim_time, a state older than /clock by more than max_state_age_s is dropped."""
     from rosgraph_msgs.msg import Clock

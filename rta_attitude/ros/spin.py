@@ -62,6 +62,8 @@ from rta_attitude.ros.faults import FaultLog, StampOrder
 GATE_POLL_S = 0.005
 """How often a closed gate checks its publisher's matches [s]."""
 SPIN_TIMEOUT_S = 0.1
+PEER_BACK_LEASES = 3
+"""A lost peer counts as back after this many liveliness leases alive again (`RtaNode._on_liveliness`)."""
 """spin_once timeout of main's loop: a signal is noticed within this time [s] (the EventsExecutor's
 own spin() does not return on SIGINT in rclpy 7.1)."""
 FLUSH_SLICE_S = 0.05
@@ -112,6 +114,8 @@ class RtaNode(Node):
         self.gates: dict[str, PublishGate] = {}
         self.lost: set[str] = set()
         """Peers (roles) whose writer lost its liveliness and has not shown a sign of life since."""
+        self.returning: dict[str, Timer] = {}
+        """Lost peers alive again, not yet for PEER_BACK_LEASES leases (`_on_liveliness`)."""
         self.counts.setdefault("clock_jumps", 0)
         # a backward jump of /clock (a replay that starts over) resets the stamp screens
         self._jump_handle = self.get_clock().create_jump_callback(
@@ -153,13 +157,29 @@ class RtaNode(Node):
                           f"QoS ({policy}) and is not matched{hint}")
 
     def _on_liveliness(self, peer: str, info: QoSLivelinessChangedInfo) -> None:
+        """A peer's writer lost its liveliness: reported once (fault `<peer>_lost`). It counts as back only once
+        alive again for PEER_BACK_LEASES leases: a killed writer's last packets, delivered late under load,
+        assert its liveliness once more, and it is lost again a lease later (found by the flake hunt of
+        2026-11-27: the controller reported a killed plant lost, back and lost again within 1.3 s)."""
         if info.not_alive_count_change > 0 and info.alive_count == 0:
-            if peer not in self.lost:
+            back = self.returning.pop(peer, None)
+            if back is not None:  # alive for less than PEER_BACK_LEASES leases: the same episode
+                self.destroy_timer(back)
+            elif peer not in self.lost:
                 self.lost.add(peer)
                 self.faults.fault(f"{peer}_lost", f"the {peer} shows no sign of life for "
                                   f"{self.knobs['liveliness_lease_s']:g} s (killed or hung)")
                 self.on_peer_lost(peer)
-        elif info.alive_count_change > 0 and peer in self.lost:
+        elif info.alive_count_change > 0 and peer in self.lost and peer not in self.returning:
+            self.returning[peer] = self.wall_timer(PEER_BACK_LEASES * self.knobs["liveliness_lease_s"],
+                                                   partial(self._peer_back, peer))
+
+    def _peer_back(self, peer: str) -> None:
+        """A lost peer stayed alive for PEER_BACK_LEASES leases: back (the fault clears)."""
+        timer = self.returning.pop(peer, None)
+        if timer is not None:
+            self.destroy_timer(timer)
+        if peer in self.lost:
             self.lost.discard(peer)
             self.faults.clear(f"{peer}_lost")
 
