@@ -286,7 +286,7 @@ INPUT_COUNTERS: tuple[str, ...] = (
 - `output_guard`: a filter output that was not finite or not inside U, replaced by u = 0 (never expected);
 - `plant_lost`: the plant's `state` writer lost its liveliness (no sign of life for `liveliness_lease_s`:
   the process was killed or hangs); the states that wait for their torque_des are dropped (no command is
-  sent to a dead plant);
+  sent to a dead plant); it counts as back after 3 leases alive again (one episode, one report);
 - `clock_jumps`: /clock jumped backwards (a replay restarted): the stamp screens were reset.
 """
 INPUT_SOURCE_KEY = "u_des_source"
