@@ -211,6 +211,8 @@ def main() -> int:
     try:
         while not node.done and time.monotonic() < deadline:
             ex.spin_once(timeout_sec=0.1)
+        if args.result is not None and node.result:  # before the teardown (bench_dds: a hang there is not fatal)
+            args.result.write_text(json.dumps(node.result))
         end = time.monotonic() + 0.5  # let the last messages reach their readers
         while time.monotonic() < end:
             ex.spin_once(timeout_sec=0.05)
@@ -218,8 +220,6 @@ def main() -> int:
         ex.shutdown()
         node.destroy_node()
         rclpy.try_shutdown()
-    if args.result is not None and node.result:
-        args.result.write_text(json.dumps(node.result))
     return 0 if node.done else 1
 
 
