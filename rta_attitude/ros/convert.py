@@ -151,11 +151,10 @@ def _frame(msg: Any, what: str, frame_id: str) -> None:
 def torque_from_msg(msg: Any) -> tuple[int, Array]:
     """(stamp [ns], torque (3,) [N m]) of a Vector3Stamped (a message, or its CDR bytes as a raw subscription
     takes them); frame must be `body`, values finite."""
-    got = layouts().torque.unpack(msg) if isinstance(msg, bytes) else None
+    got, msg = _read(layouts().torque, msg)
     if got is not None:
         t_ns, tau = got[0], np.array(got[1][0])
     else:
-        msg = _read(layouts().torque, msg)[1]
         t_ns = stamp_ns(msg.header.stamp)
         _frame(msg, "torque", topics.BODY_FRAME)
         tau = np.array([msg.vector.x, msg.vector.y, msg.vector.z], dtype=float)
@@ -315,9 +314,9 @@ assert _ODOMETRY_SPAN.stop - _ODOMETRY_SPAN.start == sum(FIELD_MESSAGES[n][1] fo
 def odometry_fields(msg: Any, out: Array) -> None:
     """Attitude, rates, CW position and velocity of an Odometry (a message or its CDR bytes) into the fields
     out (`sensors.decode`'s layout); MessageError if its frames are not hill -> body."""
-    values, msg = _read(layouts().odometry, msg)
-    if values is not None:
-        out[F_Q:F_Q + 4], out[F_POS:F_POS + 3], out[F_VEL_BODY:F_VEL_BODY + 3], out[F_OMEGA:F_OMEGA + 3] = values
+    got, msg = _read(layouts().odometry, msg)
+    if got is not None:
+        out[F_Q:F_Q + 4], out[F_POS:F_POS + 3], out[F_VEL_BODY:F_VEL_BODY + 3], out[F_OMEGA:F_OMEGA + 3] = got[1]
     else:
         _frame(msg, "odometry", topics.HILL_FRAME)
         if msg.child_frame_id != topics.BODY_FRAME:
@@ -335,13 +334,13 @@ def odometry_fields(msg: Any, out: Array) -> None:
                 raise MessageError(f"{name} is not finite")
 
 
-def _read(layout: CdrLayout, msg: Any) -> tuple[list[tuple[Any, ...]] | None, Any]:
-    """(the slots' values, None) of CDR bytes in the layout; else (None, the message: deserialized by rclpy
-    if bytes of another layout, MessageError if not a message of that type)."""
+def _read(layout: CdrLayout, msg: Any) -> tuple[tuple[int, list[tuple[Any, ...]]] | None, Any]:
+    """((stamp, the slots' values), None) of CDR bytes in the layout (`CdrLayout.unpack`); else (None, the
+    message: deserialized by rclpy if bytes of another layout, MessageError if not a message of that type)."""
     if not isinstance(msg, bytes):
         return None, msg
     got = layout.unpack(msg)
-    return (got[1], None) if got is not None else (None, layout.message(msg))
+    return (got, None) if got is not None else (None, layout.message(msg))
 
 
 _VIEWS: tuple[tuple[str, str, str, str, slice, Callable[[Any], Any], Callable[[Any], Any]], ...] = (
@@ -363,9 +362,9 @@ def state_fields(msgs: Mapping[str, Any]) -> Array:
     f = np.empty(FIELD_SIZE)
     odometry_fields(msgs[topics.ODOMETRY], f)
     L = layouts()
-    values, wheels = _read(L.wheels, msgs[topics.WHEELS])
-    if values is not None:
-        f[F_WHEEL:F_WHEEL + 3] = values[0]
+    got, wheels = _read(L.wheels, msgs[topics.WHEELS])
+    if got is not None:
+        f[F_WHEEL:F_WHEEL + 3] = got[1][0]
     else:
         _frame(wheels, "wheels", topics.BODY_FRAME)
         if list(wheels.name) != list(topics.WHEEL_JOINTS) or len(wheels.velocity) != 3:
@@ -373,9 +372,9 @@ def state_fields(msgs: Mapping[str, Any]) -> Array:
                                f"{tuple(wheels.name)} with {len(wheels.velocity)} velocities")
         f[F_WHEEL:F_WHEEL + 3] = wheels.velocity
     for topic, layout, what, frame, at, from_bytes, from_msg in _VIEWS:
-        values, msg = _read(getattr(L, layout), msgs[topic])
-        if values is not None:
-            f[at] = from_bytes(values)
+        got, msg = _read(getattr(L, layout), msgs[topic])
+        if got is not None:
+            f[at] = from_bytes(got[1])
         else:
             _frame(msg, what, frame)
             f[at] = from_msg(msg)
@@ -498,7 +497,6 @@ class CdrLayout:
         if (len(probed) != self.longest or size > self.longest or probed[:2] != b"\x00\x01"
                 or probed[4:12] != _STAMP.pack(0x5CE7F00D, 0x0A0B0C0D) or cdr_spans(probe)[1] != fixed):  # fmt: skip
             raise RuntimeError(f"{self.msg_type.__name__}: not a fixed little-endian layout with a leading stamp")
-        self.names = tuple(slots)
         self.slots: list[tuple[struct.Struct, int]] = []
         for st, mark, setter in marks:
             if mark is None:
@@ -584,58 +582,32 @@ def _seq(field: str) -> Callable[[Any, Sequence[Any]], None]:
     return setter
 
 
-def _make(cls: type, frame_id: str = "", **fields: Any) -> Callable[[], Any]:
-    def make() -> Any:
-        msg = cls()
-        if frame_id:
-            msg.header.frame_id = frame_id
-        for k, v in fields.items():
-            setattr(msg, k, v)
-        return msg
-
-    return make
-
-
 class Layouts:
-    """The CdrLayouts of the loop's per-step messages, made once per process (`layouts()`)."""
+    """The CdrLayouts of the loop's per-step messages, made once per process (`layouts()`). Each template is
+    the message its object builder makes (frame ids, names, constants written once, there)."""
 
     def __init__(self) -> None:
-        self.clock = CdrLayout(Clock, {})
-        self.state = CdrLayout(_make(JointState, name=list(STATE_NAMES), position=[0.0] * STATE_SIZE),
+        f, zero = np.zeros(FIELD_SIZE), np.zeros(3)
+        self.clock = CdrLayout(lambda: clock_msg(0), {})
+        self.state = CdrLayout(lambda: state_msg(np.zeros(STATE_SIZE), 0),
                                {"position": (f"{STATE_SIZE}d", _seq("position"))})
-        self.torque = CdrLayout(_make(Vector3Stamped, topics.BODY_FRAME), {"vector": ("3d", _set("vector", "x y z"))})
-        self.sun = CdrLayout(_make(Vector3Stamped, topics.HILL_FRAME), {"vector": ("3d", _set("vector", "x y z"))})
-
-        def odometry() -> Odometry:
-            msg = Odometry()
-            msg.header.frame_id, msg.child_frame_id = topics.HILL_FRAME, topics.BODY_FRAME
-            return msg
-
-        self.odometry = CdrLayout(odometry, {
+        self.torque = CdrLayout(lambda: torque_msg(zero, 0), {"vector": ("3d", _set("vector", "x y z"))})
+        self.sun = CdrLayout(lambda: sun_vector_msg(f, 0), {"vector": ("3d", _set("vector", "x y z"))})
+        self.odometry = CdrLayout(lambda: odometry_msg(f, 0), {
             "orientation": ("4d", _set("pose.pose.orientation", "x y z w")),
             "position": ("3d", _set("pose.pose.position", "x y z")),
             "linear": ("3d", _set("twist.twist.linear", "x y z")),
             "angular": ("3d", _set("twist.twist.angular", "x y z"))})
-        self.wheels = CdrLayout(_make(JointState, topics.BODY_FRAME, name=list(topics.WHEEL_JOINTS),
-                                      velocity=[0.0] * 3, effort=[0.0] * 3),
+        self.wheels = CdrLayout(lambda: wheels_msg(f, 0, zero),
                                 {"velocity": ("3d", _seq("velocity")), "effort": ("3d", _seq("effort"))})
-        self.temperature = CdrLayout(_make(Temperature, topics.BODY_FRAME),
-                                     {"temperature": ("d", _set("", "temperature"))})
-
-        def battery() -> BatteryState:
-            msg = BatteryState()
-            msg.header.frame_id = topics.BODY_FRAME
-            msg.capacity = msg.design_capacity = msg.percentage = msg.temperature = math.nan
-            msg.present = True
-            msg.power_supply_technology = BatteryState.POWER_SUPPLY_TECHNOLOGY_UNKNOWN
-            return msg
+        self.temperature = CdrLayout(lambda: temperature_msg(f, 0), {"temperature": ("d", _set("", "temperature"))})
 
         def status(msg: Any, vals: Sequence[Any]) -> None:
             msg.power_supply_status = int(vals[0])
 
         # voltage, temperature (NaN), current, charge are consecutive float32: one slot of three read through
         # the middle one's NaN would not be unique, so voltage and current+charge are two slots
-        self.battery = CdrLayout(battery, {
+        self.battery = CdrLayout(lambda: battery_msg(f, 0, 0.0, 0.0), {
             "voltage": ("f", _set("", "voltage")), "current_charge": ("2f", _set("", "current charge")),
             "status": ("B", status)})
         self.by_topic = {topics.ODOMETRY: self.odometry, topics.WHEELS: self.wheels,
