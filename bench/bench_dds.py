@@ -27,7 +27,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import random
 import subprocess
 import sys
 import tempfile
@@ -38,11 +37,11 @@ import numpy as np
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
-os.environ.setdefault("ROS_DOMAIN_ID", str(random.SystemRandom().randint(40, 100)))
-os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
-os.environ.setdefault("AMENT_PREFIX_PATH", sys.prefix)
 
 import machine  # noqa: E402
+
+machine.isolate_ros()
+import forward_chain  # noqa: E402
 
 from rta_attitude import config, topics  # noqa: E402
 from rta_attitude.cli import launch as launch_cli  # noqa: E402
@@ -87,10 +86,7 @@ def floor_run(steps: int, work: Path, raw: bool = False) -> dict[str, float]:
     """One forward-only chain (`raw`: of bytes): the plant's loop time and the total from start to the last exit."""
     result = work / f"chain_{time.monotonic_ns()}.json"
     t0 = time.perf_counter()
-    procs = [subprocess.Popen([sys.executable, str(HERE / "forward_chain.py"), role, "--steps", str(steps),
-                               *(["--result", str(result)] if role == topics.PLANT else []),
-                               *(["--raw"] if raw else [])])
-             for role in ROLES]  # fmt: skip
+    procs = [subprocess.Popen(forward_chain.command(role, steps, result, raw)) for role in ROLES]
     codes = []
     for p in procs:
         try:

@@ -195,6 +195,12 @@ class Forwarder(Node):
             self.done = True
 
 
+def command(role: str, steps: int, result: Path, raw: bool = False) -> list[str]:
+    """This script's command line for one role of a chain of `steps` steps (the plant writes `result`)."""
+    return [sys.executable, str(Path(__file__).resolve()), role, "--steps", str(steps),
+            *(["--result", str(result)] if role == topics.PLANT else []), *(["--raw"] if raw else [])]
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("role", choices=(topics.PLANT, topics.CONTROLLER, topics.FILTER, topics.RECORDER))

@@ -6,13 +6,23 @@ from __future__ import annotations
 import json
 import os
 import platform
+import random
 import subprocess
+import sys
 import time
 from pathlib import Path
 from typing import Any
 
 REPO = Path(__file__).resolve().parents[1]
 RESULTS = REPO / "bench" / "results"
+
+
+def isolate_ros() -> None:
+    """The ROS environment of a DDS benchmark and its children, where not set already: a ROS_DOMAIN_ID of its
+    own (random, 40-100), localhost-only discovery, and this environment's prefix as AMENT_PREFIX_PATH."""
+    os.environ.setdefault("ROS_DOMAIN_ID", str(random.SystemRandom().randint(40, 100)))
+    os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    os.environ.setdefault("AMENT_PREFIX_PATH", sys.prefix)
 
 
 def describe() -> dict[str, Any]:

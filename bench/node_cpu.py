@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import random
 import signal
 import subprocess
 import sys
@@ -30,11 +29,11 @@ import numpy as np
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
-os.environ.setdefault("ROS_DOMAIN_ID", str(random.SystemRandom().randint(40, 100)))
-os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
-os.environ.setdefault("AMENT_PREFIX_PATH", sys.prefix)
 
 import machine  # noqa: E402
+
+machine.isolate_ros()
+import forward_chain  # noqa: E402
 
 from rta_attitude import topics  # noqa: E402
 from rta_attitude.cli import launch as launch_cli  # noqa: E402
@@ -98,10 +97,8 @@ def real_cpu(steps: int, work: Path) -> dict[str, float]:
 def floor_cpu(steps: int, work: Path, raw: bool) -> dict[str, float]:
     """bench/forward_chain.py's four processes (`raw`: of bytes) for `steps` steps: each one's CPU [s]."""
     result = work / f"chain_{time.monotonic_ns()}.json"
-    procs = {role: subprocess.Popen([sys.executable, str(HERE / "forward_chain.py"), role, "--steps", str(steps),
-                                     *(["--result", str(result)] if role == topics.PLANT else []),
-                                     *(["--raw"] if raw else [])], stdin=subprocess.DEVNULL)
-             for role in ROLES}  # fmt: skip
+    procs = {role: subprocess.Popen(forward_chain.command(role, steps, result, raw), stdin=subprocess.DEVNULL)
+             for role in ROLES}
     return _reap(procs, stop_after=tuple(ROLES))
 
 
