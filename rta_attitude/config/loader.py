@@ -290,6 +290,7 @@ def from_parameters(params: Mapping[str, Any], source: str = "<memory>") -> Conf
         backup_law=fi.text("backup_law", "none"), backup_horizon_s=fi.number("backup_horizon_s", 300.0),
         backup_nominal_s=fi.number("backup_nominal_s", 20.0),
         backup_energy_lookahead_s=fi.number("backup_energy_lookahead_s", 6000.0),
+        actuator_lag=fi.text("actuator_lag", "compensate"),
         priorities=fi.levels("priorities", DEFAULT_PRIORITIES))
     fi.done()
     ct = root.section("controller")

@@ -38,6 +38,11 @@ barrier keeps a reserve, while the battery integrates a constant load (docs/deci
 BACKUP_SOLVERS: tuple[str, ...] = ("quadprog", "none")
 SOLVERS: tuple[str, ...] = ("active_set", "proxsuite")
 CONTROLLERS: tuple[str, ...] = ("pd", "none")
+ACTUATOR_LAGS: tuple[str, ...] = ("compensate", "bound")
+"""How the robust filter treats the wheel drive's first-order lag (`filter.actuator_lag`, with sensor errors on):
+compensate (the filter tracks the drive's state from its own commands and sends the command whose held mean
+is its answer: `filter.pipeline.drive_command`); bound (the answer is sent as it is and every row keeps the
+lag's largest departure from it, a full reversal inside U, as a margin: docs/noise.md)."""
 BACKUP_LAWS: tuple[str, ...] = ("none", "sun_safe")
 """Backup laws of the gatekeeper (`filter.backup_law`): none (no gatekeeper: the ASIF's answer is
 applied); sun_safe (the filter applies its answer only if the answer then the sun-safe law are safe
@@ -371,6 +376,8 @@ class FilterOptions:
     accepted only if at its end the battery could stay above E_min for this long more with the panel
     held where the wheels allow it nearest the sun (`filter.backup.energy_reserve`); 0: off. About one
     orbit (2 pi / n = 6,118 s): the sun's direction to the momentum repeats each orbit."""
+    actuator_lag: str = "compensate"
+    """Robust preset with sensor errors on: how the filter treats the wheel drive's lag (ACTUATOR_LAGS)."""
     priorities: tuple[tuple[str, ...], ...] = DEFAULT_PRIORITIES
     """Levels of constraint groups (BARRIER_GROUPS), most important first: with `fallback: prioritize`, an
     infeasible QP is answered by letting the least important level give way first, by as little as
@@ -383,6 +390,7 @@ class FilterOptions:
         _choice("filter.backup_solver", self.backup_solver, BACKUP_SOLVERS)
         _choice("filter.fallback", self.fallback, FALLBACKS)
         _choice("filter.backup_law", self.backup_law, BACKUP_LAWS)
+        _choice("filter.actuator_lag", self.actuator_lag, ACTUATOR_LAGS)
         _positive("filter.backup_horizon_s", self.backup_horizon_s)
         if not (math.isfinite(self.backup_energy_lookahead_s) and 0.0 <= self.backup_energy_lookahead_s <= 1e6):
             raise ConfigError(f"filter.backup_energy_lookahead_s must be between 0 (off) and 1e6 s, got "

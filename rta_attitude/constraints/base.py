@@ -121,7 +121,8 @@ def constraint_record(cfg: Config) -> NDArray[np.void]:
     c["sin_pole_guard"] = math.sin(cfg.filter.pole_guard_rad)
     c["robust"] = robust
     c["dt_s"], c["zoh_margin"] = cfg.filter.sample_time_s, cfg.filter.zoh_margin
-    c["u_max_rad_s2"] = cfg.u_max_rad_s2
+    # with the drive's lag compensated, the answers keep to the part of U every drive state can deliver
+    c["u_max_rad_s2"] = (1.0 - 2.0 * drive_lag(cfg)[0]) * cfg.u_max_rad_s2
     if robust and cfg.sensors.enabled:
         for key, value in measurement_errors(cfg).items():
             c[key] = value
@@ -130,12 +131,27 @@ def constraint_record(cfg: Config) -> NDArray[np.void]:
     return rec
 
 
+def drive_lag(cfg: Config) -> tuple[float, float]:
+    """(c, e) of the wheel drive's first-order lag (time constant tau) over a hold dt when the filter compensates
+    it (robust preset, sensor errors on, `filter.actuator_lag: compensate`), else (0, 0): the held mean of a
+    command v_cmd from the drive's state v is (1 - c) v_cmd + c v, c = (tau/dt)(1 - e^(-dt/tau)), and the state
+    after the hold v_cmd + (v - v_cmd) e, e = e^(-dt/tau) (`dynamics.sensors.actuate`). A held mean a with
+    |a_i| <= (1 - 2c) U_i is reached from every state |v_i| <= U_i by a command within U: (a - c v) / (1 - c)."""
+    s, dt = cfg.sensors, cfg.filter.sample_time_s
+    tau = s.actuator_lag_s
+    if not (cfg.filter.preset == "robust" and s.enabled and tau > 0 and cfg.filter.actuator_lag == "compensate"):
+        return 0.0, 0.0
+    decay = math.exp(-dt / tau)
+    return (tau / dt) * (1.0 - decay), decay
+
+
 def measurement_errors(cfg: Config) -> dict[str, float | NDArray[np.float64]]:
     """Bounds on the errors of what the filter reads and of what the wheels do over one hold, from the
     `sensors:` standard deviations (b = bound_sigma of them; docs/noise.md derives each):
 
     - err_u,a = 2 U_a (tau/dt)(1 - e^(-dt/tau)) + b sigma_u: the lag's largest departure from a held
-      command (a full reversal inside U) plus torque noise, per axis, rad/s^2;
+      command (a full reversal inside U) plus torque noise, per axis, rad/s^2; b sigma_u alone where the
+      filter compensates the lag (`drive_lag`);
     - err_omega_axis = b sqrt(sigma_g^2 + sigma_b^2 + walk^2 horizon); err_omega = sqrt(3) of it (norm);
     - err_att = sqrt(3) b sigma_att + |G err_u| dt^2 / 2 (the actuator's drift of the attitude in a hold);
     - err_psi = b sigma_psi; err_T = b sigma_T; err_E = b sigma_E.
@@ -143,6 +159,8 @@ def measurement_errors(cfg: Config) -> dict[str, float | NDArray[np.float64]]:
     s, b, dt = cfg.sensors, cfg.sensors.bound_sigma, cfg.filter.sample_time_s
     tau = s.actuator_lag_s
     lag = (tau / dt) * (1.0 - math.exp(-dt / tau)) if tau > 0 else 0.0
+    if drive_lag(cfg)[0] > 0.0:  # the filter sends the command whose held mean is its answer
+        lag = 0.0
     err_u = 2.0 * cfg.u_max_rad_s2 * lag + b * s.torque_noise_rad_s2
     gyro = b * math.sqrt(s.gyro_noise_rad_s**2 + s.gyro_bias_rad_s**2
                          + s.gyro_bias_walk_rad_s_sqrt_s**2 * s.bias_horizon_s)
@@ -228,6 +246,6 @@ def nan_min(a: float, b: float) -> float:
 
 __all__ = [
     "BATTERY", "COMMUNICATION", "CONSTRAINT_DTYPE", "EXCLUSION_ZONE", "GAIN_DTYPE", "N_CONSTRAINTS", "OMEGA_X", "PSI_X",
-    "TABLE_DTYPE", "TEMPERATURE", "ZOH_CHECKS", "ZOH_ROWS", "angle_rate_error", "constraint_record", "group_of",
-    "measurement_errors", "nan_max", "nan_min", "second_order", "speed_limit_row",
+    "TABLE_DTYPE", "TEMPERATURE", "ZOH_CHECKS", "ZOH_ROWS", "angle_rate_error", "constraint_record", "drive_lag",
+    "group_of", "measurement_errors", "nan_max", "nan_min", "second_order", "speed_limit_row",
 ]  # fmt: skip

@@ -50,7 +50,9 @@ STATUS_PASS, STATUS_SOLVED, STATUS_FALLBACK = outcome.STATUS_NAMES
 class FilterResult:
     """What filter call(s) did: a view of RESULT_DTYPE record(s), shape () for one state or (N,).
 
-    Array fields follow `names` on their last axis (m) or are per axis of u (3): u, u_des, h, psi0,
+    Array fields follow `names` on their last axis (m) or are per axis of u (3): u (the command sent),
+    u_held (the filter's answer: what the wheels hold over the sample; u but where the drive's lag is
+    compensated, `filter.pipeline.drive_command`), u_des, h, psi0,
     psi1, bc (barrier conditions at u, slack not included), slack, intervening (rows active at the
     solution), uncontrollable, box_active, lo, hi. Text fields: status ('pass', 'solved', 'fallback'),
     fallback (the policy applied, 'non_finite_u_des', 'invalid_state' or ''), solver_status, gate
@@ -69,6 +71,7 @@ class FilterResult:
         return self.record[name]
 
     u = property(lambda self: self._field("u"))
+    u_held = property(lambda self: self._field("u_held"))
     u_des = property(lambda self: self._field("u_des"))
     h = property(lambda self: self._field("h"))
     psi0 = property(lambda self: self._field("psi0"))

@@ -147,6 +147,8 @@ BACKUP_DTYPE = np.dtype([
 
 GATE_DTYPE = np.dtype([
     ("plan_steps", np.int64),            # samples the committed plan is still verified for (0: none)
+    ("drive", np.float64, (3,)),         # the wheel drive's state as the filter's commands left it, rad/s^2
+    # (`pipeline.drive_command`; 0 at rest, and where the lag is not compensated)
     ("plan_n", np.int64),                # samples of the committed nominal plan (0: none) ...
     ("plan_at", np.int64),               # ... the one the next call should be at
     ("plan_x", np.float64, (MAX_NOMINAL_STEPS, STATE_SIZE)),  # its states at the samples (as received)
@@ -751,8 +753,11 @@ def rollout(x0: Array, u0: Array, f: np.void, g: np.void, traj: Array, record: b
 
 @numba.njit(**LEAF)
 def reset(g: np.void) -> None:
-    """Forget the committed plan (a new run starts): the gate's only memory."""
+    """Forget the committed plan and the drive's state (a new run starts: the wheels' drive at rest): the
+    filter's only memory."""
     g.plan_steps = 0
+    for a in range(3):
+        g.drive[a] = 0.0
     g.plan_law = SUN_SAFE_VARIANT
     g.plan_n = g.plan_at = 0
     g.nominal_wait = 0

@@ -39,6 +39,7 @@ from rta_attitude.constraints.base import (
     TABLE_DTYPE,
     ZOH_ROWS,
     constraint_record,
+    drive_lag,
     group_of,
 )
 from rta_attitude.constraints.geometry import CONTEXT_DTYPE
@@ -130,11 +131,15 @@ FILTER_DTYPE = np.dtype([
     ("backup", BACKUP_DTYPE),                # the gatekeeper (backup law NO_LAW: off)
     ("level", np.int64, (M,)),               # priority level of each constraint (0: most important)
     ("n_levels", np.int64),
+    ("lag_gain", np.float64),                # the drive's lag compensated: c and e of `constraints.base.drive_lag`
+    ("lag_decay", np.float64),               # (0: not compensated)
 ])  # fmt: skip
 """Everything one filter call reads, by name."""
 
 RESULT_DTYPE = np.dtype([
-    ("u", np.float64, (3,)),                 # u_act, rad/s^2: finite, inside the box
+    ("u", np.float64, (3,)),                 # u_act, rad/s^2, the command sent: finite, inside U
+    ("u_held", np.float64, (3,)),            # the filter's answer: what the wheels hold over the sample (u
+    # but where the drive's lag is compensated: `drive_command`)
     ("u_des", np.float64, (3,)),             # as received
     ("h", np.float64, (M,)),                 # physical h at x
     ("psi0", np.float64, (M,)),              # HOCBF levels at x
@@ -193,6 +198,7 @@ def filter_record(cfg: Config) -> NDArray[np.void]:
     f["backup"] = backup_record(cfg)[0]
     f["level"] = constraint_levels(cfg.filter.priorities)
     f["n_levels"] = len(cfg.filter.priorities)
+    f["lag_gain"], f["lag_decay"] = drive_lag(cfg)
     apply_measurement_margins(rec, cfg)  # the backup law inside its rollouts' margins (sensor errors on)
     return rec
 
@@ -817,13 +823,40 @@ def gate_call(x: Array, u_des: Array, f: np.void, wsa: NDArray[np.void], r: np.v
     return code
 
 
+@numba.njit(**LEAF)
+def drive_command(f: np.void, g: np.void, r: np.void) -> None:
+    """The command r.u that makes the wheel drive hold the filter's answer r.u_held over the sample, and the
+    drive's state after it (g.drive). The drive's first-order lag holds (1 - c) v_cmd + c v from its state v
+    (`constraints.base.drive_lag`), so v_cmd = (u_held - c v) / (1 - c), within U wherever |u_held| keeps to
+    (1 - 2c) U (the filter's box then). Not compensated (c = 0): the answer itself."""
+    c, e = f.lag_gain, f.lag_decay
+    for a in range(3):
+        if c > 0.0:
+            v = g.drive[a]
+            cmd = (r.u_held[a] - c * v) / (1.0 - c)
+            r.u[a] = cmd
+            g.drive[a] = cmd + (v - cmd) * e
+        else:
+            r.u[a] = r.u_held[a]
+
+
 @numba.njit(**JIT)
 def filter_state(x: Array, u_des: Array, f: np.void, wsa: NDArray[np.void], r: np.void) -> None:
-    """One whole filter call: state x (19,), desired wheel accelerations u_des (3,) -> result record r;
-    wsa: the filter's workspaces (`new_workspace`)."""
+    """One whole filter call: state x (19,), desired wheel accelerations u_des (3,) -> result record r (its
+    answer u_held, the command u that makes the drive hold it: `drive_command`); wsa: the filter's workspaces
+    (`new_workspace`)."""
     ws = wsa[0]
-    if not answer(x, u_des, f, ws, r):
-        return
+    if answer(x, u_des, f, ws, r):
+        _gate_and_finish(x, u_des, f, wsa, r)
+    for a in range(3):
+        r.u_held[a] = r.u[a]
+    drive_command(f, ws.gate, r)
+
+
+@numba.njit(**JIT)
+def _gate_and_finish(x: Array, u_des: Array, f: np.void, wsa: NDArray[np.void], r: np.void) -> None:
+    """`filter_state` of a valid state after its answer: the gatekeeper, then `finish`."""
+    ws = wsa[0]
     r.gate = gate_call(x, u_des, f, wsa, r)
     if r.gate == GATE_TOWARD_BACKUP:
         # nothing verified, and a variant of the backup law stayed safe longer than the answer: the ASIF's
@@ -848,7 +881,7 @@ def filter_many(X: Array, U_des: Array, f: NDArray[np.void], ws: NDArray[np.void
 
 __all__ = [
     "ACTIVE_MULTIPLIER", "BIG", "DISTANCE", "FILTER_DTYPE", "HARD", "MIN_ROW_NORM", "NO_LEVEL", "OFF", "RESULT_DTYPE",
-    "SLACKED", "WORKSPACES", "WORKSPACE_DTYPE", "answer", "assemble", "constraint_levels", "extract", "filter_many",
-    "filter_record", "filter_state", "finish", "gate_call", "new_workspace", "plan_nominal", "prepare", "prioritize",
-    "row_modes", "solve",
+    "SLACKED", "WORKSPACES", "WORKSPACE_DTYPE", "answer", "assemble", "constraint_levels", "drive_command", "extract",
+    "filter_many", "filter_record", "filter_state", "finish", "gate_call", "new_workspace", "plan_nominal", "prepare",
+    "prioritize", "row_modes", "solve",
 ]  # fmt: skip
