@@ -15,6 +15,7 @@ from scipy import integrate, stats
 from rta_attitude import config
 from rta_attitude.constraints import ConstraintSet
 from rta_attitude.constraints.base import EXCLUSION_ZONE, angle_rate_error, constraint_record, measurement_errors
+from rta_attitude.dynamics.plant import make_plant
 from rta_attitude.dynamics.sensors import (
     FIELD_SIZE,
     Instruments,
@@ -25,8 +26,9 @@ from rta_attitude.dynamics.sensors import (
     state_from_fields,
 )
 from rta_attitude.dynamics.state import make_state
+from rta_attitude.filter.asif import AsifFilter
 from rta_attitude.montecarlo.runner import run_runs, run_runs_stepped
-from rta_attitude.simulation.closed_loop import simulate
+from rta_attitude.simulation.closed_loop import run_stepped, simulate
 
 
 @pytest.fixture(scope="module")
@@ -125,6 +127,36 @@ def test_actuator_lag_delivers_the_exact_lag_response(cfg: config.Config) -> Non
                                      epsabs=1e-13)
             assert held[a] == pytest.approx(mean / dt, abs=1e-12)  # the momentum of the hold
         v = u + (v - u) * math.exp(-dt / tau)
+
+
+@pytest.mark.parametrize("tau", [0.02, 0.3])
+def test_the_filter_sends_the_command_whose_lagged_hold_is_its_answer(cfg: config.Config, tau: float) -> None:
+    """With the drive's lag compensated (the default), what the wheels hold over each sample -- the plant's
+    `actuate`, an exact lag, tested above against quadrature -- is the filter's answer u_held, and every command
+    stays inside U; with `bound` the command is the answer and the lag moves the hold away from it. The paper
+    example on the gyrostat, PD on, torque noise off (so the hold is the lag's alone)."""
+    scen = dc.replace(cfg.scenario("paper_example"), model="gyrostat")
+    base = _sensors(cfg.for_scenario(scen), actuator_lag_s=tau, attitude_noise_rad=1e-5)
+    U = base.u_max_rad_s2
+    lag = (tau / base.filter.sample_time_s) * (1 - math.exp(-base.filter.sample_time_s / tau))
+    steps = 400
+    held = {}
+    for mode in ("compensate", "bound"):
+        c = dc.replace(base, filter=dc.replace(base.filter, actuator_lag=mode))
+        run = run_stepped(c, scen, steps, make_plant(c, scen.x0), AsifFilter(c))
+        u, answer = run.results["u"], run.results["u_held"]
+        assert np.all(np.abs(u) <= U * (1 + 1e-12))
+        held[mode] = np.abs(run.u - answer).max() / U.max()
+        if mode == "compensate":
+            assert np.all(np.abs(answer) <= (1 - 2 * lag) * U * (1 + 1e-12))
+            assert np.abs(u - answer).max() > 0.1 * lag * U.max()  # the commands do differ from the answers
+        else:
+            assert np.array_equal(u, answer)
+    assert held["compensate"] < 1e-12
+    assert held["bound"] > 0.1 * lag  # the lag's departure the margin bounds (a PD slew reverses the command)
+    assert measurement_errors(base)["err_u_rad_s2"] == pytest.approx(np.zeros(3))  # torque noise off
+    bound = dc.replace(base, filter=dc.replace(base.filter, actuator_lag="bound"))
+    assert measurement_errors(bound)["err_u_rad_s2"] == pytest.approx(2 * lag * U)
 
 
 def test_robust_margins_are_zero_without_sensor_errors(cfg: config.Config) -> None:
