@@ -297,12 +297,14 @@ KEY_BOX_ACTIVE = "box_active"
 """filter_status keys that readers (bag analysis, echo) look up by name; box_active has one key per axis."""
 QP_KEYS: tuple[str, ...] = (
     KEY_STATUS, "solver_status", "iterations", KEY_FALLBACK, KEY_SOLVE_TIME, KEY_PRESET,
-    "u_des_x", "u_des_y", "u_des_z", "u_x", "u_y", "u_z", *(f"{KEY_BOX_ACTIVE}_{a}" for a in "xyz"),
+    "u_des_x", "u_des_y", "u_des_z", "u_x", "u_y", "u_z", "u_held_x", "u_held_y", "u_held_z",
+    *(f"{KEY_BOX_ACTIVE}_{a}" for a in "xyz"),
     "calls", "fast_path", "solved", "fallbacks", "solver_failures", "backup_solves", "invalid_states",
     INPUT_SOURCE_KEY, *INPUT_COUNTERS, "gate", "gave_way",
 )  # fmt: skip
 """Keys of the `filter` entry: status ('pass', 'solved', 'fallback'), solver status (outcome.solve_text), iterations,
-fallback policy applied ('none' if none), solve time [s], preset, u_des and u [rad/s^2], box flags,
+fallback policy applied ('none' if none), solve time [s], preset, u_des, u (the command sent) and u_held (the
+filter's answer: what the wheels hold, u but where the drive's lag is compensated) [rad/s^2], box flags,
 the filter's running counters (core: calls .. invalid_states), the source of u_des, the node's
 input counters (INPUT_COUNTERS) and what the gatekeeper did (`filter.outcome.GATE_NAMES`: 'off'
 without a backup law)."""

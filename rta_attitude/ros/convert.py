@@ -693,10 +693,11 @@ class FilterStatusBuilder:
         inputs = inputs or {}
         r = res.record
         status, fallback = str(res.status), str(res.fallback)
-        u_des, u, box = r["u_des"].tolist(), r["u"].tolist(), r["box_active"].tolist()
+        u_des, u, u_held, box = r["u_des"].tolist(), r["u"].tolist(), r["u_held"].tolist(), r["box_active"].tolist()
         texts = [
             status, str(res.solver_status), str(int(r["iterations"])), fallback or topics.NO_FALLBACK,
-            repr(float(r["solve_time_s"])), preset, *map(repr, u_des), *map(repr, u), *map(_bool, box),
+            repr(float(r["solve_time_s"])), preset, *map(repr, u_des), *map(repr, u), *map(repr, u_held),
+            *map(_bool, box),
             str(counters.calls), str(counters.fast_path), str(counters.solved), str(counters.fallbacks),
             str(counters.solver_failures), str(counters.backup_solves), str(counters.invalid_states), source,
             *(str(inputs.get(k, 0)) for k in topics.INPUT_COUNTERS), str(res.gate), str(res.gave_way),

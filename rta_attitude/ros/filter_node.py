@@ -259,7 +259,7 @@ class FilterNode(RtaNode):
             return res
         self.faults.fault("output_guard", f"filter output {u!r} is not a finite command inside U; sending u = 0")
         record = res.record.copy()
-        record["u"] = 0.0
+        record["u"] = record["u_held"] = 0.0
         record["status"], record["fallback"] = outcome.FALLBACK, outcome.OUTPUT_GUARD
         return FilterResult(record, res.policy, res.levels)
 
