@@ -27,6 +27,7 @@ from rta_attitude.dynamics.sensors import (
 )
 from rta_attitude.dynamics.state import make_state
 from rta_attitude.filter.asif import AsifFilter
+from rta_attitude.filter.pipeline import drive_box, filter_record, new_workspace
 from rta_attitude.montecarlo.runner import run_runs, run_runs_stepped
 from rta_attitude.simulation.closed_loop import run_stepped, simulate
 
@@ -148,8 +149,19 @@ def test_the_filter_sends_the_command_whose_lagged_hold_is_its_answer(cfg: confi
         assert np.all(np.abs(u) <= U * (1 + 1e-12))
         held[mode] = np.abs(run.u - answer).max() / U.max()
         if mode == "compensate":
-            assert np.all(np.abs(answer) <= (1 - 2 * lag) * U * (1 + 1e-12))
             assert np.abs(u - answer).max() > 0.1 * lag * U.max()  # the commands do differ from the answers
+            # the answer's box is what this drive state reaches: all of U on the side the drive already
+            # pushes; a rollout's later samples keep (1 - 2c) U, what every drive state reaches
+            f = filter_record(c)
+            for v in (U, -U):
+                wsa = new_workspace()
+                wsa[0]["gate"]["drive"] = v
+                drive_box(f[0], wsa)
+                edge = lag * v - (1 - lag) * U if v[0] > 0 else lag * v + (1 - lag) * U
+                lo, hi = (edge, U) if v[0] > 0 else (-U, edge)
+                assert np.allclose(wsa[0]["lo0"], lo, rtol=1e-12) and np.allclose(wsa[0]["hi0"], hi, rtol=1e-12)
+                assert np.allclose(wsa[1]["hi0"], (1 - 2 * lag) * U, rtol=1e-12)
+                assert np.allclose(wsa[1]["lo0"], -(1 - 2 * lag) * U, rtol=1e-12)
         else:
             assert np.array_equal(u, answer)
     assert held["compensate"] < 1e-12

@@ -43,10 +43,12 @@ Array = NDArray[np.float64]
 
 @numba.njit(**JIT)
 def rows_many(X: Array, p: NDArray[np.void], c: NDArray[np.void], T: NDArray[np.void]) -> None:
-    """`rows` of states X (N, 19) into tables T (N,)."""
+    """`rows` of states X (N, 19) into tables T (N,), with the box a drive in any state holds."""
     ctx = np.zeros(1, CONTEXT_DTYPE)
+    hi0 = c[0].u_reach_rad_s2.copy()  # what a drive in any state holds (U without lag compensation)
+    lo0 = -hi0
     for k in range(X.shape[0]):
-        rows(X[k], p[0], c[0], ctx[0], T[k])
+        rows(X[k], p[0], c[0], ctx[0], T[k], lo0, hi0)
 
 
 @numba.njit(**JIT)

@@ -65,6 +65,7 @@ CONSTRAINT_DTYPE = np.dtype([
     ("dt_s", np.float64),                  # the hold the filter plans for
     ("zoh_margin", np.float64),            # ZOH bounds aim at (1 - zoh_margin) of the limit
     ("u_max_rad_s2", np.float64, (3,)),    # the box U
+    ("u_reach_rad_s2", np.float64, (3,)),  # the box a drive in any state reaches: (1 - 2c) U (`drive_lag`; U if c = 0)
     # measurement-robust margins (robust preset with sensors on; 0 otherwise): bounds on the errors of
     # what the filter reads (docs/noise.md, `measurement_errors`)
     ("err_att_rad", np.float64),           # attitude (angle of the error rotation, + the actuator's over a hold)
@@ -121,8 +122,10 @@ def constraint_record(cfg: Config) -> NDArray[np.void]:
     c["sin_pole_guard"] = math.sin(cfg.filter.pole_guard_rad)
     c["robust"] = robust
     c["dt_s"], c["zoh_margin"] = cfg.filter.sample_time_s, cfg.filter.zoh_margin
-    # with the drive's lag compensated, the answers keep to the part of U every drive state can deliver
-    c["u_max_rad_s2"] = (1.0 - 2.0 * drive_lag(cfg)[0]) * cfg.u_max_rad_s2
+    c["u_max_rad_s2"] = cfg.u_max_rad_s2
+    # with the drive's lag compensated, what a rollout plans keeps to the part of U every drive state can
+    # deliver (the filter's answer now: the part its drive's state can, `pipeline.drive_box`)
+    c["u_reach_rad_s2"] = (1.0 - 2.0 * drive_lag(cfg)[0]) * cfg.u_max_rad_s2
     if robust and cfg.sensors.enabled:
         for key, value in measurement_errors(cfg).items():
             c[key] = value

@@ -43,7 +43,7 @@ Array = NDArray[np.float64]
 
 
 @numba.njit(**LEAF)
-def rows(x: Array, p: np.void, c: np.void, ctx: np.void, t: np.void) -> None:
+def rows(x: Array, p: np.void, c: np.void, ctx: np.void, t: np.void, lo0: Array, hi0: Array) -> None:
     """Barrier rows and box of one state x (19,, unit quaternion) into table t (TABLE_DTYPE).
 
     Args:
@@ -52,6 +52,8 @@ def rows(x: Array, p: np.void, c: np.void, ctx: np.void, t: np.void) -> None:
         c: the constraint parameters (CONSTRAINT_DTYPE).
         ctx: scratch CONTEXT_DTYPE record (filled here).
         t: the output table.
+        lo0, hi0: the wheel accelerations the drive can hold this sample (3,): +-U, or where the filter
+            compensates its drive's lag, the part of U its state reaches (`filter.pipeline.drive_box`).
     """
     context(x, p, True, ctx)
     exclusion_zone.row(ctx, x, c, t)
@@ -62,18 +64,18 @@ def rows(x: Array, p: np.void, c: np.void, ctx: np.void, t: np.void) -> None:
         angular_rate.row(ctx, x, c, a, t)
         wheel_speed.row(ctx, x, c, a, t)
     angular_rate.zoh_rows(ctx, x, c, p, t)
-    box(ctx, x, c, t)
+    box(ctx, x, c, t, lo0, hi0)
 
 
 @numba.njit(**LEAF)
-def box(ctx: np.void, x: Array, c: np.void, t: np.void) -> None:
-    """t.lo, t.hi (3,), rad/s^2: U, and in the robust preset the one-step ZOH intervals of the enabled
-    rate and wheel-speed constraints (the rate's only where no coupled rows, t.zoh_rows, replace them)."""
+def box(ctx: np.void, x: Array, c: np.void, t: np.void, lo0: Array, hi0: Array) -> None:
+    """t.lo, t.hi (3,), rad/s^2: what the drive can hold (lo0, hi0: `rows`), and in the robust preset the
+    one-step ZOH intervals of the enabled rate and wheel-speed constraints (the rate's only where no coupled
+    rows, t.zoh_rows, replace them)."""
     rate_on = c.gains[OMEGA_X].enabled and t.zoh_rows == 0
     wheel_on = c.gains[PSI_X].enabled
     for a in range(3):
-        u_max = c.u_max_rad_s2[a]
-        lo_a, hi_a = -u_max, u_max
+        lo_a, hi_a = lo0[a], hi0[a]
         if c.robust:
             zlo, zhi = -np.inf, np.inf
             if rate_on:

@@ -623,7 +623,7 @@ def _rate_command(x: Array, p: np.void, c: np.void, b: np.void, g: np.void, out:
             v = ((w_ref - x[4 + a]) / b.rate_time_constant_s - g.wd[a]) / p.control_gain[a]
             hi, lo = (top - x[7 + a]) / c.dt_s, (-top - x[7 + a]) / c.dt_s  # the wheel within psi_hold
             v = lo if v < lo else (hi if v > hi else v)
-            m = c.u_max_rad_s2[a]
+            m = c.u_reach_rad_s2[a]  # (every drive state reaches it: the rollouts do not track the drive)
             out[a] = -m if v < -m else (m if v > m else v)
         if it == 1:
             return

@@ -171,6 +171,8 @@ WORKSPACE_DTYPE = np.dtype([
     ("ctx", CONTEXT_DTYPE),
     ("table", TABLE_DTYPE),
     ("x", np.float64, (STATE_SIZE,)),        # the state, quaternion normalised
+    ("lo0", np.float64, (3,)),               # what the drive can hold this call (`drive_box`; the rows' box)
+    ("hi0", np.float64, (3,)),
     ("u_target", np.float64, (3,)),          # u_des with non-finite entries set to 0
     ("gnorm", np.float64, (M,)),             # |dBC/du| of each row
     ("gate", GATE_DTYPE),                    # the gatekeeper's committed plan and scratch (memory!)
@@ -240,7 +242,7 @@ def prepare(x_in: Array, u_des: Array, f: np.void, ws: np.void, r: np.void) -> t
             x[i] = 0.0
         x[3] = 1.0
         x[10] = 273.15
-    rows(x, f.plant, c, ws.ctx, t)
+    rows(x, f.plant, c, ws.ctx, t, ws.lo0, ws.hi0)
     for i in range(M):
         if not math.isfinite(t.drift[i]):
             valid = False
@@ -824,11 +826,29 @@ def gate_call(x: Array, u_des: Array, f: np.void, wsa: NDArray[np.void], r: np.v
 
 
 @numba.njit(**LEAF)
+def drive_box(f: np.void, wsa: NDArray[np.void]) -> None:
+    """The box of this call's answer (wsa[0].lo0, hi0) and of the answers inside rollouts (wsa[1]): without
+    lag compensation +-U; with it, this sample's what the drive reaches from its state v by a command within
+    U, [c v - (1 - c) U, c v + (1 - c) U] (`drive_command`), and a rollout's later samples +-(1 - 2c) U, what
+    it reaches from any state (`constraints.base.drive_lag`)."""
+    c = f.constraints
+    k = f.lag_gain
+    live, inner, v = wsa[0], wsa[1], wsa[0].gate.drive
+    for a in range(3):
+        U, reach = c.u_max_rad_s2[a], c.u_reach_rad_s2[a]
+        inner.lo0[a], inner.hi0[a] = -reach, reach
+        if k > 0.0:
+            live.lo0[a], live.hi0[a] = k * v[a] - (1.0 - k) * U, k * v[a] + (1.0 - k) * U
+        else:
+            live.lo0[a], live.hi0[a] = -reach, reach
+
+
+@numba.njit(**LEAF)
 def drive_command(f: np.void, g: np.void, r: np.void) -> None:
     """The command r.u that makes the wheel drive hold the filter's answer r.u_held over the sample, and the
     drive's state after it (g.drive). The drive's first-order lag holds (1 - c) v_cmd + c v from its state v
-    (`constraints.base.drive_lag`), so v_cmd = (u_held - c v) / (1 - c), within U wherever |u_held| keeps to
-    (1 - 2c) U (the filter's box then). Not compensated (c = 0): the answer itself."""
+    (`constraints.base.drive_lag`), so v_cmd = (u_held - c v) / (1 - c), within U wherever u_held is inside
+    the box `drive_box` gave. Not compensated (c = 0): the answer itself."""
     c, e = f.lag_gain, f.lag_decay
     for a in range(3):
         if c > 0.0:
@@ -846,6 +866,7 @@ def filter_state(x: Array, u_des: Array, f: np.void, wsa: NDArray[np.void], r: n
     answer u_held, the command u that makes the drive hold it: `drive_command`); wsa: the filter's workspaces
     (`new_workspace`)."""
     ws = wsa[0]
+    drive_box(f, wsa)
     if answer(x, u_des, f, ws, r):
         _gate_and_finish(x, u_des, f, wsa, r)
     for a in range(3):
@@ -881,7 +902,7 @@ def filter_many(X: Array, U_des: Array, f: NDArray[np.void], ws: NDArray[np.void
 
 __all__ = [
     "ACTIVE_MULTIPLIER", "BIG", "DISTANCE", "FILTER_DTYPE", "HARD", "MIN_ROW_NORM", "NO_LEVEL", "OFF", "RESULT_DTYPE",
-    "SLACKED", "WORKSPACES", "WORKSPACE_DTYPE", "answer", "assemble", "constraint_levels", "drive_command", "extract",
-    "filter_many", "filter_record", "filter_state", "finish", "gate_call", "new_workspace", "plan_nominal", "prepare",
-    "prioritize", "row_modes", "solve",
+    "SLACKED", "WORKSPACES", "WORKSPACE_DTYPE", "answer", "assemble", "constraint_levels", "drive_box", "drive_command",
+    "extract", "filter_many", "filter_record", "filter_state", "finish", "gate_call", "new_workspace", "plan_nominal",
+    "prepare", "prioritize", "row_modes", "solve",
 ]  # fmt: skip
