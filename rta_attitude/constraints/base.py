@@ -134,18 +134,25 @@ def constraint_record(cfg: Config) -> NDArray[np.void]:
     return rec
 
 
-def drive_lag(cfg: Config) -> tuple[float, float]:
-    """(c, e) of the wheel drive's first-order lag (time constant tau) over a hold dt when the filter compensates
-    it (robust preset, sensor errors on, `filter.actuator_lag: compensate`), else (0, 0): the held mean of a
-    command v_cmd from the drive's state v is (1 - c) v_cmd + c v, c = (tau/dt)(1 - e^(-dt/tau)), and the state
-    after the hold v_cmd + (v - v_cmd) e, e = e^(-dt/tau) (`dynamics.sensors.actuate`). A held mean a with
-    |a_i| <= (1 - 2c) U_i is reached from every state |v_i| <= U_i by a command within U: (a - c v) / (1 - c)."""
-    s, dt = cfg.sensors, cfg.filter.sample_time_s
-    tau = s.actuator_lag_s
-    if not (cfg.filter.preset == "robust" and s.enabled and tau > 0 and cfg.filter.actuator_lag == "compensate"):
+def lag_response(cfg: Config) -> tuple[float, float]:
+    """(c, e) of the wheel drive's first-order lag (time constant tau = sensors.actuator_lag_s) over a hold dt,
+    (0, 0) without a lag: the held mean of a command v_cmd from the drive's state v is (1 - c) v_cmd + c v,
+    c = (tau/dt)(1 - e^(-dt/tau)), and the state after the hold v_cmd + (v - v_cmd) e, e = e^(-dt/tau)
+    (`dynamics.sensors.actuate`)."""
+    tau, dt = cfg.sensors.actuator_lag_s, cfg.filter.sample_time_s
+    if not tau > 0:
         return 0.0, 0.0
     decay = math.exp(-dt / tau)
     return (tau / dt) * (1.0 - decay), decay
+
+
+def drive_lag(cfg: Config) -> tuple[float, float]:
+    """`lag_response` where the filter compensates the lag (robust preset, sensor errors on,
+    `filter.actuator_lag: compensate`), else (0, 0). A held mean a with |a_i| <= (1 - 2c) U_i is reached from
+    every drive state |v_i| <= U_i by a command within U: (a - c v) / (1 - c)."""
+    if not (cfg.filter.preset == "robust" and cfg.sensors.enabled and cfg.filter.actuator_lag == "compensate"):
+        return 0.0, 0.0
+    return lag_response(cfg)
 
 
 def measurement_errors(cfg: Config) -> dict[str, float | NDArray[np.float64]]:
@@ -160,10 +167,8 @@ def measurement_errors(cfg: Config) -> dict[str, float | NDArray[np.float64]]:
     - err_psi = b sigma_psi; err_T = b sigma_T; err_E = b sigma_E.
     """
     s, b, dt = cfg.sensors, cfg.sensors.bound_sigma, cfg.filter.sample_time_s
-    tau = s.actuator_lag_s
-    lag = (tau / dt) * (1.0 - math.exp(-dt / tau)) if tau > 0 else 0.0
-    if drive_lag(cfg)[0] > 0.0:  # the filter sends the command whose held mean is its answer
-        lag = 0.0
+    # compensated: the filter sends the command whose held mean is its answer, so no lag departs from it
+    lag = 0.0 if drive_lag(cfg)[0] > 0.0 else lag_response(cfg)[0]
     err_u = 2.0 * cfg.u_max_rad_s2 * lag + b * s.torque_noise_rad_s2
     gyro = b * math.sqrt(s.gyro_noise_rad_s**2 + s.gyro_bias_rad_s**2
                          + s.gyro_bias_walk_rad_s_sqrt_s**2 * s.bias_horizon_s)
@@ -250,5 +255,5 @@ def nan_min(a: float, b: float) -> float:
 __all__ = [
     "BATTERY", "COMMUNICATION", "CONSTRAINT_DTYPE", "EXCLUSION_ZONE", "GAIN_DTYPE", "N_CONSTRAINTS", "OMEGA_X", "PSI_X",
     "TABLE_DTYPE", "TEMPERATURE", "ZOH_CHECKS", "ZOH_ROWS", "angle_rate_error", "constraint_record", "drive_lag",
-    "group_of", "measurement_errors", "nan_max", "nan_min", "second_order", "speed_limit_row",
+    "group_of", "lag_response", "measurement_errors", "nan_max", "nan_min", "second_order", "speed_limit_row",
 ]  # fmt: skip
