@@ -15,6 +15,7 @@ from oracles.constraints import ConstraintSet as OracleSet
 from rta_attitude import config
 from rta_attitude.config.schema import Config
 from rta_attitude.constraints import ConstraintSet
+from rta_attitude.dynamics.spacecraft import integrate, plant_record
 from rta_attitude.dynamics.state import THETA_S, Q
 
 CFG = config.load()
@@ -78,6 +79,26 @@ def test_compiled_rows_and_box_equal_the_reference(variant: str) -> None:
     one = ConstraintSet(cfg).evaluate(x[7])
     for key in ("h", "psi0", "psi1", "drift", "gain", "lo", "hi"):
         np.testing.assert_array_equal(one[key], out[key][7])
+
+
+def test_the_wheel_bound_by_hand() -> None:
+    """psi_y at 0.95 psi_max, omega = 0: the robust box's upper bound on u_y brings psi_y to (1 - margin) psi_max
+    in one hold, by hand from psi(t + dt) = psi + u dt; with sensor errors, less the tachometer's and the
+    torque noise's bounds (e_psi + e_u dt, docs/noise.md). The plant held at that bound keeps psi_y at or
+    below it at every substep (psi is linear in a hold)."""
+    x = CFG.scenario("paper-example").x0.copy()
+    x[4:7] = 0.0
+    psi_max, dt, m = CFG.limits.psi_max_rad_s, CFG.filter.sample_time_s, CFG.filter.zoh_margin
+    x[7:10] = (0.0, 0.95 * psi_max, 0.0)
+    hi = ConstraintSet(CFG).evaluate(x)["hi"][1]
+    assert hi == pytest.approx(((1 - m) * psi_max - x[8]) / dt, rel=1e-12)
+    noisy = CFG.with_noise()
+    s, b = noisy.sensors, noisy.sensors.bound_sigma
+    room = b * s.wheel_speed_noise_rad_s + b * s.torque_noise_rad_s2 * dt
+    assert ConstraintSet(noisy).evaluate(x)["hi"][1] == pytest.approx(hi - room / dt, rel=1e-12)
+    _, subs = integrate(x, np.array([0.0, hi, 0.0]), dt, plant_record(CFG), CFG.substeps)
+    assert np.all(subs[:, 8] <= (1 - m) * psi_max * (1 + 1e-14))
+    assert subs[-1, 8] == pytest.approx((1 - m) * psi_max, rel=1e-12)
 
 
 def test_zoh_box_hand_calculation() -> None:
