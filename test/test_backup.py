@@ -296,6 +296,44 @@ def test_where_nothing_verifies_the_filter_answers_the_backup_command_that_laste
     np.testing.assert_array_equal(res.u_des, 0.0)
 
 
+def test_where_nothing_verifies_call_after_call_the_filtered_search_backs_off(cfg: Config, states: Array) -> None:
+    """The state of the test above (run 1684 of seed 1 at t = 45 s), fed to one filter call after call: nothing
+    verifies at any call and no plan is committed, so the calls differ only by the gate's back-off. The
+    backup law through the filter (up to 5 x 300 QPs) is tried at the 1st call, then after waits of 1, 2, 4, 8,
+    16, 16, ... calls (FILTERED_BACKOFF_MAX); every call answers the same command, bit for bit (a skipped search
+    is one that found nothing). A call at which a way out verifies ends the back-off: the next call at that state
+    tries the search at once."""
+    from rta_attitude.filter.asif import AsifFilter
+    from rta_attitude.filter.pipeline import FILTERED_BACKOFF_MAX
+
+    c = config.load()
+    x0, _ = sample_initial_states(5000, 1, c)
+    x = run_runs(c, x0[1684:1685], 45.0, record=True).trajectory[0, 45]
+    on = AsifFilter(c)
+    g = on._ws[0]["gate"]
+    first = on.filter(x, np.zeros(3))
+    assert first.gate == "toward_backup" and int(g["filtered_tries"]) == 1
+    tried_at, wait, k = [1], 0, 1
+    while k < 80:  # the schedule: waits 0, 1, 2, 4, ... capped
+        k += wait + 1
+        tried_at.append(k)
+        wait = min(max(2 * wait, 1), FILTERED_BACKOFF_MAX)
+    tries = [1]
+    for _ in range(2, 81):
+        res = on.filter(x, np.zeros(3))
+        assert res.gate == "toward_backup"
+        np.testing.assert_array_equal(res.u, first.u)
+        tries.append(int(g["filtered_tries"]))
+    before = [0, *tries[:-1]]
+    assert [k + 1 for k in range(80) if tries[k] > before[k]] == [t for t in tried_at if t <= 80]
+    assert tries[-1] == 9  # 80 calls: 1, 2, 4, 7, 12, 21, 38, 55, 72
+    fine = next(y for y in states if AsifFilter(c).filter(y, np.zeros(3)).gate == "verified")
+    assert on.filter(fine, np.zeros(3)).gate == "verified"  # a way out: the back-off ends
+    n = int(g["filtered_tries"])
+    on.filter(x, np.zeros(3))
+    assert int(g["filtered_tries"]) == n + 1
+
+
 @pytest.mark.parametrize(("run", "t_s"), [(2998, 0), (4994, 60)])
 def test_where_the_backup_law_fails_alone_it_can_verify_through_the_filter(cfg: Config, run: int, t_s: int) -> None:
     """Monte Carlo runs of seed 1 where the filter's answer to u_des = 0, held a sample then each variant,

@@ -154,6 +154,9 @@ GATE_DTYPE = np.dtype([
     ("plan_x", np.float64, (MAX_NOMINAL_STEPS, STATE_SIZE)),  # its states at the samples (as received)
     ("plan_u", np.float64, (MAX_NOMINAL_STEPS, 3)),           # the filter's answers there (candidates)
     ("nominal_wait", np.int64),          # calls to wait before the next nominal plan is tried
+    ("filtered_wait", np.int64),         # calls to wait before the backup law through the filter is tried again
+    ("filtered_backoff", np.int64),      # ... the wait after its next failure (doubles, to FILTERED_BACKOFF_MAX)
+    ("filtered_tries", np.int64),        # calls that tried the backup law through the filter (since reset)
     ("next_x", np.float64, (STATE_SIZE,)),  # the committed plan's state at the next sample, as the filter will
     # receive it (`sensors.deliver` of the prediction)
     ("has_next", np.uint8),              # ... next_x is set
@@ -761,6 +764,7 @@ def reset(g: np.void) -> None:
     g.plan_law = SUN_SAFE_VARIANT
     g.plan_n = g.plan_at = 0
     g.nominal_wait = 0
+    g.filtered_wait = g.filtered_backoff = g.filtered_tries = 0
     g.has_next = g.plan_settled = g.plan_weak = 0
     g.reused = 0
     g.weak_law = -1

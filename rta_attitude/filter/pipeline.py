@@ -756,6 +756,10 @@ def plan_filtered(x: Array, f: np.void, wsa: NDArray[np.void], u: Array) -> bool
     return True
 
 
+FILTERED_BACKOFF_MAX = 16
+"""Where nothing verifies call after call, the backup law through the filter (`plan_filtered`: up to 5 x 300
+QPs a call) is tried at the first such call, then after waits of 1, 2, 4, 8, then 16 calls between tries
+(reset when any way out verifies or a filtered plan is found)."""
 UNIT_TOLERANCE = 1e-12
 """The gatekeeper's rollouts start from the state as received where its quaternion's norm is within this of
 1 (the plant's always is: it renormalises at every substep), so that they predict the plant bit for bit;
@@ -820,8 +824,18 @@ def gate_call(x: Array, u_des: Array, f: np.void, wsa: NDArray[np.void], r: np.v
         else:
             g.nominal_wait = b.nominal_steps
     code = gate(xs, f, g, r.u)
-    if (code == GATE_UNVERIFIED or code == GATE_TOWARD_BACKUP) and plan_filtered(xs, f, wsa, r.u):
+    if not (code == GATE_UNVERIFIED or code == GATE_TOWARD_BACKUP):
+        g.filtered_wait = g.filtered_backoff = 0  # a way out verified: the next search starts afresh
+        return code
+    if g.filtered_wait > 0:  # the last tries found nothing (FILTERED_BACKOFF_MAX)
+        g.filtered_wait -= 1
+        return code
+    g.filtered_tries += 1
+    if plan_filtered(xs, f, wsa, r.u):
+        g.filtered_backoff = 0
         return GATE_FILTERED_BACKUP
+    g.filtered_wait = g.filtered_backoff
+    g.filtered_backoff = min(max(2 * g.filtered_backoff, 1), FILTERED_BACKOFF_MAX)
     return code
 
 
