@@ -781,7 +781,8 @@ def gate_call(x: Array, u_des: Array, f: np.void, wsa: NDArray[np.void], r: np.v
       else the plan's own answer for this sample, and the plan goes on;
     - otherwise `backup.gate` (the answer held a sample then the backup law); where that finds nothing
       verified (`unverified`, `toward_backup`), the backup law through the filter (`plan_filtered`) ->
-      its first command (`filtered_backup`)."""
+      its first command (`filtered_backup`); tried at the first such call, then after growing waits while
+      nothing verifies (FILTERED_BACKOFF_MAX)."""
     b = f.backup
     if b.law == NO_LAW:
         return GATE_OFF
