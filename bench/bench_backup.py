@@ -59,7 +59,7 @@ def time_calls(cfg: config.Config, runs: np.ndarray) -> tuple[np.ndarray, np.nda
     """Per-call wall times (s) of `AsifFilter.filter` over runs (R, steps, 19), u_des = 0; each call's path
     (PATHS) and run; gate counts ('reused': verified calls answered from a committed nominal plan)."""
     f = AsifFilter(cfg)
-    nominal = round(cfg.filter.backup_nominal_s / cfg.filter.sample_time_s)
+    nominal = int(f.record[0]["backup"]["nominal_steps"])
     times, paths, run_of = [], [], []
     gates = dict.fromkeys((*GATE_NAMES, "reused"), 0)
     u = np.zeros(3)

@@ -301,8 +301,8 @@ def test_where_nothing_verifies_call_after_call_the_filtered_search_backs_off(cf
     verifies at any call and no plan is committed, so the calls differ only by the gate's back-off. The
     backup law through the filter (up to 5 x 300 QPs) is tried at the 1st call, then after waits of 1, 2, 4, 8,
     16, 16, ... calls (FILTERED_BACKOFF_MAX); every call answers the same command, bit for bit (a skipped search
-    is one that found nothing). A call at which a way out verifies ends the back-off: the next call at that state
-    tries the search at once."""
+    is one that found nothing). A call at which the gate's check verifies a way out ends the back-off: the next
+    call at that state tries the search at once."""
     from rta_attitude.filter.asif import AsifFilter
     from rta_attitude.filter.pipeline import FILTERED_BACKOFF_MAX
 

@@ -759,7 +759,8 @@ def plan_filtered(x: Array, f: np.void, wsa: NDArray[np.void], u: Array) -> bool
 FILTERED_BACKOFF_MAX = 16
 """Where nothing verifies call after call, the backup law through the filter (`plan_filtered`: up to 5 x 300
 QPs a call) is tried at the first such call, then after waits of 1, 2, 4, 8, then 16 calls between tries
-(reset when any way out verifies or a filtered plan is found)."""
+(reset when `backup.gate` finds a way out, the candidate, the law's own command or the committed plan's, or a
+filtered plan is found; calls answered from a nominal plan, or by a new one, return before and leave it)."""
 UNIT_TOLERANCE = 1e-12
 """The gatekeeper's rollouts start from the state as received where its quaternion's norm is within this of
 1 (the plant's always is: it renormalises at every substep), so that they predict the plant bit for bit;
@@ -826,7 +827,7 @@ def gate_call(x: Array, u_des: Array, f: np.void, wsa: NDArray[np.void], r: np.v
             g.nominal_wait = b.nominal_steps
     code = gate(xs, f, g, r.u)
     if not (code == GATE_UNVERIFIED or code == GATE_TOWARD_BACKUP):
-        g.filtered_wait = g.filtered_backoff = 0  # a way out verified: the next search starts afresh
+        g.filtered_wait = g.filtered_backoff = 0  # gate found a way out: the next search starts afresh
         return code
     if g.filtered_wait > 0:  # the last tries found nothing (FILTERED_BACKOFF_MAX)
         g.filtered_wait -= 1
