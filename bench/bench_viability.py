@@ -31,8 +31,8 @@ sys.path.insert(0, str(HERE))
 import machine  # noqa: E402
 
 from rta_attitude import config  # noqa: E402
-from rta_attitude.config.schema import CONSTRAINT_NAMES, Config  # noqa: E402
-from rta_attitude.constraints import ConstraintSet, group_of  # noqa: E402
+from rta_attitude.config.schema import Config  # noqa: E402
+from rta_attitude.constraints import ConstraintSet, registry  # noqa: E402
 from rta_attitude.dynamics.spacecraft import integrate, plant_record  # noqa: E402
 from rta_attitude.dynamics.state import STATE_SIZE  # noqa: E402
 
@@ -61,7 +61,7 @@ def plant_check(cfg: Config, x0: np.ndarray, u: np.ndarray, enforce: tuple[str, 
         x, s = integrate(x, uk, cfg.filter.sample_time_s, p, cfg.substeps)
         rows.extend(s)
     h = ConstraintSet(cfg).safety_values(np.array(rows))
-    cols = [i for i, n in enumerate(CONSTRAINT_NAMES) if group_of(n) in enforce]
+    cols = [c.row for c in registry(cfg) if c.group in enforce]
     return float(h[:, cols].min())
 
 

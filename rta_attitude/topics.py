@@ -178,8 +178,8 @@ TOPICS: dict[str, TopicSpec] = {
         TopicSpec(SCENE_TRANSFORM, "geometry_msgs/msg/TransformStamped", STREAM_QOS, SCENE, _ALL,
                   "view (scene node): the attitude as a transform hill -> body (3D panels read it as tf)"),
         TopicSpec(SCENE_MARKERS, "visualization_msgs/msg/MarkerArray", STREAM_QOS, SCENE, _ALL,
-                  "view (scene node), frame hill: body and axes, sensor boresight and field of view, sun and "
-                  "keep-out cone, antenna, Earth and communication cone, panel normal, filter state text"),
+                  "view (scene node), frame hill: body and axes, each pointing constraint's boresight and cone "
+                  "about its target, the targets, the panel normal, filter state text"),
     )
 }  # fmt: skip
 """Every topic of a run, by (relative) name."""
@@ -259,7 +259,7 @@ def expected_readers(topic: str, rta: bool, record: bool, truth: bool = False, s
 STATUS_HARDWARE_ID = "rta_attitude"
 QP_STATUS_NAME = "filter"
 """filter_status: the entry of the filter call (QP status, fallback, box, timing, counters); one entry
-per constraint follows, named like the constraint (config.schema.CONSTRAINT_NAMES). rta_attitude.recording.analysis
+per constraint follows, named like the constraint (`Config.constraint_names`). rta_attitude.recording.analysis
 reads this layout."""
 CONSTRAINT_STATUS_PREFIX = ""
 INPUT_COUNTERS: tuple[str, ...] = (
@@ -426,7 +426,7 @@ CONFIG_SECTIONS: dict[str, tuple[str, ...]] = {
     FILTER: ("spacecraft", "environment", "thermal", "power", "limits", "constraints", "filter", "integrator",
              "sensors"),
     RECORDER: ("filter.preset", "filter.sample_time_s"),
-    SCENE: ("limits", "filter.sample_time_s"),
+    SCENE: ("limits", "constraints.pointing", "environment", "power", "filter.sample_time_s"),
 }  # fmt: skip
 """The core parameters (sections, or single dotted names) each role uses and declares as ROS parameters,
 besides its own scenario's (`scenarios.<scenario>.*`). The node's configuration is still built from the

@@ -54,7 +54,7 @@ def _reference(cfg: Any, rta: bool, duration_s: float = DURATION_S) -> Run:
     scenario = dataclasses.replace(cfg.scenario("paper-example"), duration_s=duration_s)
     loop = ClosedLoop(cfg, scenario, rta=rta)
     traj = loop.run()
-    summary = summarize_trajectory(traj, cfg.limits.omega_dot_max_rad_s2, loop.cfg.slacked_constraints)
+    summary = summarize_trajectory(traj, loop.cfg)
     return Run(loop, traj, summary)
 
 

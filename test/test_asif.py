@@ -12,9 +12,9 @@ import scipy.sparse as sp
 from helpers import random_states
 
 from rta_attitude import config
+from rta_attitude.constraints.registry import levels
 from rta_attitude.errors import SolverError
 from rta_attitude.filter.asif import AsifFilter
-from rta_attitude.filter.pipeline import constraint_levels
 
 CFG = config.load().with_backup("none")  # the ASIF's own answer (the gatekeeper: test_backup.py)
 
@@ -215,7 +215,7 @@ def test_fallback_policies(policy):
         norms = np.linalg.norm(tab.gain[0], axis=-1) + 1e-300
         hard = f.enabled & (norms > 1e-12)
         if policy == "prioritize":
-            hard &= constraint_levels(CFG.filter.priorities) == 0
+            hard &= levels(CFG) == 0
             assert res.status == "fallback" and res.fallback == "prioritize" and res.gave_way != ""
         viol_soft = np.min(((tab.drift[0] + tab.gain[0] @ res.u) / norms)[hard])
         u_pass = np.clip(u_des, lo[0], hi[0])

@@ -12,7 +12,7 @@ import pytest
 from helpers import best_panel_cos
 
 from rta_attitude import config
-from rta_attitude.config.schema import CONSTRAINT_NAMES, Config
+from rta_attitude.config.schema import Config
 from rta_attitude.constraints import ConstraintSet
 from rta_attitude.dynamics.sensors import Instruments, interface_energy_error
 from rta_attitude.dynamics.spacecraft import integrate, torque_to_wheel_accel, wheel_accel_to_torque
@@ -48,6 +48,9 @@ from rta_attitude.montecarlo.runner import run_runs
 from rta_attitude.montecarlo.sampling import sample_initial_states
 from rta_attitude.viability.laws import law_command
 from rta_attitude.viability.params import from_config
+
+NAMES = config.load().constraint_names
+"""The default configuration's constraints, in row order."""
 
 Array = np.ndarray
 
@@ -207,10 +210,10 @@ def test_backup_law_brings_a_state_to_the_sun_safe_attitude(cfg: Config, states:
     cs = ConstraintSet(cfg)
     angles = cs.angles(end[None])
     assert float(np.degrees(angles["panel_sun"][0])) < 5.0  # +k_B on the sun
-    assert abs(float(np.degrees(angles["sensor_sun"][0])) - 90.0) < 5.0  # the sensor perpendicular
+    assert abs(float(np.degrees(angles["exclusion_zone"][0])) - 90.0) < 5.0  # the sensor perpendicular
     assert np.all(np.abs(end[4:7]) <= 0.1 * cfg.limits.omega_max_rad_s)  # rates damped
     h = cs.safety_values(traj)
-    hard = [i for i, n in enumerate(CONSTRAINT_NAMES) if n not in cfg.slacked_constraints]
+    hard = [i for i, n in enumerate(NAMES) if n not in cfg.slacked_constraints]
     assert np.all(h[:, hard] >= 0)
 
 
@@ -370,7 +373,7 @@ def test_where_the_backup_law_fails_alone_it_can_verify_through_the_filter(cfg: 
     plan_x, plan_u = g["plan_x"][:n].copy(), g["plan_u"][:n].copy()
     read = Instruments(c)
     cs = ConstraintSet.from_config(c)
-    hard = np.array([name not in c.slacked_constraints for name in CONSTRAINT_NAMES])
+    hard = np.array([name not in c.slacked_constraints for name in NAMES])
     p, D = f["plant"], c.spacecraft.wheel_inertia_kgm2
 
     def filtered(v: str) -> tuple[str, list[Array], list[Array]]:
@@ -424,7 +427,7 @@ def test_recursive_feasibility_on_monte_carlo_runs(cfg: Config, states: Array) -
     steps = round(duration_s / cfg.filter.sample_time_s)
     np.testing.assert_array_equal(out.gate_steps.sum(axis=1), steps)
     assert np.all(out.gate_steps[:, GATE_OFF] == 0)
-    hard = np.array([n not in cfg.slacked_constraints for n in CONSTRAINT_NAMES])
+    hard = np.array([n not in cfg.slacked_constraints for n in NAMES])
     covered = (out.gate_steps[:, [GATE_UNVERIFIED, GATE_TOWARD_BACKUP]] == 0).all(axis=1)
     assert covered.sum() >= 6
     assert not np.any(out.violated_substeps[covered][:, hard])
@@ -531,7 +534,7 @@ def test_the_cross_variant_takes_the_momentum_through_the_corridor_to_the_suns_s
     assert np.all(traj[:, 11] >= L.energy_min_J)
     cs = ConstraintSet(c)
     h = cs.safety_values(traj)
-    assert np.all(h[:, list(CONSTRAINT_NAMES).index("exclusion_zone")] >= 0.0)
+    assert np.all(h[:, list(NAMES).index("exclusion_zone")] >= 0.0)
     hz = (sc.J[2] * traj[:, 6] - sc.torque_sign * D * traj[:, 9])
     assert hz[0] * hz[-1] < 0.0  # H_body crossed the i_B-j_B plane
     panel = np.degrees(cs.angles(traj[-1])["panel_sun"])
@@ -585,7 +588,7 @@ def test_a_nominal_plan_holds_what_it_claims(cfg: Config, states: Array) -> None
     on, alone = AsifFilter(cfg), AsifFilter(cfg.with_backup("none"))
     read = Instruments(cfg)
     cs = ConstraintSet.from_config(cfg)
-    hard = np.array([n not in cfg.slacked_constraints for n in CONSTRAINT_NAMES])
+    hard = np.array([n not in cfg.slacked_constraints for n in NAMES])
     p = filter_record(cfg)["plant"]
     D = cfg.spacecraft.wheel_inertia_kgm2
     u_des = np.zeros(3)
@@ -725,14 +728,14 @@ def test_rollout_margins_cover_the_measurement_errors(cfg: Config) -> None:
     h >= 0 wherever the measured one keeps its margin."""
     from rta_attitude.constraints.base import measurement_errors
 
-    col = {n: i for i, n in enumerate(CONSTRAINT_NAMES)}
+    col = {n: i for i, n in enumerate(NAMES)}
     read = interface_energy_error(cfg)  # the battery's float32 charge, with or without sensor errors
-    zero = np.empty(len(CONSTRAINT_NAMES))
+    zero = np.empty(len(NAMES))
     _margins(filter_record(cfg), zero)
     assert zero[col["battery"]] == read > 0
     np.testing.assert_array_equal(np.delete(zero, col["battery"]), 0.0)
     noisy = cfg.with_noise()
-    m = np.empty(len(CONSTRAINT_NAMES))
+    m = np.empty(len(NAMES))
     _margins(filter_record(noisy), m)
     err = measurement_errors(noisy)
     assert m[col["exclusion_zone"]] == err["err_att_rad"] > 0
@@ -751,17 +754,17 @@ def test_rollout_margins_cover_the_measurement_errors(cfg: Config) -> None:
 
 
 def test_a_candidate_keeps_the_reading_errors_three_times_and_the_backup_law_once(cfg: Config, states: Array) -> None:
-    """Hysteresis (sensor errors on): a candidate's rollout keeps the keep-out cone's, the temperature's and the
-    charge's reading errors three times, the backup law's once; without sensor errors both margins are equal. A
+    """Hysteresis (sensor errors on): a candidate's rollout keeps the pointing constraints', the temperature's and
+    the charge's reading errors three times, the backup law's once; without sensor errors both margins are equal. A
     backup path whose lowest charge lies between the two floors (E's dynamics do not depend on E: the
     path is shifted, checked here) is accepted as the backup law's and refused as a candidate's, at the
     battery. And the extra is what the hand-over needs, no less: a candidate accepted at its floor from a
     reading e above the truth, then a next reading e below it (the worst two readings), leaves the backup
-    law's path from that reading exactly at the backup law's floor; with one reading's extra (the rule
-    before 2026-11-27) it would fall e below it and be refused."""
+    law's path from that reading exactly at the backup law's floor; with one reading's extra it would fall e
+    below it and be refused."""
     from rta_attitude.constraints.base import measurement_errors
 
-    col = {n: i for i, n in enumerate(CONSTRAINT_NAMES)}
+    col = {n: i for i, n in enumerate(NAMES)}
     plain = filter_record(cfg)[0]["backup"]
     np.testing.assert_array_equal(plain["candidate_margin"], plain["margin"])
     noisy = cfg.with_noise()
@@ -769,10 +772,12 @@ def test_a_candidate_keeps_the_reading_errors_three_times_and_the_backup_law_onc
     b = f[0]["backup"]
     err = measurement_errors(noisy)
     extra = b["candidate_margin"] - b["margin"]
-    assert extra[col["exclusion_zone"]] == pytest.approx(2.0 * err["err_att_rad"], rel=1e-12) and err["err_att_rad"] > 0
+    cones = [col[c.name] for c in noisy.pointing]  # every pointing constraint (a slacked one is never checked)
+    np.testing.assert_allclose(extra[cones], 2.0 * err["err_att_rad"], rtol=1e-12)
+    assert err["err_att_rad"] > 0
     assert extra[col["temperature"]] == pytest.approx(2.0 * err["err_T_K"], rel=1e-12) and err["err_T_K"] > 0
     assert extra[col["battery"]] == pytest.approx(2.0 * err["err_E_J"], rel=1e-12) and err["err_E_J"] > 0
-    np.testing.assert_array_equal(np.delete(extra, [col["exclusion_zone"], col["temperature"], col["battery"]]), 0.0)
+    np.testing.assert_array_equal(np.delete(extra, [*cones, col["temperature"], col["battery"]]), 0.0)
     E = 11
     S = noisy.substeps
     e = err["err_E_J"]  # one reading's error bound of the charge
@@ -794,7 +799,7 @@ def test_a_candidate_keeps_the_reading_errors_three_times_and_the_backup_law_onc
         assert path_c[-1, E] < floor + extra[col["battery"]]
         c_rows = ConstraintSet(noisy).safety_values(path_c[-1])
         assert c_rows[col["battery"]] < b["candidate_margin"][col["battery"]]
-        assert np.all(np.delete(c_rows >= b["candidate_margin"], [col["battery"], col["communication"]]))
+        assert np.all(np.delete(c_rows >= b["candidate_margin"][: len(NAMES)], [col["battery"], col["communication"]]))
         # the hand-over: the candidate (the law's own command here) accepted with its lowest charge at its floor
         y = x.copy()
         y[E] += floor + extra[col["battery"]] + 1e-6 - path[:, E].min()
@@ -893,12 +898,12 @@ def test_with_sensor_errors_the_backup_law_stays_inside_its_rollouts_margins(cfg
     assert plain["psi_limit_rad_s"] == cfg.limits.psi_max_rad_s
     noisy_cfg = cfg.with_noise()
     f = filter_record(noisy_cfg)
-    m = np.empty(len(CONSTRAINT_NAMES))
+    m = np.empty(len(NAMES))
     _margins(f, m)
     b = f[0]["backup"]
     w_max, psi_max = cfg.limits.omega_max_rad_s, cfg.limits.psi_max_rad_s
-    omega = [CONSTRAINT_NAMES.index(f"omega_{a}") for a in "xyz"]
-    psi = [CONSTRAINT_NAMES.index(f"psi_{a}") for a in "xyz"]
+    omega = [NAMES.index(f"omega_{a}") for a in "xyz"]
+    psi = [NAMES.index(f"psi_{a}") for a in "xyz"]
     assert b["rate_limit_rad_s"] ** 2 < w_max**2 - m[omega].max()
     assert b["psi_limit_rad_s"] ** 2 == pytest.approx(psi_max**2 - m[psi].max(), rel=1e-12)
     settled = 0
@@ -986,7 +991,7 @@ def test_the_energy_reserve_is_the_projection_of_the_tilted_panel(cfg: Config, r
         c = dataclasses.replace(c, environment=dataclasses.replace(c.environment, rotating_hill=True))
     f = filter_record(c)
     assert f[0]["plant"]["frame_rate_rad_s"] == (c.environment.mean_motion_rad_s if rotating else 0.0)
-    floor = c.limits.energy_min_J + float(f[0]["backup"]["margin"][CONSTRAINT_NAMES.index("battery")])
+    floor = c.limits.energy_min_J + float(f[0]["backup"]["margin"][NAMES.index("battery")])
     rng = np.random.default_rng(23)
     seen, tested = [], 0
     while tested < 10:
@@ -1017,7 +1022,7 @@ def test_a_candidates_energy_reserve_keeps_the_candidates_floor(cfg: Config) -> 
     hand-over's three reading errors) or the backup law's (one): with sensor errors the least accepted charge
     at the same state is higher for a candidate by exactly the difference of the two battery margins; without
     them the two are the same. Large momenta (the reserve applies only there) from seed 1's states."""
-    k = CONSTRAINT_NAMES.index("battery")
+    k = NAMES.index("battery")
     x0, _ = sample_initial_states(400, 1, cfg)
     large = [x for x in x0 if 600.0 < momentum_rad_s(x, cfg) < 830.0][:4]
     assert len(large) == 4

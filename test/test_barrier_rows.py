@@ -51,9 +51,11 @@ def _pole_states(rng: np.random.Generator, cfg: Config) -> np.ndarray:
 
 
 def _with_margins(cfg: Config) -> Config:
-    margins = {"exclusion_zone": 1e-3, "communication": 2e-3, "temperature": 0.1, "battery": 20.0}
+    margins = {"temperature": 0.1, "battery": 20.0}
     barriers = {k: dataclasses.replace(v, margin=margins[k]) if k in margins else v for k, v in cfg.barriers.items()}
-    return dataclasses.replace(cfg, barriers=barriers)
+    pointing = tuple(dataclasses.replace(c, gains=dataclasses.replace(c.gains, margin=m))
+                     for c, m in zip(cfg.pointing, (1e-3, 2e-3)))
+    return dataclasses.replace(cfg, barriers=barriers, pointing=pointing)
 
 
 @pytest.mark.parametrize("variant", ["robust", "paper", "robust-with-margins", "rates-disabled"])

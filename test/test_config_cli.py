@@ -4,6 +4,7 @@ traceback; the core imports without rclpy; package.xml and setup.py agree."""
 from __future__ import annotations
 
 import json
+import math
 import re
 import subprocess
 import sys
@@ -38,13 +39,9 @@ def _write(tmp_path, params):
     (lambda p: p["constraints"]["omega"].__setitem__("k1", 0.0), r"constraints\.omega\.k1 must be > 0"),
     (lambda p: p["spacecraft"].__setitem__("inertia_kgm2", [1.0, 2.0]), r"inertia_kgm2 must be a list of 3"),
     (lambda p: p["integrator"].__setitem__("substeps", 2.5), r"integrator\.substeps must be an integer"),
-    (lambda p: p.pop("limits"), r"parameters\.limits is missing"),
-    (lambda p: p["scenarios"]["paper_example"].__setitem__("epoch_utc", "2024-03-02T00:00:00+01:00"),
-     r"scenarios\.paper_example\.epoch_utc must be in UTC"),
-    (lambda p: p["scenarios"]["paper_example"].__setitem__("epoch_utc", "March 2nd"),
-     r"scenarios\.paper_example\.epoch_utc must be an ISO 8601 UTC date-time"),
-    (lambda p: p["scenarios"]["paper_example"].__setitem__("epoch_utc", "1969-12-31T23:59:59Z"),
-     r"epoch_utc must not be before 1970-01-01"),
+    (lambda p: p.__setitem__("limits", 5), r"parameters\.limits must be a mapping"),
+    (lambda p: p["constraints"]["pointing"].__setitem__("exclusion_zone", [1, 2]),
+     r"constraints\.pointing\.exclusion_zone must be a mapping"),
 ])
 def test_config_errors_name_the_parameter(tmp_path, edit, message):
     params = _params()
@@ -52,6 +49,52 @@ def test_config_errors_name_the_parameter(tmp_path, edit, message):
     with pytest.raises(ConfigError, match=message) as exc:
         config.load(_write(tmp_path, params))
     assert "\n" not in str(exc.value)
+
+
+@pytest.mark.parametrize("epoch, message", [
+    ("2024-03-02T00:00:00+01:00", r"scenarios\.paper_example\.epoch_utc must be in UTC"),
+    ("March 2nd", r"scenarios\.paper_example\.epoch_utc must be an ISO 8601 UTC date-time"),
+    ("1969-12-31T23:59:59Z", r"epoch_utc must not be before 1970-01-01"),
+])
+def test_a_bad_scenario_names_itself_and_leaves_the_others(tmp_path, epoch, message):
+    """A scenario's error names it and is raised where that scenario is used; the others run, and
+    check-config reports it with exit 1."""
+    params = _params()
+    params["scenarios"]["paper_example"]["epoch_utc"] = epoch
+    path = _write(tmp_path, params)
+    cfg = config.load(path)
+    with pytest.raises(ConfigError, match=message) as exc:
+        cfg.scenario("paper-example")
+    assert "\n" not in str(exc.value)
+    assert cfg.scenario("passed-example").name == "passed_example"
+    r = _cli("check-config", "--config", str(path))
+    assert r.returncode == 1 and re.search(message, r.stderr) and r.stderr.count("ERROR") == 1
+
+
+def test_an_overlay_holds_only_what_differs(tmp_path):
+    """A user's file merged onto the defaults: a new cone added, a gain changed, a default cone removed
+    (null); -p sets one key on top; the result is validated as one."""
+    overlay = {"constraints": {"pointing": {"star_tracker": {
+        "kind": "keep_out", "boresight_body": [0.0, 0.0, -1.0], "target": "earth", "half_angle_deg": 30.0,
+        "k1": 0.1, "k2": 0.3}, "communication": None}, "omega": {"k1": 0.3}},
+        "filter": {"priorities": ["omega, psi, exclusion_zone", "battery", "temperature"]}}  # (it named the removed)
+    path = tmp_path / "mine.yaml"
+    path.write_text(yaml.safe_dump({"/**": {"ros__parameters": overlay}}))
+    cfg = config.load(path, overrides=config.parse_overrides(["constraints.pointing.star_tracker.half_angle_deg=35",
+                                                              "filter.preset=paper"]))
+    assert cfg.constraint_names[:2] == ("exclusion_zone", "star_tracker")
+    assert math.isclose(math.degrees(cfg.pointing_constraint("star_tracker").half_angle_rad), 35.0)
+    assert cfg.gains("omega_y").k1 == 0.3 and cfg.filter.preset == "paper"
+    assert cfg.limits == config.load().limits  # the rest: the defaults
+    assert "star_tracker" in cfg.priority_levels[0]  # a hard cone the priorities leave out: the first level
+    with pytest.raises(ConfigError, match=r"-p 'filter\.preset': expected KEY=VALUE"):
+        config.parse_overrides(["filter.preset"])
+    with pytest.raises(ConfigError, match=r"filter\.preset must be one of"):
+        config.load(path, overrides={"filter.preset": "fast"})
+    r = _cli("simulate", "--config", str(path), "-p", "scenarios.paper_example.duration_s=3", "--no-plot",
+             "--out", str(tmp_path / "sim"))
+    assert r.returncode == 0, r.stderr
+    assert "star_tracker" in r.stdout
 
 
 def test_scenario_epoch_is_its_utc_date_in_ros_time(tmp_path):
@@ -77,7 +120,7 @@ def test_units_are_converted_once():
     cfg = config.load()
     assert cfg.limits.omega_max_rad_s == pytest.approx(np.radians(1.0))
     assert cfg.limits.temperature_max_K == pytest.approx(283.15)
-    assert cfg.limits.exclusion_angle_rad == pytest.approx(np.radians(40.0))
+    assert cfg.pointing_constraint("exclusion_zone").half_angle_rad == pytest.approx(np.radians(40.0))
     x0 = cfg.scenario("paper-example").x0
     assert x0[10] == pytest.approx(281.65) and x0[12] == pytest.approx(np.radians(525.0))
     assert cfg.scenario("slack-on-exclusion-zone").slack_weights == (("exclusion_zone", 1e12),)

@@ -14,7 +14,6 @@ from helpers import random_states
 from oracles.constraints import ConstraintSet as OracleSet
 
 from rta_attitude import config
-from rta_attitude.config.schema import CONSTRAINT_NAMES
 from rta_attitude.constraints import ConstraintSet
 from rta_attitude.dynamics import quaternion as quat
 from rta_attitude.dynamics import spacecraft
@@ -25,8 +24,8 @@ CFG = config.load()
 CS = ConstraintSet(CFG)
 P = spacecraft.plant_record(CFG)
 EPS = 1e-5
-DEGREE = {name: 2 if i < 4 else 1 for i, name in enumerate(CS.names)}
-"""Relative degree of each barrier as enforced (HOCBF for the first four)."""
+DEGREE = {c.name: 2 if c.kind in ("keep_out", "keep_in", "temperature", "battery") else 1 for c in CS.registry}
+"""Relative degree of each barrier as enforced (HOCBF for the cones, the temperature and the battery)."""
 EARTH = np.array([-1.0, 0.0, 0.0])
 
 
@@ -108,27 +107,34 @@ def test_gain_is_derivative_in_u(states):
 
 
 def test_h_matches_definitions(states):
+    """The paper's constraints by their definitions (SPEC sec. 4): the sensor +i_B >= 40 deg from the sun, the
+    antenna +j_B <= 90 deg from the Earth, T <= 10 degC, E >= 1 kJ, |omega_i| <= 1 deg/s, |psi_i| <= 576 rad/s."""
     x, _ = states
     h = CS.safety_values(x)
+    col = {n: i for i, n in enumerate(CS.names)}
     A = quat.attitude_matrices(x[:, 0:4])
     sensor = A[:, 0, :]
     antenna = A[:, 1, :]
     sun = np.stack([np.cos(x[:, THETA_S]), np.sin(x[:, THETA_S]), 0 * x[:, THETA_S]], axis=-1)
     th_ez = np.degrees(np.arccos(np.clip(np.sum(sensor * sun, 1), -1, 1)))
     th_gs = np.degrees(np.arccos(np.clip(-antenna[:, 0], -1, 1)))
-    np.testing.assert_allclose(np.degrees(h[:, 0]), th_ez - 40.0, atol=1e-9)
-    np.testing.assert_allclose(np.degrees(h[:, 1]), 90.0 - th_gs, atol=1e-9)
-    np.testing.assert_allclose(h[:, 2], 283.15 - x[:, 10])
-    np.testing.assert_allclose(h[:, 3], x[:, 11] - 1000.0)
-    np.testing.assert_allclose(h[:, 4:7], np.radians(1.0) ** 2 - x[:, 4:7] ** 2)
-    np.testing.assert_allclose(h[:, 7:10], 576.0**2 - x[:, 7:10] ** 2)
+    ez, comm = CFG.pointing  # the default configuration's two cones: the paper's
+    assert (ez.kind, ez.boresight_body, ez.target) == ("keep_out", (1.0, 0.0, 0.0), "sun")
+    assert (comm.kind, comm.boresight_body, comm.target) == ("keep_in", (0.0, 1.0, 0.0), "earth")
+    np.testing.assert_allclose(np.degrees(h[:, col[ez.name]]), th_ez - 40.0, atol=1e-9)
+    np.testing.assert_allclose(np.degrees(h[:, col[comm.name]]), 90.0 - th_gs, atol=1e-9)
+    np.testing.assert_allclose(h[:, col["temperature"]], 283.15 - x[:, 10])
+    np.testing.assert_allclose(h[:, col["battery"]], x[:, 11] - 1000.0)
+    np.testing.assert_allclose(h[:, [col[f"omega_{a}"] for a in "xyz"]], np.radians(1.0) ** 2 - x[:, 4:7] ** 2)
+    np.testing.assert_allclose(h[:, [col[f"psi_{a}"] for a in "xyz"]], 576.0**2 - x[:, 7:10] ** 2)
 
 
 def test_augmented_barriers_never_exceed_h(states):
     x, _ = states
     tab = CS.evaluate(x)
-    assert np.all(tab.psi0[:, 2] <= tab.h[:, 2] + 1e-12)
-    assert np.all(tab.psi0[:, 3] <= tab.h[:, 3] + 1e-12)
+    t, b = CS.names.index("temperature"), CS.names.index("battery")
+    assert np.all(tab.psi0[:, t] <= tab.h[:, t] + 1e-12)
+    assert np.all(tab.psi0[:, b] <= tab.h[:, b] + 1e-12)
 
 
 def _state_with_axis_on(axis_body, target_hill, theta_S=0.3, flip=False):
@@ -204,23 +210,23 @@ def test_batch_equals_single():
 def test_sampled_data_margin_only_in_the_robust_preset_and_by_the_filters_model():
     import dataclasses
 
-    b = dict(CFG.barriers)
-    b["exclusion_zone"] = dataclasses.replace(b["exclusion_zone"], margin=2e-3, margin_gyrostat=7e-3)
-    cfg = dataclasses.replace(CFG, barriers=b)
+    first, second = CFG.pointing
+    first = dataclasses.replace(first, gains=dataclasses.replace(first.gains, margin=2e-3, margin_gyrostat=7e-3))
+    cfg = dataclasses.replace(CFG, pointing=(first, second))
     x = random_states(np.random.default_rng(2), 50, CFG)
-    comm = CFG.barriers["communication"]
-    assert comm.margin_gyrostat == comm.margin  # not in the YAML: the paper model's
-    for model, ez_margin in (("paper", 2e-3), ("gyrostat", 7e-3)):
+    assert second.gains.margin_gyrostat == second.gains.margin  # not in the YAML: the paper model's
+    names = cfg.constraint_names
+    for model, first_margin in (("paper", 2e-3), ("gyrostat", 7e-3)):
         c = cfg.with_models(filter=model)
         robust = ConstraintSet(c.with_preset("robust")).evaluate(x)
         paper = ConstraintSet(c.with_preset("paper")).evaluate(x)
         np.testing.assert_array_equal(robust.h, paper.h)
-        np.testing.assert_allclose(paper.psi0[:, 0] - robust.psi0[:, 0], ez_margin, rtol=1e-9)
-        np.testing.assert_allclose(paper.psi0[:, 1] - robust.psi0[:, 1], comm.margin, rtol=1e-9, atol=1e-15)
-        # the battery (column 3) also keeps the float32 interface's bound in the robust preset
-        bat = CONSTRAINT_NAMES.index("battery")
+        np.testing.assert_allclose(paper.psi0[:, 0] - robust.psi0[:, 0], first_margin, rtol=1e-9)
+        np.testing.assert_allclose(paper.psi0[:, 1] - robust.psi0[:, 1], second.gains.margin, rtol=1e-9, atol=1e-15)
+        # the battery also keeps the float32 interface's bound in the robust preset
+        bat = names.index("battery")
         np.testing.assert_allclose(paper.psi0[:, bat] - robust.psi0[:, bat], interface_energy_error(c), rtol=1e-6)
-        others = [i for i in range(2, len(CONSTRAINT_NAMES)) if i != bat]
+        others = [i for i in range(2, len(names)) if i != bat]
         np.testing.assert_array_equal(robust.psi0[:, others], paper.psi0[:, others])
 
 

@@ -14,6 +14,7 @@ from rta_attitude import config
 from rta_attitude.dynamics import quaternion as quat
 from rta_attitude.dynamics import spacecraft
 from rta_attitude.dynamics.controller import controller_record, desired_command
+from rta_attitude.dynamics.environment import sun_hill
 from rta_attitude.dynamics.state import ENERGY, OMEGA, PSI, TEMP, THETA_S, make_state
 
 CFG = config.load()
@@ -142,7 +143,10 @@ def test_sun_turns_at_mean_motion_and_is_unit():
     x = make_state([0, 0, 0, 1], theta_S_rad=1.0)
     assert _integrate(x, np.zeros(3), 100.0, 10)[THETA_S] == pytest.approx(1.0 - 0.1027, abs=1e-12)
     for th in np.linspace(0, 7, 50):
-        assert math.hypot(*spacecraft.sun_hill(th)) == pytest.approx(1.0, abs=1e-15)
+        for beta in (0.0, math.radians(30.0), math.radians(-75.0)):
+            r = sun_hill(th, math.cos(beta), math.sin(beta))
+            assert math.hypot(*r) == pytest.approx(1.0, abs=1e-15)
+            assert math.asin(r[2]) == pytest.approx(beta, abs=1e-12)  # beta above the orbit plane
 
 
 def test_clohessy_wiltshire_closed_form():

@@ -51,8 +51,8 @@ def test_physical_states_near_and_past_the_limits(seed, scale, policy):
     res = _check(f, x, u)
     table = f.constraints.evaluate(x[None])
     lo, hi = table.lo, table.hi
-    if res.gate == "backup":  # the gatekeeper's backup law (inside U, checked above), not the ASIF's answer
-        return
+    if res.gate in ("backup", "toward_backup", "filtered_backup"):
+        return  # the gatekeeper's command (inside U, checked above) or the answer to it, not the answer to u_des
     assert np.all(res.u >= lo[0] - 1e-12) and np.all(res.u <= hi[0] + 1e-12)
     if res.status == "pass":
         np.testing.assert_array_equal(res.u, np.clip(u, lo[0], hi[0]))

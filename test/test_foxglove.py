@@ -6,15 +6,19 @@ a Foxglove WebSocket client written here on the standard library (handshake, mas
 subprotocol `foxglove.websocket.v1` and decodes the binary MessageData payloads with rosbags' own CDR reader and
 its own Jazzy type store (never rclpy). Every wait is a condition with a deadline.
 
-Layout (no DDS): config/foxglove_layout.json is a react-mosaic tree whose every panel has a config; every message
-path names a topic the run publishes (rta_attitude.topics), resolves field by field in the topic's message type,
-and filters on filter_status entry names and keys the filter writes.
+Layout (no DDS): config/foxglove_layout.json is what `recording.layout` writes for the default configuration; it is
+a react-mosaic tree whose every panel has a config and a title under both apps' keys; every message path names a
+topic the run publishes (rta_attitude.topics), resolves field by field in the topic's message type, and filters on
+filter_status entry names and keys the filter writes; every constraint's margin is plotted in its unit (cones in
+deg, temperature in K, battery in J, body rates in deg/s, wheel speeds in rad/s, one unit to a plot) with its
+limit lines; a configuration with a third cone gets its series.
 """
 
 from __future__ import annotations
 
 import base64
 import json
+import math
 import os
 import queue
 import re
@@ -33,12 +37,15 @@ import pytest
 from rosbags.interfaces import Nodetype
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
-from rta_attitude import topics
-from rta_attitude.config.schema import CONSTRAINT_NAMES
+from rta_attitude import config, topics
+from rta_attitude.dynamics.state import STATE_NAMES
+from rta_attitude.recording import layout as layout_module
 
 ROOT = Path(__file__).resolve().parents[1]
 LAYOUT_FILE = ROOT / "config" / "foxglove_layout.json"
 TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
+CFG = config.load()
+CONSTRAINT_NAMES = CFG.constraint_names
 DEADLINE_S = 60.0
 """Safety net of every wait (a loaded machine starts rclpy slowly); not a timing."""
 
@@ -431,9 +438,21 @@ KNOWN_PANEL_TYPES = {"3D", "Plot", "StateTransitions", "RawMessages", "Diagnosti
                      "DiagnosticStatusPanel", "Tab"}
 PLOTTABLE = {"bool", "float32", "float64", "int8", "int16", "int32", "int64", "uint8", "uint16", "uint32",
              "uint64", "string", "byte", "char"}
+MODIFIERS = {"rad2deg": math.degrees}
+"""The message path math modifiers the layout uses (both apps have them), as functions of the value."""
 _TOPIC = re.compile(r"/[A-Za-z0-9_/]*[A-Za-z0-9_]")
 _ELEMENT = re.compile(r'\.([A-Za-z0-9_]+)(\[(\d+|:)\])?((?:\{[A-Za-z0-9_]+==(?:"[^"]*"|-?\d+)\})*)')
 _FILTER = re.compile(r'\{([A-Za-z0-9_]+)==("[^"]*"|-?\d+)\}')
+_MODIFIER = re.compile(r"\.@([a-z0-9]+)$")
+_NUMBER = re.compile(r"-?\d+(\.\d+)?")
+H_PATH = re.compile(r'/rta/filter_status\.status\[:\]\{name=="([a-z0-9_]+)"\}\.values\[:\]\{key=="h"\}\.value')
+STATE_PATH = re.compile(r"/rta/state\.position\[(\d+)\]")
+
+
+def split_modifier(path: str) -> tuple[str, str | None]:
+    """(the path without a trailing `.@modifier`, the modifier or None)."""
+    m = _MODIFIER.search(path)
+    return (path[:m.start()], m.group(1)) if m else (path, None)
 
 
 def mosaic_leaves(node: Any) -> list[str]:
@@ -445,11 +464,11 @@ def mosaic_leaves(node: Any) -> list[str]:
     return mosaic_leaves(node["first"]) + mosaic_leaves(node["second"])
 
 
-def all_panel_ids() -> list[str]:
-    ids = mosaic_leaves(LAYOUT["layout"])
+def all_panel_ids(layout: dict[str, Any] = LAYOUT) -> list[str]:
+    ids = mosaic_leaves(layout["layout"])
     for panel_id in list(ids):
         if panel_id.startswith("Tab!"):
-            for tab in LAYOUT["configById"][panel_id]["tabs"]:
+            for tab in layout["configById"][panel_id]["tabs"]:
                 ids += mosaic_leaves(tab["layout"])
     return ids
 
@@ -468,7 +487,10 @@ def _field(type_name: str, name: str) -> tuple[str, str, bool]:
 
 
 def resolve(path: str) -> tuple[str, list[tuple[str, str, str]]]:
-    """Type-check a message path; returns (leaf primitive type, [(type, field, value) of each filter])."""
+    """Type-check a message path (a trailing math modifier aside); returns (leaf primitive type, [(type, field,
+    value) of each filter])."""
+    path, modifier = split_modifier(path)
+    assert modifier is None or modifier in MODIFIERS, f"{path}: unknown modifier @{modifier}"
     m = _TOPIC.match(path)
     assert m, path
     topic = m.group(0)
@@ -493,8 +515,13 @@ def resolve(path: str) -> tuple[str, list[tuple[str, str, str]]]:
     return type_name, filters
 
 
-def _paths() -> list[tuple[str, str]]:
-    return [(pid, p["value"]) for pid, cfg in LAYOUT["configById"].items() for p in cfg.get("paths", [])]
+def _paths(layout: dict[str, Any] = LAYOUT) -> list[tuple[str, str]]:
+    return [(pid, p["value"]) for pid, cfg in layout["configById"].items() for p in cfg.get("paths", [])]
+
+
+def test_shipped_layout_is_the_generators_output_for_the_default_config() -> None:
+    assert LAYOUT_FILE.read_text() == layout_module.layout_json(CFG), \
+        "regenerate it: python -m rta_attitude.recording.layout config/foxglove_layout.json"
 
 
 def test_layout_is_layout_data_with_every_panel_placed_once_and_configured() -> None:
@@ -506,9 +533,11 @@ def test_layout_is_layout_data_with_every_panel_placed_once_and_configured() -> 
         kind, _, suffix = panel_id.partition("!")
         assert kind in KNOWN_PANEL_TYPES and suffix, panel_id
         assert isinstance(LAYOUT["configById"][panel_id], dict) and LAYOUT["configById"][panel_id]
-    for cfg in LAYOUT["configById"].values():
+    for panel_id, cfg in LAYOUT["configById"].items():
         for p in cfg.get("paths", []):
             assert p["timestampMethod"] in ("receiveTime", "headerStamp") and isinstance(p["enabled"], bool)
+        titles = {cfg.get(k) for k in layout_module.TITLE_KEYS}
+        assert len(titles) == 1, f"{panel_id}: the two apps' titles differ: {titles}"
 
 
 def test_every_topic_the_layout_names_is_published_by_the_run() -> None:
@@ -521,8 +550,8 @@ def test_every_topic_the_layout_names_is_published_by_the_run() -> None:
 
 @pytest.mark.parametrize(("panel_id", "path"), _paths())
 def test_every_field_path_exists_in_its_message_type(panel_id: str, path: str) -> None:
-    if re.fullmatch(r"-?\d+(\.\d+)?", path):
-        return  # a number is a reference line (the zero line of the margin plots)
+    if _NUMBER.fullmatch(path):
+        return  # a number is a reference line (the zero and limit lines of the margin plots)
     leaf, filters = resolve(path)
     assert leaf in PLOTTABLE, f"{panel_id}: {path} ends on {leaf}"
     entry = None
@@ -535,15 +564,43 @@ def test_every_field_path_exists_in_its_message_type(panel_id: str, path: str) -
             assert value in keys, f"{path}: {value!r} is not a key of the {entry!r} entry"
 
 
-def test_margin_plots_cover_every_constraint_with_a_zero_line_and_torques_pair_per_axis() -> None:
-    plotted = []
-    for panel_id, cfg in LAYOUT["configById"].items():
+def margin_series(layout: dict[str, Any]) -> dict[str, tuple[str, str | None, list[float]]]:
+    """{constraint: (panel, modifier, reference lines of its panel)} of every margin series of a layout: h of a
+    filter_status entry, or a body rate / wheel speed of `state` (named by STATE_NAMES: omega_x ... psi_z)."""
+    out: dict[str, tuple[str, str | None, list[float]]] = {}
+    for panel_id, cfg in layout["configById"].items():
         values = [p["value"] for p in cfg.get("paths", [])]
-        margins = [v for v in values if v.endswith('.values[:]{key=="h"}.value')]
-        if margins:
-            assert "0" in values, f"{panel_id}: no zero line"
-            plotted += [re.search(r'name=="([a-z_]+)"', v).group(1) for v in margins]  # type: ignore[union-attr]
-    assert sorted(plotted) == sorted(CONSTRAINT_NAMES)
+        lines = sorted(float(v) for v in values if _NUMBER.fullmatch(v))
+        for v in values:
+            path, modifier = split_modifier(v)
+            h, state = H_PATH.fullmatch(path), STATE_PATH.fullmatch(path)
+            if h or state:
+                name = h.group(1) if h else STATE_NAMES[int(state.group(1))]  # type: ignore[union-attr]
+                assert name not in out, f"{name} is plotted twice"
+                out[name] = (panel_id, modifier, lines)
+    return out
+
+
+def test_every_margin_is_plotted_in_its_unit_with_its_limit_lines_one_unit_to_a_plot() -> None:
+    series = margin_series(LAYOUT)
+    assert sorted(series) == sorted(CONSTRAINT_NAMES)
+    L = CFG.limits
+    unit = {c.name: "deg" for c in CFG.pointing} | {"temperature": "K", "battery": "J"}
+    unit |= {f"omega_{a}": "deg/s" for a in "xyz"} | {f"psi_{a}": "rad/s" for a in "xyz"}
+    for name, (_, modifier, lines) in series.items():
+        if name.startswith("omega_"):  # the rate itself in deg/s between -omega_max and +omega_max
+            assert modifier == "rad2deg" and lines == pytest.approx([-math.degrees(L.omega_max_rad_s),
+                                                                     math.degrees(L.omega_max_rad_s)], abs=1e-4)
+        elif name.startswith("psi_"):  # the wheel speed in rad/s between -psi_max and +psi_max
+            assert modifier is None and lines == pytest.approx([-L.psi_max_rad_s, L.psi_max_rad_s], abs=1e-4)
+        else:  # h with its zero line: the cones' in deg, temperature's in K, battery's in J
+            assert modifier == ("rad2deg" if unit[name] == "deg" else None) and lines == [0.0], name
+    panels = {p for p, _, _ in series.values()}
+    for panel in panels:
+        units = {unit[n] for n, (p, _, _) in series.items() if p == panel}
+        assert len(units) == 1, f"{panel} mixes units {units}"
+        title = LAYOUT["configById"][panel]["foxglovePanelTitle"]
+        assert f"[{units.pop()}]" in title, title
     for axis in "xyz":
         values = [p["value"] for p in LAYOUT["configById"][f"Plot!torque_{axis}"]["paths"]]
         assert values == [f"/rta/torque_des.vector.{axis}", f"/rta/torque_cmd.vector.{axis}"]
@@ -551,8 +608,36 @@ def test_margin_plots_cover_every_constraint_with_a_zero_line_and_torques_pair_p
     assert state_paths, "the filter status is shown"
 
 
+def test_a_third_cone_gets_its_own_margin_series_and_status_row() -> None:
+    import dataclasses
+
+    from rta_attitude.config.schema import PointingConstraint
+
+    cone = PointingConstraint(name="star_tracker", kind="keep_out", boresight_body=(0.0, 0.0, -1.0), target="earth",
+                              half_angle_rad=math.radians(30), gains=CFG.pointing[0].gains)
+    levels = CFG.filter.priorities
+    cfg = dataclasses.replace(CFG, pointing=(*CFG.pointing, cone), filter=dataclasses.replace(
+        CFG.filter, priorities=levels[:1] and (levels[0] + ("star_tracker",), *levels[1:])))
+    layout = json.loads(layout_module.layout_json(cfg))
+    series = margin_series(layout)
+    assert sorted(series) == sorted(cfg.constraint_names)
+    assert series["star_tracker"][:2] == (layout_module.POINTING_PLOT, "rad2deg")
+    labels = [p["label"] for p in layout["configById"][layout_module.POINTING_PLOT]["paths"]]
+    assert labels[2].startswith("star_tracker (keep out 30 deg, Earth)")
+    status = [p["value"] for p in layout["configById"]["StateTransitions!filter_status"]["paths"]]
+    assert '/rta/filter_status.status[:]{name=="star_tracker"}.message' in status
+    for _, path in _paths(layout):
+        if not _NUMBER.fullmatch(path):
+            resolve(path)
+    assert set(all_panel_ids(layout)) == set(layout["configById"])
+    other = json.loads(layout_module.layout_json(cfg, "/sat2"))
+    assert all(p.startswith("/sat2/") for _, p in _paths(other) if not _NUMBER.fullmatch(p))
+
+
 def _evaluate(path: str, msg: Any) -> list[Any]:
-    """A message path on a decoded message, as the apps evaluate it: slices and filters fan out to a list."""
+    """A message path on a decoded message, as the apps evaluate it: slices and filters fan out to a list; a
+    trailing math modifier applies to each number (the apps read numeric strings as numbers)."""
+    path, modifier = split_modifier(path)
     m = _TOPIC.match(path)
     assert m, path
     items, pos = [msg], m.end()
@@ -567,34 +652,44 @@ def _evaluate(path: str, msg: Any) -> list[Any]:
             want: Any = value.strip('"') if value.startswith('"') else int(value)
             items = [item for item in items if getattr(item, key) == want]
         pos = e.end()
-    return items
+    return items if modifier is None else [MODIFIERS[modifier](float(v)) for v in items]
 
 
-def test_every_filter_status_path_reads_one_value_of_a_real_filter_status() -> None:
+def test_every_filter_status_and_state_path_reads_one_value_of_a_real_message() -> None:
     """The layout's filter_status paths on a message the filter node's builder makes (the filter's answer at
-    paper_example's initial state), serialized by rclpy and decoded by rosbags: every path gives one value, and
-    each margin path exactly the h of its constraint (repr of the float64, which the apps read as that number)."""
+    paper_example's initial state, serialized by rclpy), and its state paths on the plant's state message (its
+    CDR writer), decoded by rosbags: every path gives one value, each margin path exactly the h of its constraint
+    (repr of the float64, which the apps read as that number; in deg for the cones), each state path its
+    component."""
     import numpy as np
     from rclpy.serialization import serialize_message
 
-    from rta_attitude import config
     from rta_attitude.filter.asif import AsifFilter
     from rta_attitude.ros import convert
 
-    cfg = config.load()
-    filt = AsifFilter(cfg)
-    res = filt.filter(cfg.scenario("paper_example").x0, np.zeros(3))
+    filt = AsifFilter(CFG)
+    x0 = np.asarray(CFG.scenario("paper_example").x0, dtype=float)
+    x0[4:10] = [0.01, -0.005, 0.002, 120.0, -80.0, 5.0]
+    res = filt.filter(x0, np.zeros(3))
     msg = decode("diagnostic_msgs/msg/DiagnosticArray",
                  bytes(serialize_message(convert.filter_status_msg(res, 42, filt.counters, "robust", ()))))
+    state = decode("sensor_msgs/msg/JointState", convert.state_cdr(x0, 42))  # the bytes the plant publishes
+    cones = {c.name for c in CFG.pointing}
     checked = 0
     for panel_id, path in _paths():
+        if path.startswith("/rta/state."):
+            values = _evaluate(path, state)
+            i = int(STATE_PATH.fullmatch(split_modifier(path)[0]).group(1))  # type: ignore[union-attr]
+            assert values == [math.degrees(x0[i]) if path.endswith("@rad2deg") else x0[i]], path
+            checked += 1
         if not path.startswith("/rta/filter_status."):
             continue
         values = _evaluate(path, msg)
         assert len(values) == 1, f"{panel_id}: {path} gives {values}"
         name = re.search(r'name=="([a-z_]+)"', path).group(1)  # type: ignore[union-attr]
-        if path.endswith('{key=="h"}.value'):
-            assert float(values[0]) == res.h[list(res.names).index(name)], path
+        if H_PATH.fullmatch(split_modifier(path)[0]):
+            h = res.h[list(res.names).index(name)]
+            assert float(values[0]) == (math.degrees(h) if name in cones else h), path
         checked += 1
     assert checked >= len(CONSTRAINT_NAMES)
 

@@ -33,7 +33,7 @@ def _launch(*args: str, timeout: float = 240) -> subprocess.CompletedProcess[str
 
 def _reference_summary(traj: Any) -> dict[str, Any]:
     cfg = CFG.for_scenario(CFG.scenario(traj.scenario))
-    return summarize_trajectory(traj, cfg.limits.omega_dot_max_rad_s2, cfg.slacked_constraints)
+    return summarize_trajectory(traj, cfg)
 
 
 def _survivors(marker: str) -> list[int]:

@@ -62,9 +62,11 @@ def test_a_bad_params_file_is_rejected_before_any_node(tmp_path: Path) -> None:
         validate({"params_file": str(bad)}, cwd=tmp_path)
     assert f"params_file:={str(bad)!r}" in str(err.value) and "omega_max" in str(err.value)
     assert "\n" not in str(err.value)
-    bad.write_text("/**:\n  ros__parameters: {}\n")
-    with pytest.raises(ConfigError, match=r"params_file.*missing"):
+    bad.write_text("/**:\n  ros__parameters: {filter: {preset: fast}}\n")  # an overlay with a bad value
+    with pytest.raises(ConfigError, match=r"params_file.*filter\.preset must be one of"):
         validate({"params_file": str(bad)}, cwd=tmp_path)
+    bad.write_text("/**:\n  ros__parameters: {}\n")  # an empty overlay: the defaults
+    assert validate({"params_file": str(bad)}, cwd=tmp_path)["params_file"] == str(bad)
 
 
 def test_the_bag_is_never_silently_reused(tmp_path: Path) -> None:

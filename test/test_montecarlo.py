@@ -11,7 +11,7 @@ import pytest
 
 from rta_attitude import config
 from rta_attitude.cli.main import main as cli_main
-from rta_attitude.config.schema import CONSTRAINT_NAMES, Config, Scenario
+from rta_attitude.config.schema import Config, Scenario
 from rta_attitude.constraints import ConstraintSet
 from rta_attitude.dynamics.state import ENERGY, OMEGA, PSI, TEMP, THETA_S, Q
 from rta_attitude.errors import ConfigError
@@ -19,6 +19,9 @@ from rta_attitude.montecarlo.classify import unavoidable
 from rta_attitude.montecarlo.runner import run_dask, run_local, run_runs
 from rta_attitude.montecarlo.sampling import sample_initial_states
 from rta_attitude.simulation import closed_loop as simulation
+
+NAMES = config.load().constraint_names
+"""The default configuration's constraints, in row order."""
 
 
 @pytest.fixture(scope="module")
@@ -171,7 +174,7 @@ def test_battery_rule_flags_only_what_no_command_can_save(cfg: Config) -> None:
     x[:, TEMP] = 273.15
     x[:, ENERGY] = (1050.0, 1400.0, 5000.0)
     rules = unavoidable(x, cfg, 2000.0)
-    battery = rules["battery_energy"][:, CONSTRAINT_NAMES.index("battery")]
+    battery = rules["battery_energy"][:, NAMES.index("battery")]
     np.testing.assert_array_equal(battery, [True, False, False])
     # the bound: turning at sqrt(3) omega_max from 90 deg, the loss is P_out t - integral of P_in
     P, P_out = cfg.power.peak_W, cfg.power.load_W
@@ -243,7 +246,27 @@ def test_cli_writes_json_csv_png_with_consistent_counts(tmp_path, capsys) -> Non
     np.testing.assert_array_equal(np.array([[float(r[n]) for n in ("q1", "omega_y", "psi_z", "E")] for r in rows]),
                                   x0[:, [0, 5, 9, 11]])
     printed = capsys.readouterr().out
-    assert "success rate" in printed and "98.32%" in printed
+    assert "success rate" in printed and "98.32%" not in printed  # 40 s is not the paper's protocol
+
+
+def test_the_papers_column_is_printed_for_the_papers_protocol_only() -> None:
+    """The paper's table beside ours only where the campaign is the paper's: its vehicle and limits, its sensor
+    cone (whatever its name), 2,000 s."""
+    import dataclasses
+
+    from rta_attitude.montecarlo.report import paper_names, paper_protocol
+
+    cfg = config.load()
+    assert paper_protocol(cfg, 2000.0) and not paper_protocol(cfg, 40.0)
+    twelve_u = dataclasses.replace(cfg, spacecraft=dataclasses.replace(cfg.spacecraft, inertia_kgm2=(0.2, 0.25, 0.15)))
+    assert not paper_protocol(twelve_u, 2000.0)
+    renamed = dataclasses.replace(cfg.pointing[0], name="sun_sensor")
+    plain = dataclasses.replace(cfg.filter, priorities=())  # (the default's name the paper's cones)
+    other = dataclasses.replace(cfg, pointing=(renamed, cfg.pointing[1]), scenarios={}, filter=plain)
+    assert paper_protocol(other, 2000.0) and paper_names(other)["sensor keep-out"] == "sun_sensor"
+    moved = dataclasses.replace(cfg.pointing[0], boresight_body=(0.0, 0.0, -1.0))
+    assert not paper_protocol(dataclasses.replace(cfg, pointing=(moved, cfg.pointing[1]), scenarios={}, filter=plain),
+                              2000.0)
 
 
 def test_cli_rejects_bad_arguments(tmp_path, capsys) -> None:
@@ -271,8 +294,8 @@ def test_classify_proves_the_momentum_battery_failures(cfg: Config) -> None:
     x = x0[[841, 985, small]]
     for lost_name, expect in (("battery", [True, True, False]), ("omega_y", [True, True, False]),
                               ("communication", [False, False, False])):
-        violated = np.zeros((3, len(CONSTRAINT_NAMES)), dtype=bool)
-        violated[:, CONSTRAINT_NAMES.index(lost_name)] = True
+        violated = np.zeros((3, len(NAMES)), dtype=bool)
+        violated[:, NAMES.index(lost_name)] = True
         lost, rules = classify(x, violated, cfg, 2000.0)
         assert lost.tolist() == expect, lost_name
         assert [r == "momentum_battery" for r in rules] == expect

@@ -16,10 +16,9 @@ import pytest
 import scipy.sparse as sp
 
 from rta_attitude import config
-from rta_attitude.config.schema import BARRIER_GROUPS, CONSTRAINT_NAMES
+from rta_attitude.constraints.registry import levels as constraint_levels
 from rta_attitude.errors import ConfigError
 from rta_attitude.filter.asif import AsifFilter
-from rta_attitude.filter.pipeline import constraint_levels
 from rta_attitude.montecarlo.sampling import sample_initial_states
 from rta_attitude.topics import QP_KEYS
 
@@ -51,11 +50,11 @@ def _oracle(t, levels, slack_w, u_des):
     slack), the coupled rate rows lo <= g u <= hi (their axis's rate constraint's level), the box
     lo <= u <= hi always hard. Each level's QP minimises the sum of squared distances w (in u) by
     which its rows give way: drift + gain u + |gain| w >= 0."""
-    m = len(CONSTRAINT_NAMES)
+    m = len(CFG.constraint_names)
     on = [i for i in range(m) if np.linalg.norm(t.gain[i]) > 1e-12]
     hard = [i for i in on if slack_w[i] == 0]
     nz = int(t.zoh_rows)
-    zlevel = [levels[CONSTRAINT_NAMES.index("omega_x") + int(t.zoh_axis[q])] for q in range(nz)]
+    zlevel = [levels[CFG.constraint_names.index("omega_x") + int(t.zoh_axis[q])] for q in range(nz)]
     relax, zrelax = np.zeros(m), np.zeros(nz)
 
     def rows(n, level_of_var):
@@ -146,7 +145,7 @@ def _level_cost(t, u, levels, slack_w, lev):
     nz = int(t.zoh_rows)
     zoh = zoh / np.linalg.norm(t.zoh_gain[:nz], axis=1)
     mask = on & (levels == lev) & (slack_w == 0)
-    ox = CONSTRAINT_NAMES.index("omega_x")
+    ox = CFG.constraint_names.index("omega_x")
     zmask = np.array([levels[ox + int(t.zoh_axis[q])] == lev for q in range(int(t.zoh_rows))], dtype=bool)
     return float(np.sum(rows[mask] ** 2) + np.sum(zoh[zmask] ** 2))
 
@@ -169,13 +168,13 @@ def _infeasible_states(cfg, count, seed=5):
 
 
 def _slack_weights(cfg):
-    return np.array([cfg.barriers[n].slack_weight if n in cfg.barriers else 0.0 for n in CONSTRAINT_NAMES])
+    return np.array([cfg.gains(n).slack_weight for n in cfg.constraint_names])
 
 
 @pytest.mark.parametrize("priorities", [CFG.filter.priorities, SPLIT], ids=["default", "split"])
 def test_prioritize_is_the_lexicographic_optimum_of_an_independent_solver(priorities):
     cfg = replace(CFG, filter=replace(CFG.filter, priorities=priorities))
-    levels = constraint_levels(priorities)
+    levels = constraint_levels(cfg)
     slack_w = _slack_weights(cfg)
     f = AsifFilter(cfg)
     soften = AsifFilter(cfg.with_fallback("soften"))
@@ -244,7 +243,7 @@ def test_other_policies_are_unchanged_by_the_priorities():
 
 
 @pytest.mark.parametrize(("levels", "message"), [
-    (["omega, psi", "temperature", "battery", "communication"], "missing exclusion_zone"),
+    (["omega, psi, exclusion_zone", "temperature", "communication"], "missing battery"),
     (["omega psi exclusion_zone", "omega", "temperature", "battery", "communication"], "omega twice"),
     (["omega, psi, exclusion_zone, wheels", "temperature", "battery", "communication"], "must be one of"),
     ("omega", "must be a list of strings"),
@@ -263,8 +262,8 @@ def test_priorities_parse_from_ros_style_strings():
     cfg = config.from_parameters(params)
     assert cfg.filter.priorities == (("exclusion_zone",), ("omega", "psi"), ("battery", "temperature"),
                                      ("communication",))
-    assert constraint_levels(cfg.filter.priorities).tolist() == [0, 3, 2, 2, 1, 1, 1, 1, 1, 1]
-    assert set(BARRIER_GROUPS) == {g for level in cfg.filter.priorities for g in level}
+    assert constraint_levels(cfg).tolist() == [0, 3, 2, 2, 1, 1, 1, 1, 1, 1]
+    assert set(cfg.groups) == {g for level in cfg.filter.priorities for g in level}
 
 
 def test_conflicting_constraints_scenario_shows_which_level_gives_way() -> None:

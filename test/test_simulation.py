@@ -15,7 +15,7 @@ HARD = ("exclusion_zone", "temperature", "battery", "omega_x", "omega_y", "omega
 
 
 def _summary(traj, cfg=CFG):
-    return summarize_trajectory(traj, cfg.limits.omega_dot_max_rad_s2, cfg.slacked_constraints)
+    return summarize_trajectory(traj, cfg)
 
 
 @pytest.fixture(scope="module")

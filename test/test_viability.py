@@ -21,13 +21,16 @@ import pytest
 from helpers import best_panel_cos
 
 from rta_attitude import config
-from rta_attitude.config.schema import CONSTRAINT_NAMES, Config
-from rta_attitude.constraints import ConstraintSet, group_of
+from rta_attitude.config.schema import BarrierGains, Config, PointingConstraint
+from rta_attitude.constraints import ConstraintSet, registry
+from rta_attitude.constraints.windows import window_phase
+from rta_attitude.dynamics.quaternion import attitude_matrices
 from rta_attitude.dynamics.spacecraft import integrate, plant_record
 from rta_attitude.dynamics.state import STATE_NAMES, STATE_SIZE
 from rta_attitude.viability import find_witness
 from rta_attitude.viability.laws import LAWS, quat_from_matrix, simulate_law, sun_safe_matrix
-from rta_attitude.viability.params import default_enforce, from_config
+from rta_attitude.viability.model import constraint_values
+from rta_attitude.viability.params import check_enforce, default_enforce, from_config
 from rta_attitude.viability.result import NO_WITNESS, RECOVERABLE, UNRECOVERABLE, Result
 from rta_attitude.viability.rules import _distance_to_bands, battery_rule, check_rules, momentum_band, momentum_bands
 
@@ -57,14 +60,24 @@ def project_run(cfg: Config, x0: np.ndarray, u: np.ndarray) -> tuple[np.ndarray,
     return np.array(samples), np.concatenate(subs) if subs else np.zeros((0, STATE_SIZE))
 
 
-def project_h(cfg: Config, x0: np.ndarray, subs: np.ndarray) -> np.ndarray:
-    """The project's safety values (n, 10) at x0 and every substep."""
+def project_h(cfg: Config, x0: np.ndarray, subs: np.ndarray, start_s: float = 0.0) -> np.ndarray:
+    """The project's safety values (n, rows) at x0 (time start_s) and every substep after it."""
     x = np.zeros(STATE_SIZE)
     x[:13] = x0[:13]
-    return ConstraintSet(cfg).safety_values(np.vstack([x[None, :], subs]))
+    t = start_s + cfg.filter.sample_time_s * np.arange(len(subs) + 1) / cfg.substeps
+    return ConstraintSet(cfg).safety_values(np.vstack([x[None, :], subs]), t)
 
 
-def check_witness(cfg: Config, x0: np.ndarray, res: Result, steps: int) -> dict[str, float]:
+def enforced_rows(cfg: Config, enforce: tuple[str, ...]) -> list[int]:
+    """The project's rows of the constraints in the groups `enforce`."""
+    return [c.row for c in registry(cfg) if c.group in enforce]
+
+
+def row(cfg: Config, name: str) -> int:
+    return registry(cfg).index(name)
+
+
+def check_witness(cfg: Config, x0: np.ndarray, res: Result, steps: int, start_s: float = 0.0) -> dict[str, float]:
     """The box, the oracle's x against the project's plant, every enforced constraint at every substep."""
     assert res.verdict == RECOVERABLE and res.rule is None
     assert res.u is not None and res.x is not None
@@ -72,12 +85,12 @@ def check_witness(cfg: Config, x0: np.ndarray, res: Result, steps: int) -> dict[
     assert np.all(np.abs(res.u) <= cfg.u_max_rad_s2), "a command leaves the box U"
     samples, subs = project_run(cfg, x0, res.u)
     np.testing.assert_allclose(res.x, samples[:, :13], rtol=0, atol=1e-7)
-    h = project_h(cfg, x0, subs)
+    h = project_h(cfg, x0, subs, start_s)
     worst: dict[str, float] = {}
-    for i, name in enumerate(CONSTRAINT_NAMES):
-        if group_of(name) in res.enforce:
-            worst[name] = float(h[:, i].min())
-            assert worst[name] >= 0.0, f"{name} violated by the witness on the project's plant: {worst[name]}"
+    for c in registry(cfg):
+        if c.group in res.enforce:
+            worst[c.name] = float(h[:, c.row].min())
+            assert worst[c.name] >= 0.0, f"{c.name} violated by the witness on the project's plant: {worst[c.name]}"
     return worst
 
 
@@ -129,7 +142,7 @@ def test_the_assembled_derivatives_equal_casadi_ad(cfg: Config) -> None:
     from rta_attitude.viability.transcription import build_nlp
 
     m = from_config(with_model(cfg, "gyrostat"))
-    nlp = build_nlp(2, m, True, True, compiled=False)
+    nlp = build_nlp(2, m, True, (0, 1), compiled=False)  # both cones with rows
     z, g, f = nlp.problem["x"], nlp.problem["g"], nlp.problem["f"]
     lf, lg = ca.MX.sym("lf"), ca.MX.sym("lg", g.shape[0])
     jac_ref = ca.Function("J", [z], [ca.jacobian(g, z)])
@@ -163,7 +176,7 @@ def test_the_battery_rule_proves_a_dark_panel_unrecoverable(cfg: Config, model: 
     assert (res.verdict, res.rule, res.u) == (UNRECOVERABLE, "battery_drain", None)
     assert "E_min" in res.detail and res.iterations == 0
     # not contradicted: every warm-start law, on the project's plant, drains the battery below E_min
-    battery = CONSTRAINT_NAMES.index("battery")
+    battery = row(c, "battery")
     for law in LAWS:
         u, _, _ = simulate_law(x0, 300, from_config(c), law)
         _, subs = project_run(c, x0, u)
@@ -177,7 +190,7 @@ def test_the_temperature_rule_proves_a_hot_face_unrecoverable(cfg: Config) -> No
     rows = np.vstack([np.cross(-s, z), -s, z])  # -j_B on the sun; sensor and panel perpendicular to it
     x0 = np.concatenate([quat_from_matrix(rows), np.zeros(6), [cfg.limits.temperature_max_K - 0.02, 9000.0, theta]])
     h0 = project_h(cfg, x0, np.zeros((0, STATE_SIZE)))[0]
-    assert all(h0[i] >= 0 for i, n in enumerate(CONSTRAINT_NAMES) if group_of(n) in default_enforce(cfg))
+    assert all(h0[i] >= 0 for i in enforced_rows(cfg, default_enforce(cfg)))
     res = find_witness(x0, 300.0, cfg, compile=False)
     assert (res.verdict, res.rule, res.u) == (UNRECOVERABLE, "temperature_heating", None)
 
@@ -221,12 +234,12 @@ def test_the_momentum_rule_proves_a_panel_the_wheels_cannot_turn_unrecoverable(c
     m = from_config(cfg)
     x0 = momentum_state(cfg, 560.0, 1020.0)
     h0 = project_h(cfg, x0, np.zeros((0, STATE_SIZE)))[0]
-    assert all(h0[i] >= 0 for i, n in enumerate(CONSTRAINT_NAMES) if group_of(n) in default_enforce(cfg))
+    assert all(h0[i] >= 0 for i in enforced_rows(cfg, default_enforce(cfg)))
     assert battery_rule(x0, 300.0, m) == ""  # turning alone would save it
     res = find_witness(x0, 300.0, cfg, compile=False)
     assert (res.verdict, res.rule, res.u) == (UNRECOVERABLE, "momentum_battery", None)
     # not contradicted: every warm-start law, on the project's plant, drains the battery below E_min
-    battery = CONSTRAINT_NAMES.index("battery")
+    battery = row(cfg, "battery")
     for law in LAWS:
         u, _, _ = simulate_law(x0, 100, m, law)
         _, subs = project_run(cfg, x0, u)
@@ -264,6 +277,238 @@ def test_just_above_the_rules_threshold_the_answer_is_never_unrecoverable(cfg: C
         check_witness(cfg, x0, res, 30)
 
 
+# ----------------------------------------------------------------------------- the cone table
+NADIR_HILL = np.array([-1.0, 0.0, 0.0])
+"""The Earth from the spacecraft in Hill (+x radial out, +y along-track, +z orbit normal)."""
+
+
+def star_tracker(windows_s: tuple[tuple[float, float], ...] = ()) -> PointingConstraint:
+    """A keep-out cone of 30 deg about the Earth for a star tracker on -k_B."""
+    return PointingConstraint(name="star_tracker", kind="keep_out", boresight_body=(0.0, 0.0, -1.0), target="earth",
+                              half_angle_rad=math.radians(30.0), gains=BarrierGains(k1=0.1, k2=0.3),
+                              windows_s=windows_s)
+
+
+def with_cones(cfg: Config, *cones: PointingConstraint) -> Config:
+    """cfg with more pointing constraints (after the configured ones), each a priority level of its own."""
+    levels = (*cfg.filter.priorities, *((c.name,) for c in cones))
+    return replace(cfg, pointing=(*cfg.pointing, *cones), filter=replace(cfg.filter, priorities=levels))
+
+
+def random_states(rng: np.random.Generator, n: int) -> np.ndarray:
+    """n oracle states (13,): random attitudes and theta_S, rates, wheels, T and E inside their limits."""
+    q = rng.normal(size=(n, 4))
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    return np.column_stack([q, rng.uniform(-0.01, 0.01, (n, 3)), rng.uniform(-400, 400, (n, 3)),
+                            rng.uniform(260, 280, n), rng.uniform(2000, 8000, n), rng.uniform(0, 2 * np.pi, n)])
+
+
+def row_values(m: object, names: tuple[str, ...], xs: np.ndarray) -> np.ndarray:
+    """The transcription's rows `names` (scaled) at states xs (n, 13)."""
+    import casadi as ca
+
+    from rta_attitude.viability.transcription import ca_rows
+
+    x = ca.SX.sym("x", 13)
+    f = ca.Function("rows", [x], [ca_rows(x, names, m)])  # type: ignore[arg-type]
+    return np.array([np.array(f(xk)).ravel() for xk in xs])
+
+
+def full_states(xs: np.ndarray) -> np.ndarray:
+    out = np.zeros((len(xs), STATE_SIZE))
+    out[:, :13] = xs
+    return out
+
+
+def test_an_extra_cone_gets_a_row_of_its_boresights_cosine_to_its_target(cfg: Config) -> None:
+    """A configured keep-out cone of a star tracker on -k_B about the Earth: a row at every node and substep whose
+    value is cos(angle(boresight, Earth)) with the Earth in body axes A(q) r_E, bounded by cos(30 deg) - margin."""
+    from rta_attitude.viability.transcription import enforced_cones, row_bounds, row_names
+
+    c = with_cones(cfg, star_tracker())
+    m = from_config(c)
+    enforce = default_enforce(c)
+    assert "star_tracker" in enforce and "star_tracker" in c.groups
+    cones = enforced_cones(m, enforce)
+    node, inner = row_names(m, cones, True), row_names(m, cones, False)
+    assert node[:2] == ("exclusion_zone", "star_tracker") and "star_tracker" in inner  # communication: slacked
+    xs = random_states(np.random.default_rng(5), 8)
+    cos_row = row_values(m, node, xs)[:, node.index("star_tracker")]
+    earth_body = np.einsum("nij,j->ni", attitude_matrices(xs[:, :4]), NADIR_HILL)
+    expect = earth_body @ np.array([0.0, 0.0, -1.0])
+    assert np.ptp(expect) > 0.5  # the states differ
+    np.testing.assert_allclose(cos_row, expect, rtol=0, atol=1e-14)
+    lo, hi = row_bounds(node, enforce, 1e-4, m)
+    j = node.index("star_tracker")
+    assert lo[j] == -np.inf and hi[j] == pytest.approx(math.cos(math.radians(30.0)) - 1e-4, abs=1e-15)
+    # the oracle's h and the project's safety value: the angle's margin outside the cone
+    h = constraint_values(xs, m)["star_tracker"]
+    np.testing.assert_allclose(h, np.arccos(np.clip(expect, -1, 1)) - math.radians(30.0), rtol=0, atol=1e-9)
+    np.testing.assert_allclose(h, ConstraintSet(c).safety_values(full_states(xs))[:, row(c, "star_tracker")],
+                               rtol=0, atol=1e-8)
+    # the same numbers for the paper's two cones as with the default configuration
+    base = from_config(cfg)
+    both = row_values(base, row_names(base, (0,), True), xs)
+    np.testing.assert_array_equal(row_values(m, node, xs)[:, [i for i, n in enumerate(node) if n != "star_tracker"]],
+                                  both)
+
+
+@pytest.mark.parametrize(("target", "vector"), [("sun", None), ("orbit_normal", None), ("velocity", None),
+                                                ("hill", (0.6, 0.0, 0.8)), ("inertial", (0.0, 0.6, -0.8))])
+def test_a_cone_row_is_its_cosine_for_any_target(cfg: Config, target: str, vector: tuple | None) -> None:
+    """A keep-in cone of an oblique boresight about every kind of target, the sun 20 deg out of the orbit
+    plane: the row is e . A(q) r (r in Hill: the sun [cos b cos th, cos b sin th, sin b], the orbit normal
+    +z, the velocity +y, a Hill vector, an inertial vector turned by R_z(theta_S))."""
+    from rta_attitude.viability.transcription import enforced_cones, row_bounds, row_names
+
+    beta = math.radians(20.0)
+    e = np.array([0.6, 0.8, 0.0])
+    cone = PointingConstraint(name="probe", kind="keep_in", boresight_body=tuple(e), target=target,  # type: ignore
+                              half_angle_rad=math.radians(70.0), gains=BarrierGains(k1=0.1, k2=0.3),
+                              target_vector=vector)
+    c = with_cones(replace(cfg, environment=replace(cfg.environment, sun_beta_rad=beta)), cone)
+    m = from_config(c)
+    xs = random_states(np.random.default_rng(6), 8)
+    th = xs[:, 12]
+    one = np.ones_like(th)
+    if target == "sun":
+        r = np.column_stack([math.cos(beta) * np.cos(th), math.cos(beta) * np.sin(th), math.sin(beta) * one])
+    elif target == "inertial":
+        v = np.array(vector)
+        r = np.column_stack([np.cos(th) * v[0] - np.sin(th) * v[1], np.sin(th) * v[0] + np.cos(th) * v[1], v[2] * one])
+    else:
+        r = np.tile({"orbit_normal": [0.0, 0.0, 1.0], "velocity": [0.0, 1.0, 0.0], "hill": vector}[target], (8, 1))
+    expect = np.einsum("nij,nj->ni", attitude_matrices(xs[:, :4]), r) @ e
+    enforce = check_enforce(("probe", "omega"), c)
+    names = row_names(m, enforced_cones(m, enforce), True)
+    assert names[0] == "probe"
+    np.testing.assert_allclose(row_values(m, names, xs)[:, 0], expect, rtol=0, atol=1e-14)
+    lo, hi = row_bounds(names, enforce, 1e-4, m)
+    assert lo[0] == pytest.approx(math.cos(math.radians(70.0)) + 1e-4, abs=1e-15) and hi[0] == np.inf
+    h = constraint_values(xs, m)["probe"]
+    np.testing.assert_allclose(h, math.radians(70.0) - np.arccos(expect), rtol=0, atol=1e-9)
+    np.testing.assert_allclose(h, ConstraintSet(c).safety_values(full_states(xs))[:, row(c, "probe")], rtol=0,
+                               atol=1e-8)
+
+
+def layout(cfg: Config) -> Config:
+    """The face's normal on +i_B, the panel's on (0, -0.6, 0.8), the sun 25 deg out of the orbit plane."""
+    return replace(cfg, thermal=replace(cfg.thermal, face_normal_body=(1.0, 0.0, 0.0)),
+                   power=replace(cfg.power, panel_normal_body=(0.0, -0.6, 0.8)),
+                   environment=replace(cfg.environment, sun_beta_rad=math.radians(25.0)))
+
+
+def test_the_model_puts_the_face_the_panel_and_the_sun_where_the_config_does(cfg: Config) -> None:
+    """With another face, panel and beta angle the oracle's model follows the project's plant (which reads them
+    from the same keys), and differs from the paper's layout."""
+    from rta_attitude.viability.model import simulate
+
+    c = layout(cfg)
+    rng = np.random.default_rng(9)
+    x0 = random_states(rng, 1)[0]
+    u = rng.uniform(-1.0, 1.0, (20, 3)) * c.u_max_rad_s2
+    xs, subs = simulate(x0, u, from_config(c))
+    ref_x, ref_subs = project_run(c, x0, u)
+    np.testing.assert_allclose(xs, ref_x[:, :13], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(subs, ref_subs[:, :13], rtol=0, atol=1e-9)
+    paper = simulate(x0, u, from_config(cfg))[0]
+    assert abs(paper[-1, 10] - xs[-1, 10]) > 1e-4 and abs(paper[-1, 11] - xs[-1, 11]) > 1e-2
+
+
+def test_the_sun_safe_attitude_and_the_battery_rule_use_the_configured_panel(cfg: Config) -> None:
+    """The sun-safe attitude puts the configured panel on the sun and the face's inward normal on the Earth's
+    side; with that panel turned away from the sun the battery rule proves the state unrecoverable, and no
+    warm-start law, on the project's plant, keeps the battery."""
+    c = layout(cfg)
+    m = from_config(c)
+    theta, beta = 1.0, math.radians(25.0)
+    sun = np.array([math.cos(beta) * math.cos(theta), math.cos(beta) * math.sin(theta), math.sin(beta)])
+    a = sun_safe_matrix(theta, m)
+    np.testing.assert_allclose(a @ a.T, np.eye(3), rtol=0, atol=1e-14)
+    assert np.linalg.det(a) == pytest.approx(1.0)
+    panel, face = np.array([0.0, -0.6, 0.8]), np.array([1.0, 0.0, 0.0])
+    np.testing.assert_allclose(a @ sun, panel, rtol=0, atol=1e-14)
+    earth_side = NADIR_HILL - (NADIR_HILL @ sun) * sun
+    assert (a @ earth_side) @ face < -0.5 * np.linalg.norm(earth_side)  # the face looks away from the Earth
+    axis = np.cross(panel, [1.0, 0.0, 0.0])
+    axis /= np.linalg.norm(axis)
+    dark = (2.0 * np.outer(axis, axis) - np.eye(3)) @ a  # turned half a turn about an axis across the panel
+    np.testing.assert_allclose(dark @ sun, -panel, rtol=0, atol=1e-14)
+    x0 = np.concatenate([quat_from_matrix(dark), np.zeros(6), [270.0, 1200.0, theta]])
+    res = find_witness(x0, 300.0, c, compile=False)
+    assert (res.verdict, res.rule) == (UNRECOVERABLE, "battery_drain")
+    for law in LAWS:
+        u, _, _ = simulate_law(x0, 300, m, law)
+        _, subs = project_run(c, x0, u)
+        assert project_h(c, x0, subs)[:, row(c, "battery")].min() < 0.0, law
+
+
+def test_a_windowed_cone_has_rows_only_inside_its_windows(cfg: Config) -> None:
+    """A cone with windows [3, 5.5] and [7.2, 9] s, a problem from t0 = 1 s over 10 holds: the cone's rows are
+    bounded exactly at the substeps and nodes whose time is inside a window (the project's `window_phase`),
+    node 0 aside (its state is fixed); each row is evaluated at the state of its time."""
+    from rta_attitude.viability.transcription import build_nlp, enforced_cones, g_bounds, g_layout
+
+    cone = star_tracker(((3.0, 5.5), (7.2, 9.0)))
+    c = with_cones(cfg, cone)
+    m = from_config(c)
+    enforce = default_enforce(c)
+    cones = enforced_cones(m, enforce)
+    n, t0 = 10, 1.0
+    names, index = g_layout(n, m, cones)
+    lbg, ubg = g_bounds(n, m, cones, enforce, 1e-4, t0)
+    nlp = build_nlp(n, m, False, cones, compiled=False)
+    assert len(names) == len(lbg) == nlp.problem["g"].shape[0]
+    times = t0 + c.filter.sample_time_s * index / c.substeps
+    tracker = np.flatnonzero(names == "star_tracker")
+    inside = np.array([window_phase(cone, c, t) == "inside" for t in times[tracker]])
+    assert 0 < inside.sum() < len(tracker)
+    np.testing.assert_array_equal(np.isfinite(ubg[tracker]), inside & (index[tracker] > 0))
+    assert np.all(lbg[tracker] == -np.inf)
+    sensor = np.flatnonzero(names == "exclusion_zone")  # the windowless cone: everywhere but node 0
+    np.testing.assert_array_equal(np.isfinite(ubg[sensor]), index[sensor] > 0)
+    # every row at the state of its time: g at a consistent point against the project's plant
+    rng = np.random.default_rng(2)
+    x0 = random_states(rng, 1)[0]
+    u = rng.uniform(-1.0, 1.0, (n, 3)) * c.u_max_rad_s2
+    samples, subs = project_run(c, x0, u)
+    z = np.concatenate([(samples[:, :13] / m.x_scale).ravel(), (u / m.u_max).ravel()])
+    import casadi as ca
+
+    g = np.array(ca.Function("g", [nlp.problem["x"]], [nlp.problem["g"]])(z)).ravel()
+    states = np.vstack([samples[:1], subs])  # the state at index i
+    expect = np.einsum("nij,j->ni", attitude_matrices(states[index[tracker], :4]), NADIR_HILL)[:, 2] * -1.0
+    np.testing.assert_allclose(g[tracker], expect, rtol=0, atol=1e-9)
+    # the exact check and the rules read the windows too: violated at t0 = 40 s (inside), not at 0
+    wide = star_tracker(((30.0, 60.0),))
+    cw = with_cones(cfg, wide)
+    mw = from_config(cw)
+    turned = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0]])  # -k_B on the Earth, +i_B along-track
+    x1 = np.concatenate([quat_from_matrix(turned), np.zeros(6), [275.0, 6000.0, 0.0]])
+    assert constraint_values(x1, mw, 0.0)["star_tracker"][0] == np.inf
+    assert constraint_values(x1, mw, 40.0)["star_tracker"][0] == pytest.approx(-math.radians(30.0))
+    assert check_rules(x1, 20.0, mw, default_enforce(cw)) is None
+    rule = check_rules(x1, 20.0, mw, default_enforce(cw), 40.0)
+    assert rule is not None and rule[0] == "violated_at_x0" and "star_tracker" in rule[1]
+    res = find_witness(x1, 10.0, cw, compile=False)
+    assert res.min_margins["star_tracker"] == np.inf and res.start_s == 0.0
+    check_witness(cw, x1, res, 10)
+
+
+def test_a_windowed_cone_is_kept_from_its_windows_start(cfg: Config) -> None:
+    """The star tracker starts on the Earth, its window opens at 50 s: a witness over 60 s turns it out of the
+    cone in time, checked on the project's plant with the project's windowed safety values."""
+    c = with_cones(cfg, star_tracker(((50.0, 100.0),)))
+    turned = np.array([[0.0, 0.0, -1.0], [0.0, 1.0, 0.0], [1.0, 0.0, 0.0]])  # -k_B on the Earth, +i_B across the sun
+    x0 = np.concatenate([quat_from_matrix(turned), np.zeros(6), [275.0, 6000.0, math.pi / 2]])
+    assert project_h(c, x0, np.zeros((0, STATE_SIZE)), 50.0)[0, row(c, "star_tracker")] == pytest.approx(
+        -math.radians(30.0))
+    res = find_witness(x0, 60.0, c, compile=False)
+    worst = check_witness(c, x0, res, 60)
+    assert res.min_margins["star_tracker"] == pytest.approx(worst["star_tracker"], abs=1e-7)
+    assert 0.0 <= worst["star_tracker"] < np.inf
+
+
 # ----------------------------------------------------------------------------- witnesses
 @pytest.mark.parametrize("model", MODELS)
 def test_a_state_only_a_fast_manoeuvre_saves_gets_a_witness(cfg: Config, model: str) -> None:
@@ -274,7 +519,7 @@ def test_a_state_only_a_fast_manoeuvre_saves_gets_a_witness(cfg: Config, model: 
         u, _, _ = simulate_law(x0, 20, m, law)
         _, subs = project_run(c, x0, u)
         h = project_h(c, x0, subs)
-        enforced = [i for i, n in enumerate(CONSTRAINT_NAMES) if group_of(n) in default_enforce(c)]
+        enforced = enforced_rows(c, default_enforce(c))
         assert h[:, enforced].min() < 0.0, law
     res = find_witness(x0, 20.0, c, compile=False)
     assert res.method == "direct" and res.iterations > 0
@@ -364,6 +609,8 @@ def run_cli(*args: str) -> subprocess.CompletedProcess[str]:
     (["--runs", "/nonexistent/runs.csv"], "no such file"),
     (["--state", ",".join(["0"] * 13)], "zero quaternion"),
     (["--state", ",".join(["0.5"] * 13), "--limit", "0"], "--limit must be >= 1"),
+    (["--state", ",".join(["0.5"] * 13), "--enforce", "omega,sensor"], "unknown constraint group 'sensor'"),
+    (["--runs", "/nonexistent/runs.csv", "--start-time", "5"], "--start-time applies to --state only"),
 ])  # fmt: skip
 def test_cli_errors_are_one_line_and_exit_1(args: list[str], message: str) -> None:
     out = run_cli(*args, "--no-progress")

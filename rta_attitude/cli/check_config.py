@@ -1,32 +1,61 @@
-"""`rta-attitude check-config`: validate a parameter file and print what it sets."""
+"""`rta-attitude check-config`: validate a parameter file (or an overlay) and print what it sets.
+
+Exit 1 (one `ERROR:` line each) if the file or any scenario does not validate; warnings (`WARNING:` lines, exit
+0) for what is valid but will not hold: a scenario whose initial state already violates a constraint, a
+backup attitude that puts a configured cone inside itself at some sun geometry (`filter.gatekeeper`)."""
 
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
+import math
+import sys
+
+from rta_attitude.cli.options import add_config_arguments
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Arguments of `rta-attitude check-config`."""
-    parser.add_argument("--config", type=Path, default=None,
-                        help="parameter YAML (default: $RTA_ATTITUDE_CONFIG or the package's config/rta_attitude.yaml)")
+    add_config_arguments(parser)
 
 
 def run(args: argparse.Namespace) -> int:
     """`rta-attitude check-config`."""
     import numpy as np
 
-    from rta_attitude import config as config_module
+    from rta_attitude.cli.options import load
+    from rta_attitude.constraints import ConstraintSet
+    from rta_attitude.constraints.windows import ramp_start
 
-    cfg = config_module.load(args.config)
+    cfg = load(args)
     print(f"{cfg.source}: ok")
     print(f"  preset {cfg.filter.preset}, fallback {cfg.filter.fallback}, dt {cfg.filter.sample_time_s} s, "
           f"{cfg.substeps} RK4 substeps")
-    print(f"  plant model {cfg.spacecraft.model}, filter model {cfg.filter.model}")
+    print(f"  plant model {cfg.spacecraft.model}, filter model {cfg.filter.model}, gatekeeper {cfg.filter.backup_law}")
     print(f"  admissible |u| <= {np.array2string(cfg.u_max_rad_s2, precision=2)} rad/s^2 (x, y, z)")
+    print(f"  pointing constraints ({len(cfg.pointing)}):")
+    for c in cfg.pointing:
+        b = ", ".join(f"{v:g}" for v in c.boresight_body)
+        target = c.target if c.target_vector is None else f"{c.target} [{', '.join(f'{v:g}' for v in c.target_vector)}]"
+        slack = f", slack weight {c.gains.slack_weight:g}" if c.gains.slack_weight else ""
+        print(f"    {c.name}: {c.kind} [{b}] from {target}, half-angle {math.degrees(c.half_angle_rad):g} deg{slack}")
+        for start, end in c.windows_s:
+            t_on = ramp_start(cfg, c, start)
+            print(f"      window [{start:g}, {end:g}] s: the barrier tightens from t = {t_on:.1f} s")
+    print(f"  priority levels: {' > '.join('+'.join(level) for level in cfg.priority_levels)}")
     print(f"  slacked: {', '.join(cfg.slacked_constraints) or 'none'}")
     print(f"  scenarios: {', '.join(s.replace('_', '-') for s in cfg.scenarios)}")
-    return 0
+    constraints = ConstraintSet(cfg)
+    for name, scenario in cfg.scenarios.items():
+        run_cfg = cfg.for_scenario(scenario)
+        h = ConstraintSet(run_cfg).safety_values(scenario.x0, 0.0) if run_cfg is not cfg else \
+            constraints.safety_values(scenario.x0, 0.0)
+        for i, c in enumerate(constraints.registry):
+            if h[i] < 0:
+                print(f"WARNING: scenario {name}: the initial state violates {c.name} (h = {h[i]:.4g} {c.unit})",
+                      file=sys.stderr)
+    for message in cfg.scenario_errors.values():
+        print(f"ERROR: {message}", file=sys.stderr)
+    return 1 if cfg.scenario_errors else 0
 
 
 __all__ = ["add_arguments", "run"]

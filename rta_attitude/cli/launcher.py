@@ -50,8 +50,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, Any
 
-import yaml
-
 from rta_attitude import config as config_module
 from rta_attitude import topics
 from rta_attitude.config.schema import Config
@@ -96,15 +94,7 @@ class Child:
 
 def _overrides(args: argparse.Namespace) -> dict[str, Any]:
     """KEY=VALUE overrides (YAML-typed), plus --preset and --duration."""
-    out: dict[str, Any] = {}
-    for item in args.param:
-        key, sep, text = item.partition("=")
-        if not sep or not key.strip():
-            raise ConfigError(f"--param {item!r}: expected KEY=VALUE")
-        try:
-            out[key.strip()] = yaml.safe_load(text)
-        except yaml.YAMLError:
-            raise ConfigError(f"--param {item!r}: value is not valid YAML") from None
+    out = config_module.parse_overrides(args.param, "--param")
     if args.preset is not None:
         out["filter.preset"] = args.preset
     return out

@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from rta_attitude.cli.options import add_config_arguments
 from rta_attitude.config.schema import BACKUP_LAWS, FALLBACKS, PLANT_MODELS, PRESETS, SIMULATORS, SOLVERS
 from rta_attitude.errors import ConfigError
 from rta_attitude.montecarlo import BACKENDS, DEFAULT_CHUNK_RUNS
@@ -49,7 +50,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", type=Path, default=Path("out/montecarlo"), help="output directory")
     parser.add_argument("--no-plot", action="store_true", help="skip the PNG figure")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
-    parser.add_argument("--config", type=Path, default=None, help="parameter YAML (default: the package's)")
+    add_config_arguments(parser)
     parser.add_argument("--viability", action="store_true",
                         help="then run the viability oracle on every failed run over the run length (slow: up to "
                              "--viability-time-limit per run); writes viability.json/.csv and reports the failures "
@@ -70,11 +71,11 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError(f"--max-runs must be >= 1, got {args.max_runs}")
     if not args.viability_time_limit > 0:
         raise ConfigError(f"--viability-time-limit must be > 0 s, got {args.viability_time_limit}")
-    from rta_attitude import config as config_module
+    from rta_attitude.cli.options import load
     from rta_attitude.files import output_dir
     from rta_attitude.montecarlo.campaign import format_table, montecarlo, summary, write_outputs
 
-    cfg = config_module.load(args.config, preset=args.preset)
+    cfg = load(args, preset=args.preset)
     if args.solver is not None:
         cfg = cfg.with_solver(args.solver)
     if args.simulator is not None:

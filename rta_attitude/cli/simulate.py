@@ -8,6 +8,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from rta_attitude.cli.options import add_config_arguments
 from rta_attitude.config.schema import BACKUP_LAWS, PRESETS, SIMULATORS, SOLVERS
 from rta_attitude.errors import RtaError
 
@@ -30,8 +31,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "filter.backup_law; docs/backup.md)")
     parser.add_argument("--out", type=Path, default=Path("out/simulate"), help="output directory")
     parser.add_argument("--no-plot", action="store_true", help="skip the PNG figures (figure.png, skymap.png)")
-    parser.add_argument("--config", type=Path, default=None,
-                        help="parameter YAML (default: $RTA_ATTITUDE_CONFIG or the package's config/rta_attitude.yaml)")
+    add_config_arguments(parser)
 
 
 def write_trajectory(traj: Any, out: Path) -> Path:
@@ -54,12 +54,12 @@ def write_trajectory(traj: Any, out: Path) -> Path:
 
 def run(args: argparse.Namespace) -> int:
     """`rta-attitude simulate`."""
-    from rta_attitude import config as config_module
+    from rta_attitude.cli.options import load
     from rta_attitude.files import output_dir, write_text
     from rta_attitude.simulation.closed_loop import ClosedLoop
     from rta_attitude.simulation.metrics import format_summary, summarize_trajectory
 
-    cfg = config_module.load(args.config, preset=args.preset)
+    cfg = load(args, preset=args.preset)
     if args.solver is not None:
         cfg = cfg.with_solver(args.solver)
     if args.simulator is not None:
@@ -80,10 +80,10 @@ def run(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     traj = loop.run()
     wall = time.perf_counter() - t0
-    summary = summarize_trajectory(traj, cfg.limits.omega_dot_max_rad_s2, loop.cfg.slacked_constraints)
+    summary = summarize_trajectory(traj, loop.cfg)
     summary["wall_time_s"] = wall
-    summary["simulator"] = cfg.plant.simulator
-    summary["filter_model"] = cfg.filter.model
+    summary["simulator"] = loop.cfg.plant.simulator
+    summary["filter_model"] = loop.cfg.filter.model  # the scenario's (the paper's scenarios run the paper's model)
     write_trajectory(traj, out)
     write_text(out / "summary.json", json.dumps(summary, indent=2) + "\n")
     print(format_summary(summary))

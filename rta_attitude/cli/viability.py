@@ -1,12 +1,14 @@
 """`rta-attitude viability`: the viability oracle (rta_attitude.viability) on given states or on the
 failed runs of a Monte Carlo.
 
-    rta-attitude viability --state q1,q2,q3,q4,wx,wy,wz,psix,psiy,psiz,T,E,theta_S [--state ...]
+    rta-attitude viability --state q1,q2,q3,q4,wx,wy,wz,psix,psiy,psiz,T,E,theta_S [--state ...] [--start-time S]
     rta-attitude viability --runs out/montecarlo/runs.csv [--select failed|failed_incl_substeps|all]
-                           [--limit N] [--horizon S] [--time-limit S] [--no-compile] --out DIR
+                           [--limit N] [--horizon S] [--time-limit S] [--enforce G,...] [--no-compile] --out DIR
 
-States are in model units (rad/s, K, J, rad), as runs.csv writes them. Prints the verdict table and
-writes viability.json (every result with its witness) and viability.csv to --out.
+States are in model units (rad/s, K, J, rad), as runs.csv writes them (a run's initial state, at t = 0);
+--start-time is the time of the --state states (pointing constraints with time windows apply by it). The
+constraint groups are the configuration's (`Config.groups`). Prints the verdict table and writes
+viability.json (every result with its witness) and viability.csv to --out.
 """
 
 from __future__ import annotations
@@ -35,7 +37,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help=f"horizon, s (default: the Monte Carlo's run length, else {DEFAULT_HORIZON_S:.0f})")
     parser.add_argument("--time-limit", type=float, default=900.0, help="wall-clock budget per state, s (default 900)")
     parser.add_argument("--enforce", default=None,
-                        help="comma-separated constraint groups a witness must keep (default: enabled, not slacked)")
+                        help="comma-separated constraint groups a witness must keep: pointing constraints by name, "
+                             "temperature, battery, omega, psi (default: enabled, not slacked)")
+    parser.add_argument("--start-time", dest="start_time_s", type=float, default=0.0, metavar="S",
+                        help="time of the --state states, s from the run's start (default 0; --runs: 0, the runs' "
+                             "initial states)")
     parser.add_argument("--no-compile", action="store_true",
                         help="casadi's virtual machine instead of compiled C blocks (no compiler needed, ~10x slower)")
     parser.add_argument("--no-trajectory", action="store_true", help="leave the witnesses out of viability.json")
@@ -71,6 +77,11 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError(f"--limit must be >= 1, got {args.limit}")
     if not args.time_limit > 0:
         raise ConfigError(f"--time-limit must be > 0 s, got {args.time_limit}")
+    if not math.isfinite(args.start_time_s):
+        raise ConfigError(f"--start-time must be a finite time in s, got {args.start_time_s}")
+    if args.runs is not None and args.start_time_s != 0.0:
+        raise ConfigError(f"--start-time applies to --state only (a runs.csv holds states at t = 0), got "
+                          f"{args.start_time_s}")
     states = [parse_state(s) for s in args.state] if args.state else None
     if args.runs is not None and not args.runs.is_file():
         raise ConfigError(f"--runs {args.runs}: no such file")
@@ -79,7 +90,7 @@ def run(args: argparse.Namespace) -> int:
     from rta_attitude.viability.params import check_enforce, default_enforce
     from rta_attitude.viability.result import format_table
 
-    enforce = check_enforce(args.enforce.split(",")) if args.enforce else default_enforce(cfg)
+    enforce = check_enforce([g.strip() for g in args.enforce.split(",")], cfg) if args.enforce else default_enforce(cfg)
     if states is not None:
         items = [(f"state {k}", np.array(s)) for k, s in enumerate(states)]
         horizon = args.horizon or DEFAULT_HORIZON_S
@@ -89,8 +100,10 @@ def run(args: argparse.Namespace) -> int:
     items = items[:args.limit] if args.limit else items
     output_dir(args.out)
     results = check_states(items, horizon, cfg, progress=not args.no_progress and sys.stderr.isatty(),
-                           enforce=enforce, time_limit_s=args.time_limit, compile=not args.no_compile)
+                           enforce=enforce, time_limit_s=args.time_limit, compile=not args.no_compile,
+                           start_s=args.start_time_s)
     setup = {"config": cfg.source, "model": cfg.spacecraft.model, "horizon_s": horizon, "enforce": list(enforce),
+             "start_s": args.start_time_s,
              "time_limit_s": args.time_limit, "compiled": not args.no_compile,
              "source": str(args.runs) if args.runs else "--state", "select": args.select if args.runs else None,
              "limit": args.limit}

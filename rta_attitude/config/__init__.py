@@ -10,12 +10,16 @@ from __future__ import annotations
 from rta_attitude.config.loader import (
     CELSIUS_OFFSET_K,
     CONFIG_ENV,
+    apply_overrides,
     default_config_path,
     from_parameters,
     load,
+    merge,
+    package_config_path,
+    parse_overrides,
     read_parameters,
 )
 from rta_attitude.config.schema import Config, Scenario
 
-__all__ = ["CELSIUS_OFFSET_K", "CONFIG_ENV", "Config", "Scenario", "default_config_path", "from_parameters", "load",
-           "read_parameters"]
+__all__ = ["CELSIUS_OFFSET_K", "CONFIG_ENV", "Config", "Scenario", "apply_overrides", "default_config_path",
+           "from_parameters", "load", "merge", "package_config_path", "parse_overrides", "read_parameters"]

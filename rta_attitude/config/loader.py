@@ -3,6 +3,14 @@
 The file is a ROS 2 parameters file (`/**: ros__parameters: {...}`), so the nodes read the same
 file with `--ros-args --params-file`. Unknown keys, wrong types and out-of-range values raise
 `ConfigError` with one line naming the key, the value and what is allowed.
+
+Overlays. A user's file holds only what differs from the package's defaults (config/rta_attitude.yaml): it is
+merged onto them (`merge`: mappings key by key, recursively; a list or a value replaces; a key set to null
+removes the default's entry, e.g. a pointing constraint) and the result is validated as one. `-p KEY=VALUE`
+(`parse_overrides`, `apply_overrides`) sets one dotted key on top, as on the nodes' command line.
+
+Scenarios are checked one by one: an error in one names it and is raised when that scenario is used
+(`Config.scenario`), so the others still run.
 """
 
 from __future__ import annotations
@@ -10,7 +18,7 @@ from __future__ import annotations
 import math
 import os
 import sys
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -18,7 +26,7 @@ import numpy as np
 
 from rta_attitude.config.schema import (
     DEFAULT_EPOCH_UTC,
-    DEFAULT_PRIORITIES,
+    UNIT_TOLERANCE,
     Augmentation,
     BarrierGains,
     Config,
@@ -27,6 +35,7 @@ from rta_attitude.config.schema import (
     FilterOptions,
     Limits,
     PlantOptions,
+    PointingConstraint,
     Power,
     Scenario,
     Sensors,
@@ -42,7 +51,7 @@ CONFIG_ENV = "RTA_ATTITUDE_CONFIG"
 
 
 def default_config_path() -> Path:
-    """Where the parameter file is: $RTA_ATTITUDE_CONFIG, the source tree, or the install share/.
+    """Where the parameter file is: $RTA_ATTITUDE_CONFIG, else the package's (`package_config_path`).
 
     Raises:
         ConfigError: no parameter file found.
@@ -50,6 +59,16 @@ def default_config_path() -> Path:
     env = os.environ.get(CONFIG_ENV)
     if env:
         return Path(env)
+    return package_config_path()
+
+
+def package_config_path() -> Path:
+    """The package's parameter file (the defaults every other file is merged onto): the source tree's, or the
+    install's share/.
+
+    Raises:
+        ConfigError: no parameter file found.
+    """
     candidates = [Path(__file__).resolve().parents[2] / "config" / CONFIG_FILE_NAME]
     prefixes = [*os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep), sys.prefix]
     candidates += [Path(p) / "share" / "rta_attitude" / "config" / CONFIG_FILE_NAME for p in prefixes if p]
@@ -61,14 +80,77 @@ def default_config_path() -> Path:
 
 
 def read_parameters(path: str | os.PathLike[str] | None = None) -> tuple[dict[str, Any], Path]:
-    """The `ros__parameters` mapping of a parameter file, and the file's path.
+    """The `ros__parameters` mapping of a parameter file merged onto the package's defaults (`merge`), and the
+    file's path.
 
     Raises:
         ConfigError: missing file, unreadable YAML, or no `ros__parameters` section.
     """
+    file = Path(path) if path is not None else default_config_path()
+    params = _read_file(file)
+    base = package_config_path()
+    if file.resolve() != base.resolve():
+        params = merge(_read_file(base), params)
+    return params, file
+
+
+def merge(base: Mapping[str, Any], overlay: Mapping[str, Any]) -> dict[str, Any]:
+    """overlay merged onto base: mappings key by key (recursively); a list or a value replaces the base's; a key
+    set to null (None) removes the base's entry."""
+    out = dict(base)
+    for key, value in overlay.items():
+        if value is None:
+            out.pop(key, None)
+        elif isinstance(value, Mapping) and isinstance(out.get(key), Mapping):
+            out[key] = merge(out[key], value)
+        else:
+            out[key] = value
+    return out
+
+
+def parse_overrides(items: Sequence[str], option: str = "-p") -> dict[str, Any]:
+    """KEY=VALUE texts -> {dotted key: value}; the value is read as YAML (1.5, true, [1, 2], text).
+
+    Raises:
+        ConfigError: an item without '=' or a key, or a value that is not YAML.
+    """
     import yaml
 
-    file = Path(path) if path is not None else default_config_path()
+    out: dict[str, Any] = {}
+    for item in items:
+        key, sep, text = item.partition("=")
+        if not sep or not key.strip():
+            raise ConfigError(f"{option} {item!r}: expected KEY=VALUE")
+        try:
+            out[key.strip()] = yaml.safe_load(text)
+        except yaml.YAMLError:
+            raise ConfigError(f"{option} {item!r}: value is not valid YAML") from None
+    return out
+
+
+def apply_overrides(params: Mapping[str, Any], overrides: Mapping[str, Any]) -> dict[str, Any]:
+    """params with each dotted key of overrides set ({'filter.preset': 'paper'}); the loader then checks that
+    the key exists and the value is valid."""
+    out = merge(params, {})
+    for name, value in overrides.items():
+        *parents, leaf = name.split(".")
+        node = out
+        for i, part in enumerate(parents):
+            child = node.get(part)
+            if child is None:
+                child = {}
+            elif not isinstance(child, Mapping):
+                raise ConfigError(f"parameter {'.'.join(parents[: i + 1])} is a value, not a section (in {name})")
+            node[part] = child = dict(child)
+            node = child
+        node[leaf] = value
+    return out
+
+
+def _read_file(file: Path) -> dict[str, Any]:
+    """The `ros__parameters` mapping of one file."""
+    import yaml
+
     if file.is_dir():
         raise ConfigError(f"config file {str(file)!r} is a directory, not a file")
     if not file.is_file():
@@ -89,7 +171,7 @@ def read_parameters(path: str | os.PathLike[str] | None = None) -> tuple[dict[st
     (node_params,) = doc.values()
     if not isinstance(node_params, dict) or not isinstance(node_params.get("ros__parameters"), dict):
         raise ConfigError(f"config file {str(file)!r} has no ros__parameters mapping")
-    return node_params["ros__parameters"], file
+    return dict(node_params["ros__parameters"])
 
 
 class _Section:
@@ -141,6 +223,16 @@ class _Section:
             raise ConfigError(f"{self.where}.{key} must be a list of {n}finite numbers, got {value!r}")
         return tuple(float(v) for v in value)
 
+    def windows(self, key: str) -> tuple[tuple[float, float], ...]:
+        """A flat list of [start, end] pairs (a ROS double array), s; missing: none."""
+        if key not in self.data:
+            self.used.add(key)
+            return ()
+        flat = self.vector(key)
+        if len(flat) % 2:
+            raise ConfigError(f"{self.where}.{key} must be [start, end] pairs of times (s), got {len(flat)} numbers")
+        return tuple((flat[i], flat[i + 1]) for i in range(0, len(flat), 2))
+
     def levels(self, key: str, default: tuple[tuple[str, ...], ...]) -> tuple[tuple[str, ...], ...]:
         """A list of strings, each one level of names separated by commas or spaces (a ROS string array)."""
         value = self._get(key, default)
@@ -178,10 +270,28 @@ def _barrier(s: _Section, second_order: bool) -> BarrierGains:
     return gains
 
 
+def _pointing(name: str, s: _Section) -> PointingConstraint:
+    """One entry of `constraints.pointing` (degrees here, radians after)."""
+    target = s.text("target")
+    constraint = PointingConstraint(
+        name=name,
+        kind=s.text("kind"),
+        boresight_body=s.vector("boresight_body", 3),  # type: ignore[arg-type]
+        target=target,
+        half_angle_rad=math.radians(s.number("half_angle_deg")),
+        gains=_barrier(s, True),
+        target_vector=s.vector("target_vector", 3) if "target_vector" in s.data else None,  # type: ignore[arg-type]
+        windows_s=s.windows("windows_s"),
+    )
+    s.done()
+    return constraint
+
+
 def _scenario(name: str, s: _Section) -> Scenario:
     q = np.array(s.vector("q", 4))
-    if not 0.5 < np.linalg.norm(q) < 1.5:
-        raise ConfigError(f"{s.where}.q must be close to unit norm, got norm {np.linalg.norm(q):.3f}")
+    if not abs(np.linalg.norm(q) - 1.0) <= UNIT_TOLERANCE:
+        raise ConfigError(f"{s.where}.q must be a unit quaternion (norm within {UNIT_TOLERANCE:g} of 1: the "
+                          f"rounding of typed decimals), got norm {np.linalg.norm(q):.6g}")
     x0 = make_state(
         q,
         np.radians(s.vector("omega_deg_s", 3)),
@@ -196,8 +306,10 @@ def _scenario(name: str, s: _Section) -> Scenario:
                           f"got {len(flat)} numbers")
     rows = np.array(flat).reshape(-1, 5)
     norms = np.linalg.norm(rows[:, 1:], axis=1)
-    if np.any(norms < 0.5) or np.any(norms > 1.5):
-        raise ConfigError(f"{s.where}.command_schedule quaternions must be close to unit norm")
+    if np.any(np.abs(norms - 1.0) > UNIT_TOLERANCE):
+        k = int(np.argmax(np.abs(norms - 1.0)))
+        raise ConfigError(f"{s.where}.command_schedule: the quaternion of row {k} must be a unit quaternion (norm "
+                          f"within {UNIT_TOLERANCE:g} of 1), got norm {norms[k]:.6g}")
     qs = rows[:, 1:] / norms[:, None]
     slack: tuple[tuple[str, float], ...] | None = None
     if "slack_weights" in s.data:
@@ -236,15 +348,20 @@ def from_parameters(params: Mapping[str, Any], source: str = "<memory>") -> Conf
     environment = Environment(
         ev.number("mean_motion_rad_s"), ev.number("solar_constant_W_m2"), ev.number("albedo_factor"),
         ev.number("earth_temperature_K"), ev.number("stefan_boltzmann_W_m2K4"), ev.number("earth_view_factor"),
-        ev.flag("rotating_hill", False), ev.flag("gravity_gradient", False))
+        ev.flag("rotating_hill", False), ev.flag("gravity_gradient", False),
+        math.radians(ev.number("sun_beta_deg", 0.0)))
     ev.done()
     th = root.section("thermal")
     thermal = Thermal(th.number("mass_kg"), th.number("area_m2"), th.number("specific_heat_J_kgK"),
-                      th.number("absorptivity"), th.number("emissivity"), th.flag("clamp_view_factor", True))
+                      th.number("absorptivity"), th.number("emissivity"), th.flag("clamp_view_factor", True),
+                      th.vector("face_normal_body", 3) if "face_normal_body" in th.data else (0.0, -1.0, 0.0))  # type: ignore[arg-type]
+    th.used.add("face_normal_body")
     th.done()
     pw = root.section("power")
     power = Power(pw.number("ideal_W_m2"), pw.number("degradation"), pw.number("panel_area_m2"),
-                  pw.number("load_W"), pw.number("bus_voltage_V", 8.0))
+                  pw.number("load_W"), pw.number("bus_voltage_V", 8.0),
+                  pw.vector("panel_normal_body", 3) if "panel_normal_body" in pw.data else (0.0, 0.0, 1.0))  # type: ignore[arg-type]
+    pw.used.add("panel_normal_body")
     pw.done()
     li = root.section("limits")
     limits = Limits(
@@ -252,19 +369,18 @@ def from_parameters(params: Mapping[str, Any], source: str = "<memory>") -> Conf
         omega_dot_max_rad_s2=math.radians(li.number("omega_dot_max_deg_s2")),
         omega_max_rad_s=math.radians(li.number("omega_max_deg_s")),
         psi_max_rad_s=li.number("psi_max_rad_s"),
-        exclusion_fov_rad=math.radians(li.number("exclusion_fov_deg")),
-        exclusion_buffer_rad=math.radians(li.number("exclusion_buffer_deg")),
-        comm_fov_rad=math.radians(li.number("comm_fov_deg")),
         temperature_max_K=li.number("temperature_max_degC") + CELSIUS_OFFSET_K,
         energy_min_J=li.number("energy_min_J"),
     )
     li.done()
     co = root.section("constraints")
     barriers: dict[str, BarrierGains] = {}
-    for group in ("exclusion_zone", "communication"):
-        s = co.section(group)
-        barriers[group] = _barrier(s, True)
-        s.done()
+    pointing: tuple[PointingConstraint, ...] = ()
+    co.used.add("pointing")
+    if "pointing" in co.data:  # optional: no pointing constraint without it
+        pt = co.section("pointing")
+        pointing = tuple(_pointing(str(name), pt.section(str(name))) for name in list(pt.data))
+        pt.done()
     s = co.section("temperature")
     barriers["temperature"] = _barrier(s, True)
     d0, d1 = s.number("delta0_K_rad"), s.number("delta1_K_rad")
@@ -291,7 +407,8 @@ def from_parameters(params: Mapping[str, Any], source: str = "<memory>") -> Conf
         backup_nominal_s=fi.number("backup_nominal_s", 20.0),
         backup_energy_lookahead_s=fi.number("backup_energy_lookahead_s", 6000.0),
         actuator_lag=fi.text("actuator_lag", "compensate"),
-        priorities=fi.levels("priorities", DEFAULT_PRIORITIES))
+        window_slew_fraction=fi.number("window_slew_fraction", 0.5),
+        priorities=fi.levels("priorities", ()))
     fi.done()
     ct = root.section("controller")
     controller = ControllerGains(ct.number("kp"), ct.number("kd"))
@@ -321,29 +438,39 @@ def from_parameters(params: Mapping[str, Any], source: str = "<memory>") -> Conf
             bound_sigma=se.number("bound_sigma", 4.0), bias_horizon_s=se.number("bias_horizon_s", 2000.0))
         se.done()
     sn = root.section("scenarios")
-    scenarios = {}
+    scenarios: dict[str, Scenario] = {}
+    broken: dict[str, str] = {}
     for name in list(sn.data):
-        scenarios[name] = _scenario(name, sn.section(name))
+        try:
+            scenarios[name] = _scenario(name, sn.section(name))
+        except ConfigError as exc:  # this scenario only: the others still run (`Config.scenario` raises it)
+            broken[name] = str(exc)
     sn.done()
     root.done()
     return Config(spacecraft, environment, thermal, power, limits, barriers, Augmentation(d0, d1, d2),
                   filter_options, controller, substeps, scenarios, source=source, plant=plant,
-                  sensors=sensors)
+                  sensors=sensors, pointing=pointing, scenario_errors=broken)
 
 
-def load(path: str | os.PathLike[str] | None = None, *, preset: str | None = None) -> Config:
-    """Load and validate the parameter file (default: `default_config_path()`).
+def load(path: str | os.PathLike[str] | None = None, *, preset: str | None = None,
+         overrides: Mapping[str, Any] | None = None) -> Config:
+    """Load and validate the parameter file (default: `default_config_path()`), merged onto the package's
+    defaults, with dotted-key overrides on top.
 
     Args:
-        path: YAML parameter file; None for the default one.
+        path: YAML parameter file (a whole file or an overlay); None for the default one.
         preset: override `filter.preset` ('robust' or 'paper').
+        overrides: {dotted key: value} (`parse_overrides` of `-p KEY=VALUE`), in file units.
 
     Raises:
         ConfigError: the file is missing or any value is invalid.
     """
     params, file = read_parameters(path)
+    if overrides:
+        params = apply_overrides(params, overrides)
     cfg = from_parameters(params, source=str(file))
     return cfg.with_preset(preset) if preset is not None else cfg
 
 
-__all__ = ["CONFIG_ENV", "default_config_path", "from_parameters", "load", "read_parameters"]
+__all__ = ["CONFIG_ENV", "apply_overrides", "default_config_path", "from_parameters", "load", "merge",
+           "package_config_path", "parse_overrides", "read_parameters"]

@@ -15,26 +15,31 @@ from numpy.typing import NDArray
 
 from rta_attitude.errors import ConfigError
 
-CONSTRAINT_NAMES: tuple[str, ...] = (
-    "exclusion_zone", "communication", "temperature", "battery",
-    "omega_x", "omega_y", "omega_z", "psi_x", "psi_y", "psi_z",
+FIXED_GROUPS: tuple[str, ...] = ("temperature", "battery", "omega", "psi")
+"""The constraints that are not pointing cones, as sections of `constraints:` (after `pointing`): the thermal
+node's temperature, the battery's charge, and the body rate and wheel speed, each per axis."""
+AXIS_NAMES: tuple[str, ...] = ("x", "y", "z")
+FIXED_NAMES: tuple[str, ...] = (
+    "temperature", "battery", *(f"omega_{a}" for a in AXIS_NAMES), *(f"psi_{a}" for a in AXIS_NAMES),
 )  # fmt: skip
-"""Every safety constraint of the paper, by name, in report order."""
-
-BARRIER_GROUPS: tuple[str, ...] = (
-    "exclusion_zone", "communication", "temperature", "battery", "omega", "psi",
-)  # fmt: skip
-"""Keys of the `constraints:` section; `omega` and `psi` configure their three axes together."""
+"""The rows of FIXED_GROUPS, in report order (after the pointing cones)."""
+PER_AXIS_GROUPS: tuple[str, ...] = ("omega", "psi")
+"""Groups with one constraint per body axis (`omega_x` ...), always hard."""
+MAX_POINTING = 16
+"""Pointing constraints (`constraints.pointing`) a configuration may hold: the compiled table's capacity, so
+that any number up to it runs without recompiling the kernels."""
+MAX_WINDOWS = 8
+"""Time windows one pointing constraint may hold."""
+POINTING_KINDS: tuple[str, ...] = ("keep_out", "keep_in")
+"""keep_out: the boresight stays outside the cone about the target; keep_in: inside it."""
+TARGET_NAMES: tuple[str, ...] = ("sun", "earth", "orbit_normal", "velocity", "hill", "inertial")
+"""What a pointing constraint's cone is about (`dynamics.environment`): the sun; nadir; the orbit normal; the
+along-track velocity; a fixed vector in Hill; a fixed vector in the inertial frame (x toward the sun's
+direction in the orbit plane at theta_S = 0, z the orbit normal)."""
+NAME_CHARACTERS = frozenset("abcdefghijklmnopqrstuvwxyz0123456789_")
 
 PRESETS: tuple[str, ...] = ("robust", "paper")
 FALLBACKS: tuple[str, ...] = ("pass_through", "hold", "soften", "raise", "prioritize")
-DEFAULT_PRIORITIES: tuple[tuple[str, ...], ...] = (
-    ("omega", "psi", "exclusion_zone"), ("battery",), ("temperature",), ("communication",),
-)  # fmt: skip
-"""`filter.priorities` by default: the levels of the `prioritize` fallback, most important first (body rate,
-wheel speed and the sun keep-out cone; then battery, temperature, communication). Battery above
-temperature: the temperature relaxes by radiation once the hot face leaves the sun, and its augmented
-barrier keeps a reserve, while the battery integrates a constant load (docs/decisions.md, priorities)."""
 BACKUP_SOLVERS: tuple[str, ...] = ("quadprog", "none")
 SOLVERS: tuple[str, ...] = ("active_set", "proxsuite")
 CONTROLLERS: tuple[str, ...] = ("pd", "none")
@@ -60,6 +65,12 @@ SIMULATORS: tuple[str, ...] = ("compiled", "basilisk")
 (`dynamics.spacecraft`); `basilisk`, Basilisk (the optional `bsk` package) as an independent truth plant
 (`dynamics.basilisk`: rigid hub and three wheels, always with the wheels' gyroscopic torque)."""
 BASILISK_MISSING = "plant.simulator basilisk needs the optional extra: pip install rta_attitude[basilisk]"
+
+
+def group_of(name: str) -> str:
+    """The group (a section of `constraints:`) of a constraint: omega_y -> omega, psi_x -> psi, else itself."""
+    head, _, axis = name.rpartition("_")
+    return head if head in PER_AXIS_GROUPS and axis in AXIS_NAMES else name
 
 
 def _positive(where: str, value: float) -> None:
@@ -200,8 +211,13 @@ class Environment:
     """The Hill frame turns at the mean motion (in the attitude kinematics); False: inertial, as the paper."""
     gravity_gradient: bool = False
     """Gravity-gradient torque of a circular orbit at the mean motion."""
+    sun_beta_rad: float = 0.0
+    """The sun's angle out of the orbit plane (the orbit's beta angle), rad: r_S = [cos beta cos theta_S,
+    cos beta sin theta_S, sin beta] in Hill (`dynamics.environment`; 0 in the paper)."""
 
     def __post_init__(self) -> None:
+        if not (math.isfinite(self.sun_beta_rad) and abs(self.sun_beta_rad) <= math.pi / 2):
+            raise ConfigError(f"environment.sun_beta_deg must be in [-90, 90], got {math.degrees(self.sun_beta_rad)!r}")
         for name in ("mean_motion_rad_s", "solar_constant_W_m2", "earth_temperature_K",
                      "stefan_boltzmann_W_m2K4"):
             _positive(f"environment.{name}", getattr(self, name))
@@ -221,8 +237,11 @@ class Thermal:
     absorptivity: float
     emissivity: float
     clamp_view_factor: bool = True
+    face_normal_body: tuple[float, float, float] = (0.0, -1.0, 0.0)
+    """The node's face, its outward normal in body axes (the paper's -j_B)."""
 
     def __post_init__(self) -> None:
+        object.__setattr__(self, "face_normal_body", unit_vector("thermal.face_normal_body", self.face_normal_body))
         for name in ("mass_kg", "area_m2", "specific_heat_J_kgK"):
             _positive(f"thermal.{name}", getattr(self, name))
         for name in ("absorptivity", "emissivity"):
@@ -242,8 +261,11 @@ class Power:
     bus_voltage_V: float = 8.0
     """Nominal bus voltage: the battery's energy E crosses the flight software's interface as
     sensor_msgs/BatteryState.charge = E / (V 3600) Ah, a float32 (`dynamics.sensors.encode`)."""
+    panel_normal_body: tuple[float, float, float] = (0.0, 0.0, 1.0)
+    """The solar panel's normal in body axes (the paper's +k_B)."""
 
     def __post_init__(self) -> None:
+        object.__setattr__(self, "panel_normal_body", unit_vector("power.panel_normal_body", self.panel_normal_body))
         for name in ("ideal_W_m2", "panel_area_m2", "bus_voltage_V"):
             _positive(f"power.{name}", getattr(self, name))
         _nonneg("power.load_W", self.load_W)
@@ -264,32 +286,14 @@ class Limits:
     omega_dot_max_rad_s2: float
     omega_max_rad_s: float
     psi_max_rad_s: float
-    exclusion_fov_rad: float
-    exclusion_buffer_rad: float
-    comm_fov_rad: float
     temperature_max_K: float
     energy_min_J: float
 
     def __post_init__(self) -> None:
         for name in ("wheel_accel_max_rad_s2", "omega_dot_max_rad_s2", "omega_max_rad_s",
-                     "psi_max_rad_s", "exclusion_fov_rad", "comm_fov_rad", "temperature_max_K"):
+                     "psi_max_rad_s", "temperature_max_K"):
             _positive(f"limits.{name}", getattr(self, name))
-        _nonneg("limits.exclusion_buffer_rad", self.exclusion_buffer_rad)
         _nonneg("limits.energy_min_J", self.energy_min_J)
-        if self.exclusion_fov_rad / 2 + self.exclusion_buffer_rad >= math.pi:
-            raise ConfigError("limits: exclusion_fov/2 + exclusion_buffer must be < 180 deg")
-        if self.comm_fov_rad > 2 * math.pi:
-            raise ConfigError(f"limits.comm_fov must be <= 360 deg, got {self.comm_fov_rad!r} rad")
-
-    @property
-    def exclusion_angle_rad(self) -> float:
-        """Smallest allowed sensor-to-sun angle, FOV/2 + beta, rad."""
-        return self.exclusion_fov_rad / 2 + self.exclusion_buffer_rad
-
-    @property
-    def comm_angle_rad(self) -> float:
-        """Largest allowed antenna-to-Earth angle, FOV/2, rad."""
-        return self.comm_fov_rad / 2
 
 
 @dataclass(frozen=True)
@@ -326,6 +330,90 @@ class BarrierGains:
         _nonneg(f"{where}.margin_gyrostat", self.margin_gyrostat)
         if not math.isfinite(self.bias):
             raise ConfigError(f"{where}.bias must be finite, got {self.bias!r}")
+
+
+def unit_vector(where: str, v: tuple[float, ...]) -> tuple[float, float, float]:
+    """v (3,) as a unit vector: its norm must be within UNIT_TOLERANCE of 1 (the rounding of typed decimals);
+    it is normalised (a configured unit vector is stored normalised).
+
+    Raises:
+        ConfigError: not 3 finite numbers, or a norm off 1 by more than UNIT_TOLERANCE.
+    """
+    if len(v) != 3 or not all(math.isfinite(a) for a in v):
+        raise ConfigError(f"{where} must be 3 finite numbers, got {v!r}")
+    n = math.sqrt(sum(a * a for a in v))
+    if not abs(n - 1.0) <= UNIT_TOLERANCE:
+        raise ConfigError(f"{where} must be a unit vector, got {list(v)} (norm {n:.6g})")
+    return (v[0] / n, v[1] / n, v[2] / n) if n != 1.0 else (float(v[0]), float(v[1]), float(v[2]))
+
+
+UNIT_TOLERANCE = 1e-3
+"""How far from 1 the norm of a configured unit vector (a boresight, a target, an axis) may be: three typed
+decimals (0.577, 0.577, 0.577 has norm 0.99933); it is then normalised."""
+
+
+@dataclass(frozen=True)
+class PointingConstraint:
+    """A cone about a target that a body axis must stay outside (keep_out) or inside (keep_in).
+
+    h = theta - half_angle (keep_out) or half_angle - theta (keep_in), theta = angle(boresight, target), rad,
+    enforced as an HOCBF (`constraints.cones`). With windows, only within them (h is +inf outside), and the
+    barrier tightens ahead of each window's start at `ramp_rad_s` (docs/windows.md)."""
+
+    name: str
+    kind: str
+    """POINTING_KINDS."""
+    boresight_body: tuple[float, float, float]
+    """The body axis (unit vector, body frame)."""
+    target: str
+    """TARGET_NAMES."""
+    half_angle_rad: float
+    """The cone's half-angle (a keep-out's FOV/2 + buffer, as the paper builds it), rad, in (0, pi)."""
+    gains: BarrierGains
+    target_vector: tuple[float, float, float] | None = None
+    """The fixed vector of target 'hill' or 'inertial' (unit); None for the named targets."""
+    windows_s: tuple[tuple[float, float], ...] = ()
+    """(start, end) times, s from the run's t = 0, increasing and apart; empty: always."""
+
+    def __post_init__(self) -> None:
+        where = f"constraints.pointing.{self.name}"
+        if not (self.name and set(self.name) <= NAME_CHARACTERS and self.name[0].isalpha()):
+            raise ConfigError(f"{where}: a constraint's name must be lower-case letters, digits and '_', starting "
+                              f"with a letter, got {self.name!r}")
+        if self.name in FIXED_NAMES or self.name in FIXED_GROUPS:
+            raise ConfigError(f"{where}: {self.name!r} is the name of another constraint; choose another name")
+        _choice(f"{where}.kind", self.kind, POINTING_KINDS)
+        _choice(f"{where}.target", self.target, TARGET_NAMES)
+        object.__setattr__(self, "boresight_body", unit_vector(f"{where}.boresight_body", self.boresight_body))
+        if self.target in ("hill", "inertial"):
+            if self.target_vector is None:
+                raise ConfigError(f"{where}.target_vector is missing (target {self.target!r} takes a unit vector)")
+            object.__setattr__(self, "target_vector", unit_vector(f"{where}.target_vector", self.target_vector))
+        elif self.target_vector is not None:
+            raise ConfigError(f"{where}.target_vector is only for targets 'hill' and 'inertial', not {self.target!r}")
+        if not (math.isfinite(self.half_angle_rad) and 0.0 < self.half_angle_rad < math.pi):
+            raise ConfigError(f"{where}.half_angle_deg must be in (0, 180), got {math.degrees(self.half_angle_rad)!r}")
+        self.gains.check(where)
+        if self.gains.enabled:
+            _positive(f"{where}.k2", self.gains.k2)
+        if len(self.windows_s) > MAX_WINDOWS:
+            raise ConfigError(f"{where}.windows_s holds {len(self.windows_s)} windows; at most {MAX_WINDOWS}")
+        last = -math.inf
+        for a, b in self.windows_s:
+            if not (math.isfinite(a) and math.isfinite(b)):
+                raise ConfigError(f"{where}.windows_s must be finite times, got [{a!r}, {b!r}]")
+            if a < 0.0:
+                raise ConfigError(f"{where}.windows_s: the window [{a:g}, {b:g}] s starts before t = 0")
+            if not b > a:
+                raise ConfigError(f"{where}.windows_s: the window [{a:g}, {b:g}] s must end after it starts")
+            if not a > last:
+                raise ConfigError(f"{where}.windows_s: the window [{a:g}, {b:g}] s overlaps or precedes the one "
+                                  f"before it (windows are in time order and apart)")
+            last = b
+
+    @property
+    def keep_in(self) -> bool:
+        return self.kind == "keep_in"
 
 
 @dataclass(frozen=True)
@@ -378,10 +466,15 @@ class FilterOptions:
     orbit (2 pi / n = 6,118 s): the sun's direction to the momentum repeats each orbit."""
     actuator_lag: str = "compensate"
     """Robust preset with sensor errors on: how the filter treats the wheel drive's lag (ACTUATOR_LAGS)."""
-    priorities: tuple[tuple[str, ...], ...] = DEFAULT_PRIORITIES
-    """Levels of constraint groups (BARRIER_GROUPS), most important first: with `fallback: prioritize`, an
-    infeasible QP is answered by letting the least important level give way first, by as little as
-    possible (`filter.pipeline.prioritize`)."""
+    window_slew_fraction: float = 0.5
+    """A scheduled window's barrier tightens at this fraction of the rate the vehicle can turn a boresight at
+    ((1 - zoh_margin) omega_max less the target's motion), leaving the rest to the approach and the other
+    constraints (`constraints.windows`)."""
+    priorities: tuple[tuple[str, ...], ...] = ()
+    """Levels of constraint groups (`Config.groups`: the pointing constraints by name, temperature, battery,
+    omega, psi), most important first: with `fallback: prioritize`, an infeasible QP is answered by letting the
+    least important level give way first, by as little as possible (`filter.pipeline.prioritize`). Checked
+    against the groups by `Config`; `Config.priority_levels` places the pointing constraints it leaves out."""
 
     def __post_init__(self) -> None:
         _choice("filter.model", self.model, PLANT_MODELS)
@@ -391,19 +484,12 @@ class FilterOptions:
         _choice("filter.fallback", self.fallback, FALLBACKS)
         _choice("filter.backup_law", self.backup_law, BACKUP_LAWS)
         _choice("filter.actuator_lag", self.actuator_lag, ACTUATOR_LAGS)
+        if not (math.isfinite(self.window_slew_fraction) and 0.0 < self.window_slew_fraction <= 1.0):
+            raise ConfigError(f"filter.window_slew_fraction must be in (0, 1], got {self.window_slew_fraction!r}")
         _positive("filter.backup_horizon_s", self.backup_horizon_s)
         if not (math.isfinite(self.backup_energy_lookahead_s) and 0.0 <= self.backup_energy_lookahead_s <= 1e6):
             raise ConfigError(f"filter.backup_energy_lookahead_s must be between 0 (off) and 1e6 s, got "
                               f"{self.backup_energy_lookahead_s!r}")
-        named = [g for level in self.priorities for g in level]
-        for g in named:
-            _choice("filter.priorities", g, BARRIER_GROUPS)
-        missing = [g for g in BARRIER_GROUPS if g not in named]
-        twice = sorted({g for g in named if named.count(g) > 1})
-        if missing or twice or not all(self.priorities):
-            why = (f"missing {', '.join(missing)}" if missing else f"{', '.join(twice)} twice" if twice
-                   else "an empty level")
-            raise ConfigError(f"filter.priorities must name every constraint group once, in non-empty levels ({why})")
         _positive("filter.sample_time_s", self.sample_time_s)
         nominal = self.backup_nominal_s / self.sample_time_s
         if not (math.isfinite(nominal) and 1 <= round(nominal) <= MAX_NOMINAL_STEPS):
@@ -470,10 +556,8 @@ class Scenario:
             raise ConfigError(f"{where}.command_schedule times must start at 0 and increase, got {self.schedule_s}")
         if len(self.schedule_s) != len(self.schedule_q):
             raise ConfigError(f"{where}.command_schedule is malformed")
-        if self.slack_weights is not None:
-            for name, w in self.slack_weights:
-                _choice(f"{where}.slack_weights", name, CONSTRAINT_NAMES[:4])
-                _nonneg(f"{where}.slack_weights.{name}", w)
+        for name, w in self.slack_weights or ():
+            _nonneg(f"{where}.slack_weights.{name}", w)
 
     @property
     def epoch_ns(self) -> int:
@@ -496,7 +580,7 @@ class Config:
     power: Power
     limits: Limits
     barriers: dict[str, BarrierGains]
-    """Gains by group name (BARRIER_GROUPS); use `gains(name)` for one constraint."""
+    """Gains of the constraints that are not pointing cones, by group (FIXED_GROUPS); `gains(name)` reads any."""
     augmentation: Augmentation
     filter: FilterOptions
     controller: ControllerGains
@@ -507,6 +591,10 @@ class Config:
     """The simulator of the spacecraft (`plant:` section; optional, default compiled)."""
     sensors: Sensors = field(default_factory=Sensors)
     """Sensor and actuator errors (`sensors:` section; optional, default off)."""
+    pointing: tuple[PointingConstraint, ...] = ()
+    """The pointing constraints (`constraints.pointing`), in order: the first rows of every table."""
+    scenario_errors: dict[str, str] = field(default_factory=dict)
+    """Scenarios of the file that did not validate: name -> the one-line error (`scenario` raises it)."""
 
     def __post_init__(self) -> None:
         if self.plant.simulator == "basilisk" and self.spacecraft.torque_sign != 1.0:
@@ -517,24 +605,90 @@ class Config:
         if self.filter.backup_law != "none" and self.substeps > MAX_BACKUP_SUBSTEPS:
             raise ConfigError(f"integrator.substeps must be <= {MAX_BACKUP_SUBSTEPS} with filter.backup_law "
                               f"{self.filter.backup_law!r}, got {self.substeps!r}")
-        for group in BARRIER_GROUPS:
+        for group in FIXED_GROUPS:
             if group not in self.barriers:
                 raise ConfigError(f"constraints.{group} is missing")
             self.barriers[group].check(f"constraints.{group}")
-        for group in ("exclusion_zone", "communication", "temperature", "battery"):
+        for group in ("temperature", "battery"):
             if self.barriers[group].enabled:
                 _positive(f"constraints.{group}.k2", self.barriers[group].k2)
-        for group in ("omega", "psi"):
+        for group in PER_AXIS_GROUPS:
             if self.barriers[group].slack_weight:
                 raise ConfigError(f"constraints.{group}.slack_weight must be 0 (hard), got "
                                   f"{self.barriers[group].slack_weight!r}")
+        if len(self.pointing) > MAX_POINTING:
+            raise ConfigError(f"constraints.pointing holds {len(self.pointing)} constraints; at most {MAX_POINTING}")
+        names = [c.name for c in self.pointing]
+        twice = sorted({n for n in names if names.count(n) > 1})
+        if twice:
+            raise ConfigError(f"constraints.pointing: {twice[0]!r} is named twice")
+        if self.filter.priorities:
+            named = [g for level in self.filter.priorities for g in level]
+            for g in named:
+                _choice("filter.priorities", g, self.groups)
+            missing = [g for g in FIXED_GROUPS if g not in named]  # (a pointing constraint joins a level)
+            twice = sorted({g for g in named if named.count(g) > 1})
+            if missing or twice or not all(self.filter.priorities):
+                why = (f"missing {', '.join(missing)}" if missing else f"{', '.join(twice)} twice" if twice
+                       else "an empty level")
+                raise ConfigError(f"filter.priorities must name every constraint group once, in non-empty levels "
+                                  f"({why})")
+        for scenario in self.scenarios.values():
+            for name, _ in scenario.slack_weights or ():
+                _choice(f"scenarios.{scenario.name}.slack_weights", name, self.slackable)
+
+    @property
+    def constraint_names(self) -> tuple[str, ...]:
+        """Every safety constraint by name, in row order: the pointing constraints, then FIXED_NAMES."""
+        return (*(c.name for c in self.pointing), *FIXED_NAMES)
+
+    @property
+    def groups(self) -> tuple[str, ...]:
+        """The configured groups of constraints: the pointing constraints by name, then FIXED_GROUPS (`omega` and
+        `psi` stand for their three axes)."""
+        return (*(c.name for c in self.pointing), *FIXED_GROUPS)
+
+    @property
+    def slackable(self) -> tuple[str, ...]:
+        """The constraints that may carry a slack: all but the per-axis rate and wheel-speed ones."""
+        return (*(c.name for c in self.pointing), "temperature", "battery")
+
+    def pointing_constraint(self, name: str) -> PointingConstraint:
+        """A pointing constraint by name.
+
+        Raises:
+            ConfigError: no pointing constraint of that name.
+        """
+        for c in self.pointing:
+            if c.name == name:
+                return c
+        raise ConfigError(f"unknown pointing constraint {name!r}; known: {', '.join(c.name for c in self.pointing)}")
 
     def gains(self, name: str) -> BarrierGains:
-        """Gains of one constraint by name (e.g. 'omega_y' reads the `omega` group)."""
-        if name not in CONSTRAINT_NAMES:
-            raise ConfigError(f"unknown constraint {name!r}; known: {', '.join(CONSTRAINT_NAMES)}")
-        return self.barriers[name.split("_")[0] if name[:3] in ("ome", "psi") else name]
+        """Gains of one constraint or group by name (e.g. 'omega_y' reads the `omega` group)."""
+        group = group_of(name)
+        if group in self.barriers:
+            return self.barriers[group]
+        for c in self.pointing:
+            if c.name == name:
+                return c.gains
+        raise ConfigError(f"unknown constraint {name!r}; known: {', '.join(self.constraint_names)}")
 
+    @property
+    def priority_levels(self) -> tuple[tuple[str, ...], ...]:
+        """The levels of the `prioritize` fallback, most important first: `filter.priorities`, where a pointing
+        constraint it does not name joins its most important level if hard, its least important if slacked
+        (so an overlay that adds a cone need not restate the list); without `filter.priorities`, two levels:
+        the hard groups, then the slacked ones."""
+        levels = [list(level) for level in self.filter.priorities]
+        if not levels:
+            levels = [[g for g in self.groups if not self.gains(g).slack_weight],
+                      [g for g in self.groups if self.gains(g).slack_weight]]
+        named = {g for level in levels for g in level}
+        for c in self.pointing:
+            if c.name not in named:
+                levels[-1 if c.gains.slack_weight else 0].append(c.name)
+        return tuple(tuple(level) for level in levels if level)
     @property
     def u_max_rad_s2(self) -> NDArray[np.float64]:
         """Bounds of the admissible set U (3,), rad/s^2: actuator and angular-acceleration limits.
@@ -550,8 +704,7 @@ class Config:
     @property
     def slacked_constraints(self) -> tuple[str, ...]:
         """Names of the enabled constraints that carry a slack (reported, not counted as failures)."""
-        return tuple(n for n in ("exclusion_zone", "communication", "temperature", "battery")
-                     if self.barriers[n].enabled and self.barriers[n].slack_weight > 0)
+        return tuple(n for n in self.slackable if self.gains(n).enabled and self.gains(n).slack_weight > 0)
 
     def with_preset(self, preset: str) -> Config:
         """A copy using another filter preset ('robust' or 'paper')."""
@@ -600,15 +753,23 @@ class Config:
             cfg = cfg.with_backup(scenario.backup_law)
         if scenario.slack_weights is None:
             return cfg
-        weights = dict(scenario.slack_weights)
-        barriers = dict(cfg.barriers)
-        for group in ("exclusion_zone", "communication", "temperature", "battery"):
+        return cfg.with_slack_weights(dict(scenario.slack_weights))
+
+    def with_slack_weights(self, weights: dict[str, float]) -> Config:
+        """A copy in which the constraints named in weights carry those slack weights and every other slackable
+        constraint is hard."""
+        barriers = dict(self.barriers)
+        for group in ("temperature", "battery"):
             barriers[group] = replace(barriers[group], slack_weight=float(weights.get(group, 0.0)))
-        return replace(cfg, barriers=barriers)
+        pointing = tuple(replace(c, gains=replace(c.gains, slack_weight=float(weights.get(c.name, 0.0))))
+                         for c in self.pointing)
+        return replace(self, barriers=barriers, pointing=pointing)
 
     def scenario(self, name: str) -> Scenario:
         """A scenario by name; '-' and '_' are interchangeable."""
         key = name.replace("-", "_")
+        if key in self.scenario_errors:
+            raise ConfigError(self.scenario_errors[key])
         if key not in self.scenarios:
             known = ", ".join(s.replace("_", "-") for s in self.scenarios)
             raise ConfigError(f"unknown scenario {name!r}; known: {known}")

@@ -33,10 +33,8 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
-from rta_attitude.constraints.base import OMEGA_X, ZOH_CHECKS, speed_limit_row
+from rta_attitude.constraints.base import ZOH_CHECKS, speed_limit_row
 from rta_attitude.jit import LEAF
-
-NAMES = ("omega_x", "omega_y", "omega_z")
 
 
 @numba.njit(**LEAF)
@@ -48,7 +46,7 @@ def h(ctx: np.void, x: NDArray[np.float64], c: np.void, axis: int) -> float:
 @numba.njit(**LEAF)
 def row(ctx: np.void, x: NDArray[np.float64], c: np.void, axis: int, t: np.void) -> None:
     """h and the CBF row of one axis into table t."""
-    i = OMEGA_X + axis
+    i = c.row_omega + axis
     speed_limit_row(t, i, axis, x[4 + axis], c.omega_max_rad_s, c.err_omega_axis_rad_s, ctx.control_gain[axis],
                     ctx.omega_drift[axis], c.gains[i])
 
@@ -98,7 +96,7 @@ def zoh_rows(ctx: np.void, x: NDArray[np.float64], c: np.void, p: np.void, t: np
     """The coupled zero-order-hold rate rows of state x into t (zoh_rows, zoh_axis, zoh_gain, zoh_lo,
     zoh_hi): in the robust preset, with the rate constraint on and the gyrostat model (p); else none."""
     t.zoh_rows = 0
-    if not (c.robust and p.wheel_gyroscopic and c.gains[OMEGA_X].enabled):
+    if not (c.robust and p.wheel_gyroscopic and c.gains[c.row_omega].enabled):
         return
     dt = c.dt_s
     J = p.inertia_kgm2

@@ -9,10 +9,16 @@ A constraint's barrier condition is affine in u:  BC(x, u) = drift(x) + gain(x) 
 and for relative degree 1:  BC = dh/dt|_(f + g u) + k1 h + bias. `bias` is the paper's sigma,
 added to the final condition as the paper's equation writes it (AFRL's framework adds it to h).
 
+Rows. A configuration's constraints are rows in one order (`Config.constraint_names`): its pointing
+constraints (`constraints.cones`, the cone table), then temperature, battery, omega_x/y/z, psi_x/y/z. Every
+table holds MAX_ROWS rows (the capacity: any configuration up to it runs the same compiled kernels) and the
+record says how many are in use (n_rows) and where the fixed ones are (row_temperature, ...).
+
 Records (structured NumPy arrays, read by name in compiled code):
-- GAIN_DTYPE: one constraint's switches and gains (one per row of CONSTRAINT_NAMES);
-- CONSTRAINT_DTYPE: the limits, the augmentation weights, the sampled-data options and the gains
-  of every constraint (`constraint_record`);
+- GAIN_DTYPE: one constraint's switches and gains (one per row);
+- CONE_DTYPE: one pointing constraint (kind, boresight, target, half-angle, windows);
+- CONSTRAINT_DTYPE: the limits, the augmentation weights, the sampled-data options, the cone table and the
+  gains of every constraint (`constraint_record`);
 - TABLE_DTYPE: one state's evaluation: h, Psi_0, Psi_1, drift and gain of every constraint, the
   box lo <= u <= hi (U, intersected with the one-step zero-order-hold bounds in the robust preset)
   and, in the robust preset with the gyrostat model, the coupled zero-order-hold rate rows
@@ -27,18 +33,31 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
-from rta_attitude.config.schema import CONSTRAINT_NAMES, Config
+from rta_attitude.config.schema import FIXED_NAMES, MAX_POINTING, MAX_WINDOWS, Config
+from rta_attitude.dynamics.environment import target_kind
 from rta_attitude.dynamics.sensors import interface_energy_error
 from rta_attitude.jit import LEAF
 
 Array = NDArray[np.float64]
 
-N_CONSTRAINTS = len(CONSTRAINT_NAMES)
-"""Rows in CONSTRAINT_NAMES order: exclusion_zone, communication, temperature, battery,
-omega_x/y/z, psi_x/y/z."""
-EXCLUSION_ZONE, COMMUNICATION, TEMPERATURE, BATTERY = 0, 1, 2, 3
-OMEGA_X, PSI_X = 4, 7
-"""Row of each constraint (omega_y = OMEGA_X + 1, ...)."""
+MAX_CONES = MAX_POINTING
+MAX_ROWS = MAX_CONES + len(FIXED_NAMES)
+"""Rows every table holds (the pointing constraints' capacity and the fixed rows); a configuration uses
+`n_rows` of them."""
+
+CONE_DTYPE = np.dtype([
+    ("keep_in", np.uint8),                  # 1: h = half_angle - theta; 0: h = theta - half_angle
+    ("axis", np.float64, (3,)),             # the boresight, body axes (unit)
+    ("target", np.int64),                   # `dynamics.environment` kind: SUN, EARTH, HILL_FIXED, INERTIAL_FIXED
+    ("vector", np.float64, (3,)),           # the target's fixed vector (Hill or inertial)
+    ("angle_rad", np.float64),              # the half-angle
+    ("n_windows", np.int64),                # 0: always; else only within the windows
+    ("window_on_s", np.float64, (MAX_WINDOWS,)),     # the barrier starts to tighten (`windows.ramp_start`)
+    ("window_start_s", np.float64, (MAX_WINDOWS,)),
+    ("window_end_s", np.float64, (MAX_WINDOWS,)),
+    ("ramp_rad_s", np.float64),             # how fast the barrier tightens ahead of a window
+])  # fmt: skip
+"""One pointing constraint of the cone table (`constraints.cones`)."""
 
 GAIN_DTYPE = np.dtype([
     ("enabled", np.uint8),
@@ -50,9 +69,14 @@ GAIN_DTYPE = np.dtype([
 ])  # fmt: skip
 
 CONSTRAINT_DTYPE = np.dtype([
-    ("gains", GAIN_DTYPE, (N_CONSTRAINTS,)),
-    ("exclusion_angle_rad", np.float64),   # FOV/2 + beta
-    ("comm_angle_rad", np.float64),        # FOV/2
+    ("gains", GAIN_DTYPE, (MAX_ROWS,)),
+    ("n_rows", np.int64),                  # rows in use: n_cones + the fixed rows
+    ("n_cones", np.int64),                 # the pointing constraints: rows 0 .. n_cones - 1
+    ("row_temperature", np.int64),         # rows of the fixed constraints (after the cones)
+    ("row_battery", np.int64),
+    ("row_omega", np.int64),               # omega_x; omega_y, omega_z follow
+    ("row_psi", np.int64),                 # psi_x; psi_y, psi_z follow
+    ("cones", CONE_DTYPE, (MAX_CONES,)),
     ("temperature_max_K", np.float64),
     ("energy_min_J", np.float64),
     ("omega_max_rad_s", np.float64),
@@ -83,11 +107,11 @@ ZOH_CHECKS = 5
 ZOH_ROWS = 3 * ZOH_CHECKS
 
 TABLE_DTYPE = np.dtype([
-    ("h", np.float64, (N_CONSTRAINTS,)),
-    ("psi0", np.float64, (N_CONSTRAINTS,)),
-    ("psi1", np.float64, (N_CONSTRAINTS,)),
-    ("drift", np.float64, (N_CONSTRAINTS,)),
-    ("gain", np.float64, (N_CONSTRAINTS, 3)),
+    ("h", np.float64, (MAX_ROWS,)),
+    ("psi0", np.float64, (MAX_ROWS,)),
+    ("psi1", np.float64, (MAX_ROWS,)),
+    ("drift", np.float64, (MAX_ROWS,)),
+    ("gain", np.float64, (MAX_ROWS, 3)),
     ("lo", np.float64, (3,)),
     ("hi", np.float64, (3,)),
     ("zoh_rows", np.int64),                      # coupled rate rows in use (0, or ZOH_ROWS)
@@ -98,24 +122,35 @@ TABLE_DTYPE = np.dtype([
 ])  # fmt: skip
 
 
-def group_of(name: str) -> str:
-    """The `constraints:` section of a constraint (omega_y -> omega)."""
-    return name.split("_")[0] if name[:3] in ("ome", "psi") else name
-
-
 def constraint_record(cfg: Config) -> NDArray[np.void]:
     """The CONSTRAINT_DTYPE record (shape (1,)) of a configuration (margins only in the robust preset)."""
+    from rta_attitude.constraints.windows import ramp_rate, ramp_start
+
     robust = cfg.filter.preset == "robust"
     L, aug = cfg.limits, cfg.augmentation
     rec = np.zeros(1, CONSTRAINT_DTYPE)
     c = rec[0]
-    for i, name in enumerate(CONSTRAINT_NAMES):
-        g = cfg.barriers[group_of(name)]
+    names = cfg.constraint_names
+    for i, name in enumerate(names):
+        g = cfg.gains(name)
         gi = c["gains"][i]
         gi["enabled"], gi["k1"], gi["k2"], gi["bias"] = g.enabled, g.k1, g.k2, g.bias
         gi["slack_weight"] = g.slack_weight if g.enabled else 0.0
         gi["margin"] = g.sampled_data_margin(cfg.filter.model) if robust else 0.0
-    c["exclusion_angle_rad"], c["comm_angle_rad"] = L.exclusion_angle_rad, L.comm_angle_rad
+    k = len(cfg.pointing)
+    c["n_rows"], c["n_cones"] = len(names), k
+    c["row_temperature"], c["row_battery"], c["row_omega"], c["row_psi"] = k, k + 1, k + 2, k + 5
+    for j, cone in enumerate(cfg.pointing):
+        e = c["cones"][j]
+        kind, vector = target_kind(cone.target)
+        e["keep_in"], e["axis"], e["target"] = cone.keep_in, cone.boresight_body, kind
+        e["vector"] = cone.target_vector if cone.target_vector is not None else vector
+        e["angle_rad"] = cone.half_angle_rad
+        e["n_windows"] = len(cone.windows_s)
+        e["ramp_rad_s"] = ramp_rate(cfg, cone)
+        for w, (start, end) in enumerate(cone.windows_s):
+            e["window_on_s"][w] = ramp_start(cfg, cone, start)
+            e["window_start_s"][w], e["window_end_s"][w] = start, end
     c["temperature_max_K"], c["energy_min_J"] = L.temperature_max_K, L.energy_min_J
     c["omega_max_rad_s"], c["psi_max_rad_s"] = L.omega_max_rad_s, L.psi_max_rad_s
     c["delta0_K_rad"], c["delta1_K_rad"], c["delta2_J_rad"] = aug.delta0_K_rad, aug.delta1_K_rad, aug.delta2_J_rad
@@ -253,7 +288,7 @@ def nan_min(a: float, b: float) -> float:
 
 
 __all__ = [
-    "BATTERY", "COMMUNICATION", "CONSTRAINT_DTYPE", "EXCLUSION_ZONE", "GAIN_DTYPE", "N_CONSTRAINTS", "OMEGA_X", "PSI_X",
-    "TABLE_DTYPE", "TEMPERATURE", "ZOH_CHECKS", "ZOH_ROWS", "angle_rate_error", "constraint_record", "drive_lag",
-    "group_of", "lag_response", "measurement_errors", "nan_max", "nan_min", "second_order", "speed_limit_row",
+    "CONE_DTYPE", "CONSTRAINT_DTYPE", "GAIN_DTYPE", "MAX_CONES", "MAX_ROWS", "TABLE_DTYPE", "ZOH_CHECKS", "ZOH_ROWS",
+    "angle_rate_error", "constraint_record", "drive_lag", "lag_response", "measurement_errors", "nan_max", "nan_min",
+    "second_order", "speed_limit_row",
 ]  # fmt: skip

@@ -1,7 +1,8 @@
 """Battery charge: E >= E_min.
 
     h_batt = E - E_min                                         (J; relative degree 3)
-    Psi_0  = E - E_min - margin - delta2 theta_SI              theta_SI: sun incidence on the +k_B panel, [0, pi]
+    Psi_0  = E - E_min - margin - delta2 theta_SI              theta_SI: sun incidence on the panel, [0, pi]
+                                                               (`power.panel_normal_body`, the paper's +k_B)
     Psi_1  = Psi_0' + k1 Psi_0,   BC = Psi_0''(u) + k1 Psi_0' + k2 Psi_1 + bias >= 0   (HOCBF)
 
     E_dot  = P_peak max(0, cos theta_SI) - P_out                  (`dynamics.spacecraft.net_power`)
@@ -19,14 +20,10 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
-from rta_attitude.constraints.base import BATTERY, angle_rate_error, second_order
+from rta_attitude.constraints.base import angle_rate_error, second_order
 from rta_attitude.constraints.geometry import pointing
 from rta_attitude.dynamics.spacecraft import net_power
 from rta_attitude.jit import LEAF
-
-NAME = "battery"
-AXIS_BODY = (0.0, 0.0, 1.0)
-"""Solar panel normal +k_B."""
 
 
 @numba.njit(**LEAF)
@@ -38,10 +35,10 @@ def h(ctx: np.void, x: NDArray[np.float64], c: np.void) -> float:
 @numba.njit(**LEAF)
 def row(ctx: np.void, x: NDArray[np.float64], c: np.void, p: np.void, t: np.void) -> None:
     """h, HOCBF levels and the barrier row of the battery into table t (p: the plant model)."""
-    i = BATTERY
+    i = c.row_battery
     g = c.gains[i]
-    cp, cp_dot, th, th_dot, th_dd, g0, g1, g2 = pointing(0.0, 0.0, 1.0, ctx.sun, ctx.sun_rate, ctx.sun_acc, ctx,
-                                                         c.sin_pole_guard)
+    cp, cp_dot, th, th_dot, th_dd, g0, g1, g2 = pointing(p.panel_normal[0], p.panel_normal[1], p.panel_normal[2],
+                                                         ctx.sun, ctx.sun_rate, ctx.sun_acc, ctx, c.sin_pole_guard)
     t.h[i] = x[11] - c.energy_min_J
     E_dot = net_power(cp, p)
     E_ddot = p.panel_peak_W * (1.0 if cp > 0 else 0.0) * cp_dot

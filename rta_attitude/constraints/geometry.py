@@ -3,15 +3,9 @@
 `context` fills a CONTEXT_DTYPE record from a state x and the filter's plant model (a PLANT_DTYPE
 record): the attitude matrix A(q) (Hill -> body), the body rate omega, the drift of omega_dot
 (`dynamics.spacecraft.omega_drift`: Euler, wheel gyroscopic term, gravity gradient as the model
-has them), the control gain G = d omega_dot / d u, and the two targets in body axes with their
-first two *inertial* time derivatives:
-
-    sun   r_S = [cos theta_S, sin theta_S, 0] (Hill), theta_S_dot = -n
-    Earth r_E = [-1, 0, 0] (Hill, the ground station's direction)
-
-With the Hill frame turning at n_f about z (`frame_rate_rad_s`), a target's inertial derivatives
-are r' = r_dot + W x r and r'' = r_ddot + 2 W x r_dot + W x (W x r), W = [0, 0, n_f]: the sun
-(fixed in inertial space) then has r' = 0 exactly when n_f = n, and the Earth direction turns.
+has them), the control gain G = d omega_dot / d u, and the sun and the Earth (nadir) in body axes with
+their first two *inertial* time derivatives (`dynamics.environment`: the one place that says where a target
+is and how it moves). `target` does the same for any target of the cone table (`constraints.cones`).
 
 `pointing` gives, for a unit body axis e and a target r_B = A r (with r_B', r_B''), the angle
 theta = angle(e, r_B) and its derivatives along f + g u:
@@ -37,8 +31,9 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
+from rta_attitude.dynamics.environment import EARTH, EARTH_HILL, SUN, inertial_rates, target_hill
 from rta_attitude.dynamics.quaternion import attitude_matrix
-from rta_attitude.dynamics.spacecraft import omega_drift, sun_hill
+from rta_attitude.dynamics.spacecraft import omega_drift
 from rta_attitude.jit import LEAF
 
 Array = NDArray[np.float64]
@@ -54,6 +49,12 @@ CONTEXT_DTYPE = np.dtype([
     ("earth", np.float64, (3,)),       # r_E in body
     ("earth_rate", np.float64, (3,)),
     ("earth_acc", np.float64, (3,)),
+    ("tgt", np.float64, (3,)),         # `target`: a cone's target in body, its inertial rates (scratch)
+    ("tgt_rate", np.float64, (3,)),
+    ("tgt_acc", np.float64, (3,)),
+    ("hill", np.float64, (3,)),        # a target in Hill and its derivatives there (scratch)
+    ("hill_rate", np.float64, (3,)),
+    ("hill_acc", np.float64, (3,)),
     ("zoh_omega", np.float64, (3, 3)),   # scratch of angular_rate.zoh_rows: Omega, the linear wheel term
     ("zoh_sum", np.float64, (3, 3)),     # sum of (Omega tau)^n / (n + 1)!
     ("zoh_term", np.float64, (3, 3)),
@@ -64,38 +65,59 @@ CONTEXT_DTYPE = np.dtype([
 
 
 @numba.njit(**LEAF)
+def to_body(A: Array, r: Array, out: Array) -> None:
+    """out = A r (3,): a Hill vector r in body axes (a zero z component skipped: the paper's arithmetic)."""
+    for i in range(3):
+        v = A[i, 0] * r[0] + A[i, 1] * r[1]
+        if r[2] != 0.0:
+            v += A[i, 2] * r[2]
+        out[i] = v
+
+
+@numba.njit(**LEAF)
+def _target_in_body(kind: int, v: Array, theta_S: float, p: np.void, rates: bool, ctx: np.void, r: Array,
+                    rd: Array, rdd: Array) -> None:
+    """A target (`dynamics.environment.target_hill`) in body axes into r and, with rates, its inertial rates
+    into rd, rdd (ctx.A set; ctx.hill* scratch)."""
+    target_hill(kind, v, theta_S, p.sun_cos_beta, p.sun_sin_beta, p.mean_motion_rad_s, ctx.hill, ctx.hill_rate,
+                ctx.hill_acc)
+    to_body(ctx.A, ctx.hill, r)
+    if rates:
+        inertial_rates(ctx.hill, ctx.hill_rate, ctx.hill_acc, p.frame_rate_rad_s)
+        to_body(ctx.A, ctx.hill_rate, rd)
+        to_body(ctx.A, ctx.hill_acc, rdd)
+
+
+@numba.njit(**LEAF)
 def context(x: Array, p: np.void, rates: bool, ctx: np.void) -> None:
     """Fill ctx (CONTEXT_DTYPE) for state x (19,) with plant model p (PLANT_DTYPE). With rates False,
-    only A, omega and the two targets (what the safety values need)."""
+    only A, omega and the sun and the Earth in body axes (what the safety values need)."""
     A = ctx.A
     attitude_matrix(x[0], x[1], x[2], x[3], A)
     for a in range(3):
         ctx.omega[a] = x[4 + a]
-    cs, sn = sun_hill(x[12])
-    for i in range(3):  # A r_S with r_S = [cos, sin, 0]; A r_E with r_E = EARTH_HILL = [-1, 0, 0]
-        ctx.sun[i] = A[i, 0] * cs + A[i, 1] * sn
-        ctx.earth[i] = -A[i, 0]
+    e = ctx.tgt  # (a vector's storage for EARTH_HILL: the Earth's kind reads its direction from it)
+    e[0], e[1], e[2] = EARTH_HILL
+    _target_in_body(SUN, e, x[12], p, rates, ctx, ctx.sun, ctx.sun_rate, ctx.sun_acc)
+    _target_in_body(EARTH, e, x[12], p, rates, ctx, ctx.earth, ctx.earth_rate, ctx.earth_acc)
     if not rates:
         return
     omega_drift(x, A, p, ctx.omega_drift)
     for a in range(3):
         ctx.control_gain[a] = p.control_gain[a]
-    n = p.mean_motion_rad_s
-    # Hill-frame derivatives of r_S (theta_S_dot = -n); r_E is fixed in Hill
-    sd0, sd1 = n * sn, -n * cs
-    sdd0, sdd1 = -(n * n) * cs, -(n * n) * sn
-    ed0 = ed1 = edd0 = edd1 = 0.0
-    nf = p.frame_rate_rad_s
-    if nf != 0.0:  # inertial derivatives: r' = r_dot + W x r, r'' = r_ddot + 2 W x r_dot + W x (W x r)
-        sdd0, sdd1 = sdd0 - 2.0 * nf * sd1 - nf * nf * cs, sdd1 + 2.0 * nf * sd0 - nf * nf * sn
-        sd0, sd1 = sd0 - nf * sn, sd1 + nf * cs
-        ed0, ed1 = 0.0, -nf
-        edd0, edd1 = nf * nf, 0.0
-    for i in range(3):  # z components are 0 (targets in the orbit plane, W along z)
-        ctx.sun_rate[i] = A[i, 0] * sd0 + A[i, 1] * sd1
-        ctx.sun_acc[i] = A[i, 0] * sdd0 + A[i, 1] * sdd1
-        ctx.earth_rate[i] = A[i, 0] * ed0 + A[i, 1] * ed1
-        ctx.earth_acc[i] = A[i, 0] * edd0 + A[i, 1] * edd1
+
+
+@numba.njit(**LEAF)
+def target(kind: int, v: Array, x: Array, p: np.void, rates: bool, ctx: np.void) -> tuple[Array, Array, Array]:
+    """A cone's target in body axes with its inertial rates (context must have run on x): the sun's and the
+    Earth's from ctx, any other's computed into ctx.tgt, tgt_rate, tgt_acc. kind: `dynamics.environment`'s
+    code; v: its fixed vector (Hill or inertial)."""
+    if kind == SUN:
+        return ctx.sun, ctx.sun_rate, ctx.sun_acc
+    if kind == EARTH:
+        return ctx.earth, ctx.earth_rate, ctx.earth_acc
+    _target_in_body(kind, v, x[12], p, rates, ctx, ctx.tgt, ctx.tgt_rate, ctx.tgt_acc)
+    return ctx.tgt, ctx.tgt_rate, ctx.tgt_acc
 
 
 @numba.njit(**LEAF)
@@ -145,4 +167,4 @@ def new_context() -> NDArray[np.void]:
     return np.zeros(1, CONTEXT_DTYPE)
 
 
-__all__ = ["CONTEXT_DTYPE", "angle", "context", "new_context", "pointing"]
+__all__ = ["CONTEXT_DTYPE", "angle", "context", "new_context", "pointing", "target", "to_body"]

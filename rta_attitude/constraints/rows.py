@@ -1,15 +1,17 @@
 """The ordered constraint set of one state, compiled: every barrier row, the box, the safety values.
 
-`rows` evaluates each constraint's module in CONSTRAINT_NAMES order into a TABLE_DTYPE record and
-then the box lo <= u <= hi: U, intersected in the `robust` preset with the one-step-ahead
-zero-order-hold intervals of the enabled rate and wheel-speed constraints (with the gyrostat model the
-rate's are coupled rows instead, `angular_rate.zoh_rows`); where such an interval
-misses U entirely (a state already past a limit by more than one step of U can undo) the box shrinks
-to the edge of U nearest to it. `safety_values` gives the physical h of every constraint (what the
-plant is judged by, at samples and at RK4 substeps) without the derivatives.
+`rows` evaluates the constraints in row order into a TABLE_DTYPE record (the cone table, `cones`, then
+temperature, battery, the rates and the wheel speeds) and then the box lo <= u <= hi: U, intersected in the
+`robust` preset with the one-step-ahead zero-order-hold intervals of the enabled rate and wheel-speed
+constraints (with the gyrostat model the rate's are coupled rows instead, `angular_rate.zoh_rows`); where
+such an interval misses U entirely (a state already past a limit by more than one step of U can undo) the box
+shrinks to the edge of U nearest to it. `safety_values` gives the physical h of every constraint (what the
+plant is judged by, at samples and at RK4 substeps) without the derivatives. Both take the time t_s (s from
+the run's start): a cone with windows applies only within them (`windows`).
 
-Adding a constraint: a module here with `h` and `row` (docs/architecture.md has the worked example),
-its name in `config.schema.CONSTRAINT_NAMES`, and one line in each function below.
+A new pointing constraint is an entry of the configuration (`constraints.pointing`), nothing here. A new
+*kind* of constraint: a module with `h` and `row` (docs/architecture.md), its row in `base.CONSTRAINT_DTYPE`
+and `config.schema.FIXED_NAMES`, and one line in each function below.
 """
 
 from __future__ import annotations
@@ -18,24 +20,8 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
-from rta_attitude.constraints import (
-    angular_rate,
-    battery,
-    communication,
-    exclusion_zone,
-    temperature,
-    wheel_speed,
-)
-from rta_attitude.constraints.base import (
-    BATTERY,
-    COMMUNICATION,
-    EXCLUSION_ZONE,
-    OMEGA_X,
-    PSI_X,
-    TEMPERATURE,
-    nan_max,
-    nan_min,
-)
+from rta_attitude.constraints import angular_rate, battery, cones, temperature, wheel_speed
+from rta_attitude.constraints.base import nan_max, nan_min
 from rta_attitude.constraints.geometry import angle, context
 from rta_attitude.jit import LEAF
 
@@ -43,11 +29,12 @@ Array = NDArray[np.float64]
 
 
 @numba.njit(**LEAF)
-def rows(x: Array, p: np.void, c: np.void, ctx: np.void, t: np.void, lo0: Array, hi0: Array) -> None:
-    """Barrier rows and box of one state x (19,, unit quaternion) into table t (TABLE_DTYPE).
+def rows(x: Array, t_s: float, p: np.void, c: np.void, ctx: np.void, t: np.void, lo0: Array, hi0: Array) -> None:
+    """Barrier rows and box of one state x (19,, unit quaternion) at time t_s into table t (TABLE_DTYPE).
 
     Args:
         x: the state.
+        t_s: the time, s from the run's start (the cones' windows).
         p: the filter's plant model (PLANT_DTYPE).
         c: the constraint parameters (CONSTRAINT_DTYPE).
         ctx: scratch CONTEXT_DTYPE record (filled here).
@@ -56,8 +43,7 @@ def rows(x: Array, p: np.void, c: np.void, ctx: np.void, t: np.void, lo0: Array,
             compensates its drive's lag, the part of U its state reaches (`filter.pipeline.drive_box`).
     """
     context(x, p, True, ctx)
-    exclusion_zone.row(ctx, x, c, t)
-    communication.row(ctx, x, c, t)
+    cones.rows(x, t_s, p, c, ctx, t)
     temperature.row(ctx, x, c, p, t)
     battery.row(ctx, x, c, p, t)
     for a in range(3):
@@ -65,15 +51,13 @@ def rows(x: Array, p: np.void, c: np.void, ctx: np.void, t: np.void, lo0: Array,
         wheel_speed.row(ctx, x, c, a, t)
     angular_rate.zoh_rows(ctx, x, c, p, t)
     box(ctx, x, c, t, lo0, hi0)
-
-
 @numba.njit(**LEAF)
 def box(ctx: np.void, x: Array, c: np.void, t: np.void, lo0: Array, hi0: Array) -> None:
     """t.lo, t.hi (3,), rad/s^2: what the drive can hold (lo0, hi0: `rows`), and in the robust preset the
     one-step ZOH intervals of the enabled rate and wheel-speed constraints (the rate's only where no coupled
     rows, t.zoh_rows, replace them)."""
-    rate_on = c.gains[OMEGA_X].enabled and t.zoh_rows == 0
-    wheel_on = c.gains[PSI_X].enabled
+    rate_on = c.gains[c.row_omega].enabled and t.zoh_rows == 0
+    wheel_on = c.gains[c.row_psi].enabled
     for a in range(3):
         lo_a, hi_a = lo0[a], hi0[a]
         if c.robust:
@@ -95,36 +79,35 @@ def box(ctx: np.void, x: Array, c: np.void, t: np.void, lo0: Array, hi0: Array) 
 
 
 @numba.njit(**LEAF)
-def safety_values(x: Array, p: np.void, c: np.void, ctx: np.void, out: Array) -> None:
-    """Physical h of every constraint (CONSTRAINT_NAMES order) of state x into out; negative = violated."""
+def safety_values(x: Array, t_s: float, p: np.void, c: np.void, ctx: np.void, out: Array) -> None:
+    """Physical h of every constraint (row order, n_rows) of state x at time t_s into out; negative = violated
+    (+inf: a cone outside its windows)."""
     context(x, p, False, ctx)
-    out[EXCLUSION_ZONE] = exclusion_zone.h(ctx, x, c)
-    out[COMMUNICATION] = communication.h(ctx, x, c)
-    out[TEMPERATURE] = temperature.h(ctx, x, c)
-    out[BATTERY] = battery.h(ctx, x, c)
+    cones.safety(x, t_s, p, c, ctx, out)
+    out[c.row_temperature] = temperature.h(ctx, x, c)
+    out[c.row_battery] = battery.h(ctx, x, c)
     for a in range(3):
-        out[OMEGA_X + a] = angular_rate.h(ctx, x, c, a)
-        out[PSI_X + a] = wheel_speed.h(ctx, x, c, a)
+        out[c.row_omega + a] = angular_rate.h(ctx, x, c, a)
+        out[c.row_psi + a] = wheel_speed.h(ctx, x, c, a)
 
 
-ANGLE_NAMES: tuple[str, ...] = ("sensor_sun", "antenna_earth", "face_sun", "face_earth", "panel_sun")
-"""`pointing_angles`: theta_EZ (+i_B to the sun), theta_GS (+j_B to the Earth), the -j_B face's sun and
-Earth incidence angles, the +k_B panel's sun incidence angle (rad)."""
+BODY_ANGLE_NAMES: tuple[str, ...] = ("face_sun", "face_earth", "panel_sun")
+"""`pointing_angles` after the cones': the thermal face's sun and Earth incidence angles, the panel's sun
+incidence angle (rad)."""
 
 
 @numba.njit(**LEAF)
-def pointing_angles(x: Array, p: np.void, ctx: np.void, out: Array) -> None:
-    """The ANGLE_NAMES angles of state x into out (5,), rad (the geometry the barriers act on)."""
+def pointing_angles(x: Array, p: np.void, c: np.void, ctx: np.void, out: Array) -> None:
+    """The angles the barriers act on into out (n_cones + 3,), rad: each cone's boresight to its target (time
+    aside: windows do not change the geometry), then BODY_ANGLE_NAMES."""
     context(x, p, False, ctx)
-    e = exclusion_zone.AXIS_BODY
-    out[0] = angle(e[0], e[1], e[2], ctx.sun)
-    e = communication.AXIS_BODY
-    out[1] = angle(e[0], e[1], e[2], ctx.earth)
-    e = temperature.AXIS_BODY
-    out[2] = angle(e[0], e[1], e[2], ctx.sun)
-    out[3] = angle(e[0], e[1], e[2], ctx.earth)
-    e = battery.AXIS_BODY
-    out[4] = angle(e[0], e[1], e[2], ctx.sun)
+    cones.angles(x, p, c, ctx, out)
+    k = c.n_cones
+    f = p.face_normal
+    out[k] = angle(f[0], f[1], f[2], ctx.sun)
+    out[k + 1] = angle(f[0], f[1], f[2], ctx.earth)
+    e = p.panel_normal
+    out[k + 2] = angle(e[0], e[1], e[2], ctx.sun)
 
 
-__all__ = ["ANGLE_NAMES", "box", "pointing_angles", "rows", "safety_values"]
+__all__ = ["BODY_ANGLE_NAMES", "box", "pointing_angles", "rows", "safety_values"]

@@ -1,10 +1,10 @@
-"""Temperature of the -j_B face: T <= T_max.
+"""Temperature of the thermal node's face (`thermal.face_normal_body`, the paper's -j_B): T <= T_max.
 
     h_temp   = T_max - T                                                  (K; relative degree 3)
     Psi_0    = T_max - T - margin - delta0 max(0, pi/2 - theta_SI) - delta1 max(0, pi/2 - theta_EI)
     Psi_1    = Psi_0' + k1 Psi_0,   BC = Psi_0''(u) + k1 Psi_0' + k2 Psi_1 + bias >= 0   (HOCBF)
 
-theta_SI / theta_EI: sun / Earth incidence angles of the face normal -j_B. Psi_0 <= h_temp and has
+theta_SI / theta_EI: sun / Earth incidence angles of the face normal. Psi_0 <= h_temp and has
 relative degree 2 (u enters theta_ddot); the clamps (SPEC sec. 4, [resolved]) give the zero gradient
 the paper mentions when the face sees neither sun nor Earth. With c_S, c_E the incidence cosines:
 
@@ -24,14 +24,10 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
-from rta_attitude.constraints.base import TEMPERATURE, angle_rate_error, nan_max, second_order
+from rta_attitude.constraints.base import angle_rate_error, nan_max, second_order
 from rta_attitude.constraints.geometry import pointing
 from rta_attitude.dynamics.spacecraft import thermal_rate
 from rta_attitude.jit import LEAF
-
-NAME = "temperature"
-AXIS_BODY = (0.0, -1.0, 0.0)
-"""Outward normal of the thermal node's face, -j_B."""
 
 
 @numba.njit(**LEAF)
@@ -43,12 +39,13 @@ def h(ctx: np.void, x: NDArray[np.float64], c: np.void) -> float:
 @numba.njit(**LEAF)
 def row(ctx: np.void, x: NDArray[np.float64], c: np.void, p: np.void, t: np.void) -> None:
     """h, HOCBF levels and the barrier row of the temperature into table t (p: the plant model)."""
-    i = TEMPERATURE
+    i = c.row_temperature
     g = c.gains[i]
     guard = c.sin_pole_guard
-    cs, cs_dot, th_s, th_s_dot, th_s_dd, gs0, gs1, gs2 = pointing(0.0, -1.0, 0.0, ctx.sun, ctx.sun_rate, ctx.sun_acc,
+    f0, f1, f2 = p.face_normal[0], p.face_normal[1], p.face_normal[2]
+    cs, cs_dot, th_s, th_s_dot, th_s_dd, gs0, gs1, gs2 = pointing(f0, f1, f2, ctx.sun, ctx.sun_rate, ctx.sun_acc,
                                                                   ctx, guard)
-    ce, ce_dot, th_e, th_e_dot, th_e_dd, ge0, ge1, ge2 = pointing(0.0, -1.0, 0.0, ctx.earth, ctx.earth_rate,
+    ce, ce_dot, th_e, th_e_dot, th_e_dd, ge0, ge1, ge2 = pointing(f0, f1, f2, ctx.earth, ctx.earth_rate,
                                                                   ctx.earth_acc, ctx, guard)
     T = x[10]
     T_dot = thermal_rate(cs, ce, T, p)

@@ -14,10 +14,8 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
-from rta_attitude.constraints.base import PSI_X, speed_limit_row
+from rta_attitude.constraints.base import speed_limit_row
 from rta_attitude.jit import LEAF
-
-NAMES = ("psi_x", "psi_y", "psi_z")
 
 
 @numba.njit(**LEAF)
@@ -29,7 +27,7 @@ def h(ctx: np.void, x: NDArray[np.float64], c: np.void, axis: int) -> float:
 @numba.njit(**LEAF)
 def row(ctx: np.void, x: NDArray[np.float64], c: np.void, axis: int, t: np.void) -> None:
     """h and the CBF row of one wheel into table t."""
-    i = PSI_X + axis  # psi_dot = u: gain 1, no drift
+    i = c.row_psi + axis  # psi_dot = u: gain 1, no drift
     speed_limit_row(t, i, axis, x[7 + axis], c.psi_max_rad_s, c.err_psi_rad_s, 1.0, 0.0, c.gains[i])
 
 

@@ -37,6 +37,7 @@ from numpy.typing import NDArray
 
 from rta_attitude.config.loader import CELSIUS_OFFSET_K
 from rta_attitude.config.schema import Config
+from rta_attitude.dynamics.environment import sun_hill
 from rta_attitude.dynamics.quaternion import attitude_matrix, product
 from rta_attitude.dynamics.state import STATE_SIZE
 from rta_attitude.jit import LEAF
@@ -59,6 +60,8 @@ SENSORS_DTYPE = np.dtype([
     ("actuator_lag_s", np.float64),
     ("bus_voltage_V", np.float64),         # BatteryState.charge = E / (V 3600) (`encode`)
     ("wheel_sign", np.float64),            # spacecraft.torque_sign s: the rotors spin at -s psi
+    ("sun_cos_beta", np.float64),          # the sun's beta angle: the sun vector's message (`encode`)
+    ("sun_sin_beta", np.float64),
 ])  # fmt: skip
 
 # the fields of the message interface (see "the interface" below), in their order
@@ -94,6 +97,8 @@ def sensors_record(cfg: Config, stream: int = 0) -> NDArray[np.void]:
                  "actuator_lag_s"):
         r[name] = getattr(s, name)
     r["bus_voltage_V"], r["wheel_sign"] = cfg.power.bus_voltage_V, cfg.spacecraft.torque_sign
+    beta = cfg.environment.sun_beta_rad
+    r["sun_cos_beta"], r["sun_sin_beta"] = math.cos(beta), math.sin(beta)
     return rec
 
 
@@ -231,9 +236,7 @@ def encode(y: Array, s: np.void, A: Array, out: Array) -> None:
         out[F_WHEEL + a] = -s.wheel_sign * y[7 + a]
     out[F_TEMP_C] = y[10] - CELSIUS_OFFSET_K
     out[F_CHARGE_AH] = np.float32(y[11] / (s.bus_voltage_V * SECONDS_PER_HOUR))
-    out[F_SUN] = math.cos(y[12])
-    out[F_SUN + 1] = math.sin(y[12])
-    out[F_SUN + 2] = 0.0
+    out[F_SUN], out[F_SUN + 1], out[F_SUN + 2] = sun_hill(y[12], s.sun_cos_beta, s.sun_sin_beta)
 
 
 @numba.njit(**LEAF)

@@ -12,10 +12,12 @@ angular momentum A(q)^T (J omega - s D psi) is constant (test_gyrostat, docs/gyr
     J omega_dot = -omega x  J omega            + s D u + tau_gg   the paper's model (no wheel momentum)
     tau_gg     = 3 n^2 r x (J r),  r = A(q) [1, 0, 0]             gravity gradient (optional)
     psi_dot    = u
-    theta_S_dot = -n;  r_S = [cos theta_S, sin theta_S, 0] (Hill);  r_E = [-1, 0, 0] (Hill)
+    theta_S_dot = -n;  r_S, r_E: `dynamics.environment` (the sun with its beta angle; nadir)
     T_dot      = (alpha A S max(0, c_S) + (alpha A S A_f + sigma eps A T_E^4) F_E - sigma eps A T^4) / (m c_p)
-                 F_E = F max(0, c_E) (clamped; c_E unclamped if not), c_S, c_E: -j_B face to sun, Earth
-    E_dot      = P_I I_d A_p max(0, c_panel) - P_out               c_panel: +k_B panel to the sun
+                 F_E = F max(0, c_E) (clamped; c_E unclamped if not), c_S, c_E: the face (thermal.face_normal_body,
+                 -j_B in the paper) to sun, Earth
+    E_dot      = P_I I_d A_p max(0, c_panel) - P_out               c_panel: the panel (power.panel_normal_body, +k_B)
+                                                                   to the sun
     CW         : unforced Clohessy-Wiltshire at mean motion n
 
 psi is the paper's "wheel speed" with the paper's sign (psi = -Omega, Omega the wheel's spin rate
@@ -38,6 +40,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from rta_attitude.config.schema import Config
+from rta_attitude.dynamics.environment import EARTH_HILL, sun_hill
 from rta_attitude.dynamics.quaternion import attitude_matrix
 from rta_attitude.dynamics.state import STATE_SIZE
 from rta_attitude.jit import LEAF
@@ -63,6 +66,10 @@ PLANT_DTYPE = np.dtype([
     ("panel_peak_W", np.float64),              # P_I I_d A_p
     ("load_W", np.float64),                    # P_out
     ("wheel_accel_max_rad_s2", np.float64),    # actuator saturation of u
+    ("sun_cos_beta", np.float64),              # the sun's beta angle (`dynamics.environment.sun_hill`)
+    ("sun_sin_beta", np.float64),
+    ("face_normal", np.float64, (3,)),         # the thermal node's face, outward normal, body axes
+    ("panel_normal", np.float64, (3,)),        # the solar panel's normal, body axes
 ])  # fmt: skip
 """The plant's parameters, in model units, as the compiled code reads them."""
 
@@ -97,6 +104,9 @@ def plant_record(cfg: Config, model: str | None = None) -> NDArray[np.void]:
     p["panel_peak_W"] = pw.peak_W
     p["load_W"] = pw.load_W
     p["wheel_accel_max_rad_s2"] = cfg.limits.wheel_accel_max_rad_s2
+    p["sun_cos_beta"], p["sun_sin_beta"] = math.cos(env.sun_beta_rad), math.sin(env.sun_beta_rad)
+    p["face_normal"] = th.face_normal_body
+    p["panel_normal"] = pw.panel_normal_body
     return rec
 
 
@@ -104,14 +114,21 @@ def plant_record(cfg: Config, model: str | None = None) -> NDArray[np.void]:
 
 
 @numba.njit(**LEAF)
-def sun_hill(theta_S_rad: float) -> tuple[float, float]:
-    """(cos, sin) of theta_S: the unit vector to the sun in Hill is [cos, sin, 0] (SPEC sec. 2,
-    [resolved]: the paper prints [cos, cos, 0], not a unit vector)."""
-    return math.cos(theta_S_rad), math.sin(theta_S_rad)
-
-
-EARTH_HILL = (-1.0, 0.0, 0.0)
-"""Unit vector from the spacecraft to the Earth (and the ground station) in Hill: -x (radial in)."""
+def axis_along(e: Array, A: Array, r0: float, r1: float, r2: float) -> float:
+    """e . (A r): the cosine between the body axis e (3,) and the Hill direction r = (r0, r1, r2) for the
+    attitude matrix A (Hill -> body). Terms of a zero component of e or r are skipped (so an axis along a body
+    axis and a target in the orbit plane cost what the paper's formulas do, to the last bit)."""
+    c = 0.0
+    first = True
+    for i in range(3):
+        if e[i] != 0.0:
+            v = A[i, 0] * r0 + A[i, 1] * r1
+            if r2 != 0.0:
+                v += A[i, 2] * r2
+            term = v if e[i] == 1.0 else (-v if e[i] == -1.0 else e[i] * v)
+            c = term if first else c + term
+            first = False
+    return c
 
 
 @numba.njit(**LEAF)
@@ -185,11 +202,10 @@ def derivative(x: Array, u: Array, p: np.void, A: Array, wd: Array, f: Array) ->
     if p.frame_rate_rad_s != 0.0:  # attitude relative to the rotating Hill frame
         nf = p.frame_rate_rad_s
         w1, w2, w3 = w1 - nf * A[0, 2], w2 - nf * A[1, 2], w3 - nf * A[2, 2]
-    cs, sn = sun_hill(x[12])
-    # row 1 (j_B) and row 2 (k_B) of A(q): those body axes in Hill; the thermal face is -j_B (r_E = -x_Hill)
-    cos_sun = -(A[1, 0] * cs + A[1, 1] * sn)
-    cos_earth = A[1, 0]
-    c_panel = A[2, 0] * cs + A[2, 1] * sn
+    sx, sy, sz = sun_hill(x[12], p.sun_cos_beta, p.sun_sin_beta)
+    cos_sun = axis_along(p.face_normal, A, sx, sy, sz)
+    cos_earth = axis_along(p.face_normal, A, EARTH_HILL[0], EARTH_HILL[1], EARTH_HILL[2])
+    c_panel = axis_along(p.panel_normal, A, sx, sy, sz)
     n = p.mean_motion_rad_s
     cg = p.control_gain
     f[0] = 0.5 * (q4 * w1 - q3 * w2 + q2 * w3)
@@ -373,8 +389,8 @@ def integrate(x: Array, u: Array, dt_s: float, p: NDArray[np.void], substeps: in
 
 
 __all__ = [
-    "EARTH_HILL", "PLANT_DTYPE", "RK4_WORK_ROWS", "derivative", "integrate", "net_power", "omega_dot",
+    "PLANT_DTYPE", "RK4_WORK_ROWS", "axis_along", "derivative", "integrate", "net_power", "omega_dot",
     "omega_drift", "plant_record", "positive_part", "rk4_hold", "rk4_work", "saturate", "saturated", "state_derivative",
-    "sun_hill", "thermal_rate",
+    "thermal_rate",
     "torque_round_trip", "torque_to_wheel_accel", "wheel_accel_to_torque",
 ]  # fmt: skip

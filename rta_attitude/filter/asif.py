@@ -25,7 +25,7 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
-from rta_attitude.config.schema import CONSTRAINT_NAMES, DEFAULT_PRIORITIES, Config
+from rta_attitude.config.schema import Config
 from rta_attitude.constraints import ConstraintSet
 from rta_attitude.dynamics.state import STATE_SIZE
 from rta_attitude.errors import SolverError
@@ -45,12 +45,15 @@ log = logging.getLogger(__name__)
 
 STATUS_PASS, STATUS_SOLVED, STATUS_FALLBACK = outcome.STATUS_NAMES
 """The names of a call's status."""
+PER_CONSTRAINT = frozenset({"h", "psi0", "psi1", "bc", "slack", "intervening", "uncontrollable"})
+"""RESULT_DTYPE's fields with one entry per row (MAX_ROWS, of which a configuration uses its n_rows)."""
 
 
 class FilterResult:
     """What filter call(s) did: a view of RESULT_DTYPE record(s), shape () for one state or (N,).
 
-    Array fields follow `names` on their last axis (m) or are per axis of u (3): u (the command sent),
+    Array fields follow `names` (the configuration's constraints, `Config.constraint_names`) on their last axis
+    (m) or are per axis of u (3): u (the command sent),
     u_held (the filter's answer: what the wheels hold over the sample; u but where the drive's lag is
     compensated, `filter.pipeline.drive_command`), u_des, h, psi0,
     psi1, bc (barrier conditions at u, slack not included), slack, intervening (rows active at the
@@ -59,16 +62,17 @@ class FilterResult:
     (what the gatekeeper did: 'off', 'verified', 'backup', 'unverified', 'toward_backup', 'filtered_backup').
     """
 
-    def __init__(self, record: NDArray[np.void], policy: str,
-                 levels: tuple[tuple[str, ...], ...] = DEFAULT_PRIORITIES) -> None:
+    def __init__(self, record: NDArray[np.void], policy: str, levels: tuple[tuple[str, ...], ...],
+                 names: tuple[str, ...]) -> None:
         self.record = record
         self.policy = policy
         self.levels = levels
-        """`filter.priorities` (the names `gave_way` reports)."""
-        self.names: tuple[str, ...] = CONSTRAINT_NAMES
+        """`Config.priority_levels` (the names `gave_way` reports)."""
+        self.names = names
 
     def _field(self, name: str) -> NDArray[np.generic]:
-        return self.record[name]
+        a = self.record[name]
+        return a[..., : len(self.names)] if name in PER_CONSTRAINT else a
 
     u = property(lambda self: self._field("u"))
     u_held = property(lambda self: self._field("u_held"))
@@ -142,7 +146,7 @@ class FilterResult:
 
     def __getitem__(self, k: int) -> FilterResult:
         """Call k of a batch."""
-        return FilterResult(self.record[k], self.policy, self.levels)
+        return FilterResult(self.record[k], self.policy, self.levels, self.names)
 
     def __len__(self) -> int:
         return len(self.record)
@@ -214,7 +218,7 @@ class AsifFilter:
         self.cfg = cfg
         self.record = filter_record(cfg)
         self.constraints = ConstraintSet(cfg)
-        self.names = CONSTRAINT_NAMES
+        self.names = self.constraints.names
         self.u_max = cfg.u_max_rad_s2
         self.options = cfg.filter
         self.enabled = self.constraints.enabled
@@ -225,19 +229,23 @@ class AsifFilter:
         self._out = np.zeros(1, RESULT_DTYPE)
         self._x1 = np.zeros((1, STATE_SIZE))
         self._u1 = np.zeros((1, 3))
+        self._t1 = np.zeros(1)
+        self.levels = cfg.priority_levels
         compile_kernels(cfg)
 
     def reset(self) -> None:
         """Forget the gatekeeper's committed plan (a new run starts; nothing else carries over)."""
         _reset_gate(self._ws)
 
-    def filter(self, x: Array, u_des: Array) -> FilterResult:
+    def filter(self, x: Array, u_des: Array, t_s: float = 0.0) -> FilterResult:
         """Filter one desired command.
 
         Args:
             x: state (19,), model units.
             u_des: desired wheel accelerations (3,), rad/s^2 (non-finite entries are treated as 0 and
                 the call is counted as a fallback).
+            t_s: the time of x, s from the run's start (t = 0 of the scenario): where the configured pointing
+                constraints' windows are (none configured: any time gives the same answer).
 
         Returns:
             FilterResult (one record) with u_act and the per-constraint record.
@@ -252,21 +260,22 @@ class AsifFilter:
             raise ValueError(f"filter takes x ({STATE_SIZE},) and u_des (3,), got {sx} and {su}")
         self._x1[0] = x
         self._u1[0] = u_des
+        self._t1[0] = t_s
         # arrays, not record scalars, cross into compiled code: numba types a record scalar at every
         # call (~28 us), an array of records once per dtype (~1.5 us)
-        filter_many(self._x1, self._u1, self.record, self._ws, self._out)
+        filter_many(self._x1, self._u1, self._t1, self.record, self._ws, self._out)
         # a byte copy: numpy copies a record with array fields field by field, 10 times slower
         rec = np.frombuffer(bytearray(self._out.tobytes()), RESULT_DTYPE).reshape(())
         rec["solve_time_s"] = time.perf_counter() - t0
-        result = FilterResult(rec, self.options.fallback, self.options.priorities)
+        result = FilterResult(rec, self.options.fallback, self.levels, self.names)
         self.counters.add_one(rec)
         if rec["raise_error"]:
             raise SolverError(f"ASIF QP failed ({result.solver_status})")
         return result
 
-    def filter_batch(self, x: Array, u_des: Array) -> FilterResult:
-        """Filter a batch: x (N, 19), u_des (N, 3); every state through the same compiled call as
-        `filter`, so a run inside a batch and a single run compute the same numbers.
+    def filter_batch(self, x: Array, u_des: Array, t_s: float | Array = 0.0) -> FilterResult:
+        """Filter a batch: x (N, 19), u_des (N, 3) at times t_s (s; one for all, or (N,)); every state through
+        the same compiled call as `filter`, so a run inside a batch and a single run compute the same numbers.
 
         Raises:
             SolverError: a QP failed and the fallback policy is 'raise' (the first such state named).
@@ -277,8 +286,9 @@ class AsifFilter:
             raise ValueError(f"filter_batch takes x (N, {STATE_SIZE}) and u_des (N, 3), got {x.shape} and "
                              f"{u_des.shape}")
         out = np.zeros(x.shape[0], RESULT_DTYPE)
-        filter_many(x, u_des, self.record, self._ws, out)
-        result = FilterResult(out, self.options.fallback, self.options.priorities)
+        t = np.ascontiguousarray(np.broadcast_to(np.asarray(t_s, dtype=float), (x.shape[0],)))
+        filter_many(x, u_des, t, self.record, self._ws, out)
+        result = FilterResult(out, self.options.fallback, self.levels, self.names)
         self.counters.add(out)
         if np.any(out["raise_error"]):
             k = int(np.flatnonzero(out["raise_error"])[0])
@@ -307,7 +317,7 @@ def compile_kernels(cfg: Config) -> float:
     x[3], x[10], x[11] = 1.0, 273.15, 5000.0
     rec = filter_record(cfg)
     ws, out = new_workspace(), np.zeros(1, RESULT_DTYPE)
-    filter_many(x[None], np.zeros((1, 3)), rec, ws, out)
+    filter_many(x[None], np.zeros((1, 3)), np.zeros(1), rec, ws, out)
     _reset_gate(ws)
     return time.perf_counter() - t0
 

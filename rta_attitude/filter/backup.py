@@ -45,18 +45,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from rta_attitude.config.schema import BACKUP_LAWS, MAX_BACKUP_SUBSTEPS, MAX_NOMINAL_STEPS, Config
-from rta_attitude.constraints.base import (
-    BATTERY,
-    COMMUNICATION,
-    EXCLUSION_ZONE,
-    N_CONSTRAINTS,
-    OMEGA_X,
-    PSI_X,
-    TEMPERATURE,
-)
+from rta_attitude.constraints.base import MAX_ROWS
 from rta_attitude.constraints.geometry import CONTEXT_DTYPE
 from rta_attitude.constraints.rows import safety_values
 from rta_attitude.constraints.wheel_speed import wheel_speed_error
+from rta_attitude.dynamics.environment import EARTH_HILL, sun_hill
 from rta_attitude.dynamics.quaternion import attitude_matrix, error_vector, from_matrix
 from rta_attitude.dynamics.sensors import (
     ENERGY_RELATIVE_ERROR,
@@ -67,13 +60,11 @@ from rta_attitude.dynamics.sensors import (
     sensors_record,
 )
 from rta_attitude.dynamics.spacecraft import (
-    EARTH_HILL,
     RK4_WORK_ROWS,
     net_power,
     omega_drift,
     rk4_hold,
     saturate,
-    sun_hill,
     torque_round_trip,
 )
 from rta_attitude.dynamics.state import ENERGY, STATE_SIZE, TEMP, THETA_S
@@ -81,7 +72,7 @@ from rta_attitude.filter.outcome import GATE_BACKUP, GATE_OFF, GATE_TOWARD_BACKU
 from rta_attitude.jit import LEAF
 
 Array = NDArray[np.float64]
-M = N_CONSTRAINTS
+M = MAX_ROWS
 
 NO_LAW, SUN_SAFE = (BACKUP_LAWS.index(n) for n in ("none", "sun_safe"))
 """Codes of the backup laws (`filter.backup_law`)."""
@@ -168,6 +159,8 @@ GATE_DTYPE = np.dtype([
     ("weak_x", np.float64, (STATE_SIZE,)),
     ("first_x", np.float64, (STATE_SIZE,)),  # the last rollout's state after its first sample
     ("x0", np.float64, (STATE_SIZE,)),   # the state the call's rollouts start from
+    ("t_call", np.float64),              # the call's time, s from the run's start: where its rollouts start
+    ("t", np.float64),                   # the rollout's clock at its sample's start (`hold_sample`)
     ("reused", np.int64),                # calls answered from a committed plan without a rollout (since reset)
     ("checked", np.int64),               # substeps the last rollout checked
     ("x", np.float64, (STATE_SIZE,)),    # the rollout's state at the samples
@@ -252,10 +245,11 @@ def _wheel_load(T: Array, Hh: Array, p: np.void, b: np.void, share: float = 1.0)
 
 
 @numba.njit(**LEAF)
-def _sun_across(hx: float, hy: float, hz: float, cs: float, sn: float, sh: float) -> tuple[float, float, float]:
-    """The unit part of r_S = (cs, sn, 0) perpendicular to the unit vector h (sh = h . r_S); where r_S
+def _sun_across(hx: float, hy: float, hz: float, sx: float, sy: float, sz: float, sh: float
+                ) -> tuple[float, float, float]:
+    """The unit part of r_S = (sx, sy, sz) perpendicular to the unit vector h (sh = h . r_S); where r_S
     lies along h, a direction perpendicular to h."""
-    ox, oy, oz = cs - sh * hx, sn - sh * hy, -sh * hz
+    ox, oy, oz = sx - sh * hx, sy - sh * hy, sz - sh * hz
     on = math.sqrt(ox * ox + oy * oy + oz * oz)
     if on < 1e-9:  # h along the sun: any perpendicular direction
         ox, oy, oz, on = -hy, hx, 0.0, math.sqrt(hx * hx + hy * hy)
@@ -392,13 +386,13 @@ def energy_reserve(x: Array, p: np.void, c: np.void, b: np.void, g: np.void) -> 
     if not hn > 0.0:
         return True
     E = x[ENERGY]
-    floor = c.energy_min_J + rollout_margin(b, g, BATTERY)  # the floor of the rollout it ends
+    floor = c.energy_min_J + rollout_margin(b, g, c.row_battery)  # the floor of the rollout it ends
     dt = b.reserve_step_s
     for k in range(b.reserve_steps):
         t = (k + 0.5) * dt
-        cs, sn = sun_hill(x[THETA_S] - p.mean_motion_rad_s * t)
+        sx, sy, sz = sun_hill(x[THETA_S] - p.mean_motion_rad_s * t, p.sun_cos_beta, p.sun_sin_beta)
         cf, sf = math.cos(p.frame_rate_rad_s * t), math.sin(p.frame_rate_rad_s * t)
-        ca = ((cf * hx + sf * hy) * cs + (cf * hy - sf * hx) * sn) / hn  # H turned by -frame_rate t
+        ca = ((cf * hx + sf * hy) * sx + (cf * hy - sf * hx) * sy + hz * sz) / hn  # H turned by -frame_rate t
         cb = _tilt(hn, ca, Hb2, p, b)
         if cb > 1.0:
             cos_phi = 1.0
@@ -413,10 +407,10 @@ def energy_reserve(x: Array, p: np.void, c: np.void, b: np.void, g: np.void) -> 
 
 
 @numba.njit(**LEAF)
-def _tilted_target(cs: float, sn: float, hb0: float, hb1: float, hb2: float, share: float, p: np.void,
+def _tilted_target(sx: float, sy: float, sz: float, hb0: float, hb1: float, hb2: float, share: float, p: np.void,
                    b: np.void, g: np.void) -> bool:
     """Write into g.target the sun-safe attitude tilted off the sun just enough for the wheels to hold
-    the momentum g.Hh (Hill): the panel k_B as near r_S = (cs, sn, 0) as the wheels allow.
+    the momentum g.Hh (Hill): the panel k_B as near r_S = (sx, sy, sz) as the wheels allow.
 
     With the panel at angle beta from H the panel-axis wheel holds |H| cos beta: it can (at rest, with
     the rate margin of `_wheel_load` and TILT_WHEEL_MARGIN) while |cos beta| <= cos a. i_B and j_B
@@ -437,14 +431,14 @@ def _tilted_target(cs: float, sn: float, hb0: float, hb1: float, hb2: float, sha
     if not hn > 0.0:
         return False
     hx, hy, hz = Hh[0] / hn, Hh[1] / hn, Hh[2] / hn
-    ca = hx * cs + hy * sn
+    ca = hx * sx + hy * sy + hz * sz
     cb = _tilt(hn, ca, hb2, p, b, share, g.law == CROSS)
     if not abs(cb) <= 1.0:  # no tilt needed, or none the wheels can hold
         return False
     sb = math.sqrt(max(0.0, 1.0 - cb * cb))
     c1, c2, _ = _wheel_caps(p, b, share)
     c12 = math.sqrt(c1 * c1 + c2 * c2)
-    ox, oy, oz = _sun_across(hx, hy, hz, cs, sn, ca)
+    ox, oy, oz = _sun_across(hx, hy, hz, sx, sy, sz, ca)
     kx, ky, kz = cb * hx + sb * ox, cb * hy + sb * oy, cb * hz + sb * oz
     px, py, pz = (hx - cb * kx) / sb, (hy - cb * ky) / sb, (hz - cb * kz) / sb  # H's part perpendicular to k
     mx, my, mz = ky * pz - kz * py, kz * px - kx * pz, kx * py - ky * px  # k x p
@@ -456,7 +450,7 @@ def _tilted_target(cs: float, sn: float, hb0: float, hb1: float, hb2: float, sha
         ix, iy, iz = sa * r1 * px + sg * r2 * mx, sa * r1 * py + sg * r2 * my, sa * r1 * pz + sg * r2 * mz
         jx, jy, jz = ky * iz - kz * iy, kz * ix - kx * iz, kx * iy - ky * ix  # j = k x i
         score = jx * ex + jy * ey + jz * ez
-        if jx * cs + jy * sn < -1e-12:  # the radiator would see the sun
+        if jx * sx + jy * sy + jz * sz < -1e-12:  # the radiator would see the sun
             score -= 10.0
         if sa * hb0 >= 0.0 and -sg * hb1 >= 0.0:  # H . i = sa r1 |H_perp|, H . j = -sg r2 |H_perp|
             score += 20.0
@@ -492,19 +486,19 @@ def sun_safe_error(x: Array, p: np.void, b: np.void, g: np.void) -> float:
     variant tilts as above with only SETTLED_RATE_FRACTION w_max of the rates' momentum kept in the wheels
     (`_rate_share`); the CROSS variant as TIGHT, but with the panel on the sun's side of H where the corridor
     across the i_B-j_B plane is narrow, H_body taken through the corridor's middle first (`_cross`)."""
-    cs, sn = sun_hill(x[12])
+    sx, sy, sz = sun_hill(x[THETA_S], p.sun_cos_beta, p.sun_sin_beta)
     T = g.target
     Hb0, Hb1, Hb2 = _momentum(x, p, g)
     ex, ey, ez = EARTH_HILL
-    d = ex * cs + ey * sn
-    jx, jy, jz = ex - d * cs, ey - d * sn, ez
+    d = ex * sx + ey * sy + ez * sz
+    jx, jy, jz = ex - d * sx, ey - d * sy, ez - d * sz
     n = math.sqrt(jx * jx + jy * jy + jz * jz)
     if n < 1e-6:  # conjunction: z_Hill x r_S
-        jx, jy, jz, n = -sn, cs, 0.0, 1.0
+        jx, jy, jz, n = -sy, sx, 0.0, math.sqrt(sx * sx + sy * sy) if sz != 0.0 else 1.0
     jx, jy, jz = jx / n, jy / n, jz / n
     T[1, 0], T[1, 1], T[1, 2] = jx, jy, jz
-    T[2, 0], T[2, 1], T[2, 2] = cs, sn, 0.0
-    T[0, 0], T[0, 1], T[0, 2] = jy * 0.0 - jz * sn, jz * cs - jx * 0.0, jx * sn - jy * cs  # j x k
+    T[2, 0], T[2, 1], T[2, 2] = sx, sy, sz
+    T[0, 0], T[0, 1], T[0, 2] = jy * sz - jz * sy, jz * sx - jx * sz, jx * sy - jy * sx  # j x k
     if g.law == EARTH_SIDE:  # the Earth-side target as it is (used with a large momentum: no terminal set)
         g.momentum_mode = 3
         return _error_to(x, g)
@@ -514,30 +508,30 @@ def sun_safe_error(x: Array, p: np.void, b: np.void, g: np.void) -> float:
     rolled = large or _wheel_load(T, g.Hh, p, b) > 0.0
     if rolled:
         Hh = g.Hh
-        hk = Hh[0] * cs + Hh[1] * sn
-        px, py, pz = Hh[0] - hk * cs, Hh[1] - hk * sn, Hh[2]
+        hk = Hh[0] * sx + Hh[1] * sy + Hh[2] * sz
+        px, py, pz = Hh[0] - hk * sx, Hh[1] - hk * sy, Hh[2] - hk * sz
         hp = math.sqrt(px * px + py * py + pz * pz)
         if hp > 0.0:
             px, py, pz = px / hp, py / hp, pz / hp
-            mx, my, mz = sn * pz, -cs * pz, cs * py - sn * px  # k x h
+            mx, my, mz = sy * pz - sz * py, sz * px - sx * pz, sx * py - sy * px  # k x h
             best = -np.inf
             ux = uy = uz = 0.0
             r = 1.0 / math.sqrt(2.0)
             for sa, sb in ((1.0, 1.0), (1.0, -1.0), (-1.0, 1.0), (-1.0, -1.0)):
                 ix, iy, iz = r * (sa * px + sb * mx), r * (sa * py + sb * my), r * (sa * pz + sb * mz)
                 # j = k x i
-                cx, cy, cz = sn * iz, -cs * iz, cs * iy - sn * ix
+                cx, cy, cz = sy * iz - sz * iy, sz * ix - sx * iz, sx * iy - sy * ix
                 e = cx * ex + cy * ey + cz * ez
                 if sa * Hb0 >= 0.0 and -sb * Hb1 >= 0.0:  # H stays in its quadrant of (i_B, j_B) on the way
                     e += 20.0
                 if e > best:
                     best, ux, uy, uz = e, ix, iy, iz
             T[0, 0], T[0, 1], T[0, 2] = ux, uy, uz
-            T[1, 0], T[1, 1], T[1, 2] = sn * uz, -cs * uz, cs * uy - sn * ux
+            T[1, 0], T[1, 1], T[1, 2] = sy * uz - sz * uy, sz * ux - sx * uz, sx * uy - sy * ux
     share = _rate_share(g)
     g.load = _wheel_load(T, g.Hh, p, b, share)
     tilted = False
-    if (large or g.load > 0.0) and g.law != MOMENTUM and _tilted_target(cs, sn, Hb0, Hb1, Hb2, share, p, b, g):
+    if (large or g.load > 0.0) and g.law != MOMENTUM and _tilted_target(sx, sy, sz, Hb0, Hb1, Hb2, share, p, b, g):
         tilted = True
         g.load = _wheel_load(T, g.Hh, p, b, share)
     g.momentum_mode = 1 if (g.law == MOMENTUM or g.load > 0.0) else (2 if tilted else 0)
@@ -553,7 +547,7 @@ def sun_safe_error(x: Array, p: np.void, b: np.void, g: np.void) -> float:
             dq4 = _h_first(b0, b1, b2, d0, d1, d2, b, g)  # first stage: H_body straight to d
             if dq4 >= 0.0:
                 return dq4
-            ox, oy, oz = _sun_across(hx, hy, hz, cs, sn, hx * cs + hy * sn)
+            ox, oy, oz = _sun_across(hx, hy, hz, sx, sy, sz, hx * sx + hy * sy + hz * sz)
             ck = math.sqrt(1.0 - d2 * d2)
             kx, ky, kz = d2 * hx + ck * ox, d2 * hy + ck * oy, d2 * hz + ck * oz  # k . h = d2
             vx, vy, vz = hx - d2 * kx, hy - d2 * ky, hz - d2 * kz  # = d0 i + d1 j, |v| = ck
@@ -671,15 +665,15 @@ def check_margins(p: np.void, c: np.void, out: Array) -> None:
     again. Angles: the attitude error (err_att, with the actuator's drift over a hold); T and E: their
     errors; a rate (or wheel speed) with error e: w_max^2 - (|w| + e)^2 >= 0 needs h >= 2 w_max e + e^2,
     e = the gyro's (tachometer's) error plus the actuator's (|G_a| err_u,a dt; err_u,a dt)."""
-    out[EXCLUSION_ZONE] = c.err_att_rad
-    out[COMMUNICATION] = c.err_att_rad
-    out[TEMPERATURE] = c.err_T_K
-    out[BATTERY] = c.err_E_J
+    for j in range(c.n_cones):
+        out[j] = c.err_att_rad
+    out[c.row_temperature] = c.err_T_K
+    out[c.row_battery] = c.err_E_J
     for a in range(3):
         e = c.err_omega_axis_rad_s + abs(p.control_gain[a]) * c.err_u_rad_s2[a] * c.dt_s
-        out[OMEGA_X + a] = 2.0 * c.omega_max_rad_s * e + e * e
+        out[c.row_omega + a] = 2.0 * c.omega_max_rad_s * e + e * e
         e = wheel_speed_error(c, a)
-        out[PSI_X + a] = 2.0 * c.psi_max_rad_s * e + e * e
+        out[c.row_psi + a] = 2.0 * c.psi_max_rad_s * e + e * e
 
 
 @numba.njit(**LEAF)
@@ -692,12 +686,12 @@ def rollout_margin(b: np.void, g: np.void, i: int) -> float:
 
 @numba.njit(**LEAF)
 def hold_sample(u: Array, f: np.void, g: np.void, traj: Array, record: bool) -> bool:
-    """One sample of a rollout from g.x (19,): u (3,) held (across the torque interface, saturated, as the
-    loop applies it), `substeps` RK4 steps of the filter's model, every enabled, non-slacked constraint
-    checked at each substep (h >= b.margin, `check_margins`: 0 without sensor errors; b.candidate_margin where
-    g.candidate; NaN fails). g.x becomes
-    the state at the sample's end; g.checked counts the substeps (with record, their states go to traj).
-    Returns False at the first violation."""
+    """One sample of a rollout from g.x (19,) at time g.t: u (3,) held (across the torque interface, saturated,
+    as the loop applies it), `substeps` RK4 steps of the filter's model, every enabled, non-slacked constraint
+    checked at each substep at its time (h >= b.margin, `check_margins`: 0 without sensor errors;
+    b.candidate_margin where g.candidate; NaN fails). g.x becomes the state at the sample's end and g.t its
+    time; g.checked counts the substeps (with record, their states go to traj). Returns False at the first
+    violation."""
     p, c, b = f.plant, f.constraints, f.backup
     S = b.substeps
     subs = g.subs[:S]
@@ -710,13 +704,14 @@ def hold_sample(u: Array, f: np.void, g: np.void, traj: Array, record: bool) -> 
             for i in range(STATE_SIZE):
                 traj[g.checked, i] = subs[j, i]
         g.checked += 1
-        safety_values(subs[j], p, c, g.ctx, g.h)
-        for i in range(M):
+        safety_values(subs[j], g.t + c.dt_s * (j + 1) / S, p, c, g.ctx, g.h)
+        for i in range(c.n_rows):
             gi = c.gains[i]
             if gi.enabled != 0 and gi.slack_weight == 0.0 and not g.h[i] >= rollout_margin(b, g, i):
                 return False
     for i in range(STATE_SIZE):
         x[i] = subs[S - 1, i]
+    g.t += c.dt_s
     return True
 
 
@@ -747,6 +742,7 @@ def rollout(x0: Array, u0: Array, f: np.void, g: np.void, traj: Array, record: b
     for a in range(3):
         g.u[a] = u0[a]
     g.checked = 0
+    g.t = g.t_call
     if not hold_sample(g.u, f, g, traj, record):
         return FAILED
     for i in range(STATE_SIZE):
@@ -1012,18 +1008,20 @@ def apply_measurement_margins(rec: NDArray[np.void], cfg: Config) -> None:
     tachometer's and the actuator's over a hold, as in `check_margins`): a plan that parks a wheel at
     psi_limit leaves the next reading above it half the time, and from there no rollout passes
     (docs/backup.md, "The wheels within their checked speed")."""
-    m = np.empty(M)
+    m = np.zeros(M)
     _margins_of(rec, m)
     b = rec["backup"]
     b["margin"][0] = m
     c = rec["constraints"][0]
     extra = np.zeros(M)  # two readings' errors: the candidate's (above the truth) and the next (below it)
-    extra[EXCLUSION_ZONE] = 2.0 * float(c["err_att_rad"])
-    extra[TEMPERATURE] = 2.0 * float(c["err_T_K"])
-    extra[BATTERY] = 2.0 * max(0.0, float(c["err_E_J"]) - (interface_energy_error(cfg) if c["robust"] else 0.0))
+    extra[: int(c["n_cones"])] = 2.0 * float(c["err_att_rad"])
+    extra[int(c["row_temperature"])] = 2.0 * float(c["err_T_K"])
+    extra[int(c["row_battery"])] = 2.0 * max(0.0, float(c["err_E_J"]) - (interface_energy_error(cfg) if c["robust"]
+                                                                         else 0.0))
     b["candidate_margin"][0] = m + extra
     w_max, psi_max = float(b["omega_max_rad_s"][0]), float(b["psi_max_rad_s"][0])
-    rate_margin, speed_margin = float(np.max(m[OMEGA_X:OMEGA_X + 3])), float(np.max(m[PSI_X:PSI_X + 3]))
+    omega_x, psi_x = int(c["row_omega"]), int(c["row_psi"])
+    rate_margin, speed_margin = float(np.max(m[omega_x:omega_x + 3])), float(np.max(m[psi_x:psi_x + 3]))
     if rate_margin > 0.0:
         w_left = math.sqrt(max(0.0, w_max * w_max - rate_margin))
         b["rate_limit_rad_s"] = min(float(b["rate_limit_rad_s"][0]), RATE_LIMIT_FRACTION * w_left)
@@ -1072,9 +1070,9 @@ def is_settled(x: Array, f: NDArray[np.void], variant: str = "sun_safe") -> bool
 
 
 def backup_rollout(x: Array, u0: Array, f: NDArray[np.void], variant: str = "sun_safe",
-                   candidate: bool = False) -> tuple[str, Array]:
-    """`rollout` of candidate u0 (3,) at state x (19,) with filter record f (1,) and a variant of the
-    backup law (VARIANTS); candidate: it checks a candidate's margins (b.candidate_margin), as `verify` does
+                   candidate: bool = False, t_s: float = 0.0) -> tuple[str, Array]:
+    """`rollout` of candidate u0 (3,) at state x (19,) and time t_s with filter record f (1,) and a variant of
+    the backup law (VARIANTS); candidate: it checks a candidate's margins (b.candidate_margin), as `verify` does
     for the filter's answer.
 
     Returns:
@@ -1085,6 +1083,7 @@ def backup_rollout(x: Array, u0: Array, f: NDArray[np.void], variant: str = "sun
     traj = np.empty(((int(b["horizon_steps"]) + 1) * int(b["substeps"]), STATE_SIZE))
     g = _scratch(variant)
     g[0]["candidate"] = candidate
+    g[0]["t_call"] = t_s
     found = _rollout(np.ascontiguousarray(x, dtype=float), np.ascontiguousarray(u0, dtype=float), f, g, traj)
     return ("failed", "horizon", "settled")[found], traj[:int(g[0]["checked"])]
 

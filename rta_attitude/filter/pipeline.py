@@ -31,18 +31,17 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
-from rta_attitude.config.schema import CONSTRAINT_NAMES, MAX_NOMINAL_STEPS, Config
+from rta_attitude.config.schema import MAX_NOMINAL_STEPS, Config
 from rta_attitude.constraints.base import (
     CONSTRAINT_DTYPE,
-    N_CONSTRAINTS,
-    OMEGA_X,
+    MAX_ROWS,
     TABLE_DTYPE,
     ZOH_ROWS,
     constraint_record,
     drive_lag,
-    group_of,
 )
 from rta_attitude.constraints.geometry import CONTEXT_DTYPE
+from rta_attitude.constraints.registry import levels
 from rta_attitude.constraints.rows import rows
 from rta_attitude.dynamics.spacecraft import PLANT_DTYPE, plant_record
 from rta_attitude.dynamics.state import STATE_SIZE
@@ -98,7 +97,8 @@ from rta_attitude.filter.outcome import (
 from rta_attitude.jit import JIT, LEAF
 
 Array = NDArray[np.float64]
-M = N_CONSTRAINTS
+M = MAX_ROWS
+"""Rows of every per-constraint array (the capacity); a call uses the configuration's n_rows of them."""
 
 BIG = active_set.BIG
 """Stand-in for an infinite bound (proxsuite's convention)."""
@@ -198,18 +198,11 @@ def filter_record(cfg: Config) -> NDArray[np.void]:
     f["eps_abs"], f["eps_primal_inf"], f["eps_dual_inf"] = o.eps_abs, o.eps_primal_inf, o.eps_dual_inf
     f["max_iterations"], f["max_inner_iterations"] = o.max_iterations, o.max_inner_iterations
     f["backup"] = backup_record(cfg)[0]
-    f["level"] = constraint_levels(cfg.filter.priorities)
-    f["n_levels"] = len(cfg.filter.priorities)
+    f["level"][: len(cfg.constraint_names)] = levels(cfg)
+    f["n_levels"] = len(cfg.priority_levels)
     f["lag_gain"], f["lag_decay"] = drive_lag(cfg)
     apply_measurement_margins(rec, cfg)  # the backup law inside its rollouts' margins (sensor errors on)
     return rec
-
-
-def constraint_levels(priorities: tuple[tuple[str, ...], ...]) -> NDArray[np.int64]:
-    """The priority level (M,) of each constraint (CONSTRAINT_NAMES) from `filter.priorities` (levels of
-    BARRIER_GROUPS: omega and psi stand for their three axes)."""
-    level_of = {g: k for k, level in enumerate(priorities) for g in level}
-    return np.array([level_of[group_of(n)] for n in CONSTRAINT_NAMES], dtype=np.int64)
 
 
 def new_workspace() -> NDArray[np.void]:
@@ -221,11 +214,12 @@ def new_workspace() -> NDArray[np.void]:
 
 
 @numba.njit(**LEAF)
-def prepare(x_in: Array, u_des: Array, f: np.void, ws: np.void, r: np.void) -> tuple[bool, bool, bool]:
-    """Validity, rows, box and the fast-path test of one state. Returns (valid, u_des finite, QP needed).
-    For an invalid state the rows are zero and the box is U."""
+def prepare(x_in: Array, u_des: Array, t_s: float, f: np.void, ws: np.void, r: np.void) -> tuple[bool, bool, bool]:
+    """Validity, rows, box and the fast-path test of one state at time t_s. Returns (valid, u_des finite, QP
+    needed). For an invalid state the rows are zero and the box is U."""
     x, t = ws.x, ws.table
     c = f.constraints
+    n = c.n_rows
     valid = True
     for i in range(STATE_SIZE):
         x[i] = x_in[i]
@@ -242,8 +236,8 @@ def prepare(x_in: Array, u_des: Array, f: np.void, ws: np.void, r: np.void) -> t
             x[i] = 0.0
         x[3] = 1.0
         x[10] = 273.15
-    rows(x, f.plant, c, ws.ctx, t, ws.lo0, ws.hi0)
-    for i in range(M):
+    rows(x, t_s, f.plant, c, ws.ctx, t, ws.lo0, ws.hi0)
+    for i in range(n):
         if not math.isfinite(t.drift[i]):
             valid = False
         for a in range(3):
@@ -261,7 +255,7 @@ def prepare(x_in: Array, u_des: Array, f: np.void, ws: np.void, r: np.void) -> t
             ws.u_target[a] = 0.0
             finite_des = False
     if not valid:
-        for i in range(M):
+        for i in range(n):
             t.drift[i] = 0.0
             ws.gnorm[i] = 0.0
             r.uncontrollable[i] = 0
@@ -274,7 +268,7 @@ def prepare(x_in: Array, u_des: Array, f: np.void, ws: np.void, r: np.void) -> t
         return False, finite_des, False
     need = not finite_des
     tol = f.check_tolerance
-    for i in range(M):
+    for i in range(n):
         g0, g1, g2 = t.gain[i, 0], t.gain[i, 1], t.gain[i, 2]
         ws.gnorm[i] = math.sqrt(g0 * g0 + g1 * g1 + g2 * g2)
         on = c.gains[i].enabled != 0
@@ -303,7 +297,7 @@ def row_modes(f: np.void, soften: bool, mode: NDArray[np.int8]) -> None:
     """The modes (M,) of the filter's QP (soften False: slacked where a slack weight is configured, else
     hard) or of the soften fallback's (every enabled constraint slacked)."""
     g = f.constraints.gains
-    for i in range(M):
+    for i in range(f.constraints.n_rows):
         if not g[i].enabled:
             mode[i] = OFF
         elif soften or g[i].slack_weight > 0:
@@ -329,16 +323,17 @@ def assemble(f: np.void, ws: np.void, mode: NDArray[np.int8], relax: Array
     """
     t = ws.table
     g = f.constraints.gains
+    n_rows, omega_x = f.constraints.n_rows, f.constraints.row_omega
     r = 0
     ns = 0
-    for i in range(M):
+    for i in range(n_rows):
         if g[i].enabled and mode[i] != OFF and ws.gnorm[i] > MIN_ROW_NORM:
             r += 1
             if mode[i] >= SLACKED:
                 ns += 1
     nz = 0
     for q in range(t.zoh_rows):
-        mq = mode[OMEGA_X + t.zoh_axis[q]]
+        mq = mode[omega_x + t.zoh_axis[q]]
         if mq != OFF:
             nz += 1
             if mq >= SLACKED:
@@ -353,7 +348,7 @@ def assemble(f: np.void, ws: np.void, mode: NDArray[np.int8], relax: Array
     scale = np.zeros(n)
     k = 0
     v = 3
-    for i in range(M):
+    for i in range(n_rows):
         if not (g[i].enabled and mode[i] != OFF and ws.gnorm[i] > MIN_ROW_NORM):
             continue
         row_of[k] = i
@@ -377,10 +372,10 @@ def assemble(f: np.void, ws: np.void, mode: NDArray[np.int8], relax: Array
         lower[k] = -t.drift[i] / norm if relax[i] <= 0.0 else (-t.drift[i] - relax[i]) / norm
         k += 1
     for q in range(t.zoh_rows):
-        mq = mode[OMEGA_X + t.zoh_axis[q]]
+        mq = mode[omega_x + t.zoh_axis[q]]
         if mq == OFF:
             continue
-        row_of[k] = OMEGA_X + t.zoh_axis[q]
+        row_of[k] = omega_x + t.zoh_axis[q]
         for a in range(3):
             C[k, a] = t.zoh_gain[q, a]
         if mq >= SLACKED:
@@ -445,10 +440,11 @@ def extract(z: Array, mult: Array, row_of: NDArray[np.int64], slack_var: NDArray
 
 
 @numba.njit(**LEAF)
-def finish(ws: np.void, r: np.void) -> None:
-    """BC_i at the final u (slack not included), the box flags, and the table copied into the result."""
+def finish(n: int, ws: np.void, r: np.void) -> None:
+    """BC_i at the final u (slack not included) of the n rows, the box flags, and the table copied into the
+    result."""
     t = ws.table
-    for i in range(M):
+    for i in range(n):
         r.bc[i] = t.drift[i] + (t.gain[i, 0] * r.u[0] + t.gain[i, 1] * r.u[1] + t.gain[i, 2] * r.u[2])
         r.h[i], r.psi0[i], r.psi1[i] = t.h[i], t.psi0[i], t.psi1[i]
     for a in range(3):
@@ -496,6 +492,7 @@ def prioritize(f: np.void, ws: np.void, r: np.void
     Returns (ok, z, mult, row_of, slack_var, scale, relax) of the last QP (or of the last level's QP if
     the last one failed: its u meets every row as relaxed)."""
     g = f.constraints.gains
+    n, omega_x = f.constraints.n_rows, f.constraints.row_omega
     t = ws.table
     mode = np.zeros(M, dtype=np.int8)
     relax = np.zeros(M + ZOH_ROWS)
@@ -508,7 +505,7 @@ def prioritize(f: np.void, ws: np.void, r: np.void
     scale = np.zeros(3)
     for lev in range(f.n_levels):
         rows_here = False
-        for i in range(M):
+        for i in range(n):
             if not g[i].enabled or g[i].slack_weight > 0 or f.level[i] > lev:
                 mode[i] = OFF
             elif f.level[i] == lev:
@@ -517,7 +514,7 @@ def prioritize(f: np.void, ws: np.void, r: np.void
             else:
                 mode[i] = HARD
         for q in range(t.zoh_rows):
-            if f.level[OMEGA_X + t.zoh_axis[q]] == lev and g[OMEGA_X + t.zoh_axis[q]].enabled:
+            if f.level[omega_x + t.zoh_axis[q]] == lev and g[omega_x + t.zoh_axis[q]].enabled:
                 rows_here = True
         if not rows_here:
             continue
@@ -528,25 +525,25 @@ def prioritize(f: np.void, ws: np.void, r: np.void
         for a in range(3):
             u[a] = min(max(zl[a], t.lo[a]), t.hi[a])
         z, mult, row_of, slack_var, scale, have = zl, ml, ro, sv, sc, True
-        for i in range(M):
+        for i in range(n):
             if mode[i] == DISTANCE and ws.gnorm[i] > MIN_ROW_NORM:
                 v = _violation(ws, u, i)
                 if v > 0.0:  # (+ the solver's tolerance, a distance in u as the rows are normalised)
                     relax[i] = v + f.check_tolerance * ws.gnorm[i]
         for q in range(t.zoh_rows):
-            if mode[OMEGA_X + t.zoh_axis[q]] == DISTANCE:
+            if mode[omega_x + t.zoh_axis[q]] == DISTANCE:
                 v = _zoh_violation(ws, u, q)
                 if v > 0.0:
                     relax[M + q] = v + f.check_tolerance * _zoh_norm(t, q)
     # the most important level with a row that misses by more than the solver's tolerance (as a distance)
     tol2 = 2.0 * f.check_tolerance
     top = f.n_levels
-    for i in range(M):
+    for i in range(n):
         if relax[i] > tol2 * ws.gnorm[i]:
             top = min(top, f.level[i])
     for q in range(t.zoh_rows):
         if relax[M + q] > tol2 * _zoh_norm(t, q):
-            top = min(top, f.level[OMEGA_X + t.zoh_axis[q]])
+            top = min(top, f.level[omega_x + t.zoh_axis[q]])
     r.gave_way = top if top < f.n_levels else NO_LEVEL
     row_modes(f, False, mode)
     C, lower, upper, z0, ro, sv, sc = assemble(f, ws, mode, relax)
@@ -561,12 +558,13 @@ def prioritize(f: np.void, ws: np.void, r: np.void
 
 
 @numba.njit(**JIT)
-def answer(x: Array, u_des: Array, f: np.void, ws: np.void, r: np.void) -> bool:
-    """The ASIF's answer r.u at state x (19,) for the desired wheel accelerations u_des (3,): every step of
-    the call but the gate and finish (a pure function of x and u_des: ws is scratch). Returns False for an
-    invalid state, answered (u = 0) and finished here."""
+def answer(x: Array, u_des: Array, t_s: float, f: np.void, ws: np.void, r: np.void) -> bool:
+    """The ASIF's answer r.u at state x (19,) and time t_s (s from the run's start: the cones' windows) for the
+    desired wheel accelerations u_des (3,): every step of the call but the gate and finish (a pure function of
+    x, u_des and t_s: ws is scratch). Returns False for an invalid state, answered (u = 0) and finished here."""
     t = ws.table
-    for i in range(M):
+    n = f.constraints.n_rows
+    for i in range(n):
         r.slack[i] = 0.0
         r.intervening[i] = 0
     r.solver = f.solver
@@ -576,13 +574,13 @@ def answer(x: Array, u_des: Array, f: np.void, ws: np.void, r: np.void) -> bool:
     r.solves = 0
     r.gate = GATE_OFF
     r.gave_way = NO_LEVEL
-    valid, finite_des, need = prepare(x, u_des, f, ws, r)
+    valid, finite_des, need = prepare(x, u_des, t_s, f, ws, r)
     if not valid:
         # no barrier can be trusted: the wheels hold their speed (u = 0), keeping the body rates
         r.u[0] = r.u[1] = r.u[2] = 0.0
         r.status, r.fallback = FALLBACK, INVALID_STATE
-        finish(ws, r)
-        for i in range(M):
+        finish(n, ws, r)
+        for i in range(n):
             r.h[i] = r.psi0[i] = r.psi1[i] = r.bc[i] = np.nan
         return False
     for a in range(3):
@@ -617,11 +615,11 @@ def answer(x: Array, u_des: Array, f: np.void, ws: np.void, r: np.void) -> bool:
     if ok:
         extract(z, mult, row_of, slack_var, scale, ws, r)
         if f.policy == PRIORITIZE and r.qp_failed:
-            for i in range(M):  # how far each row gave way (a relaxed row has no slack variable)
+            for i in range(n):  # how far each row gave way (a relaxed row has no slack variable)
                 if relax[i] > 0.0:
                     r.slack[i] = relax[i]
             for q in range(t.zoh_rows):
-                i = OMEGA_X + t.zoh_axis[q]
+                i = f.constraints.row_omega + t.zoh_axis[q]
                 r.slack[i] = max(r.slack[i], relax[M + q])
     r.fallback = reason
     r.status = FALLBACK if reason != NO_FALLBACK else SOLVED
@@ -645,6 +643,7 @@ def plan_nominal(x: Array, u: Array, u_des: Array, N: int, f: np.void, wsa: NDAr
     for i in range(STATE_SIZE):
         g.x[i] = x[i]
     g.checked = 0
+    g.t = g.t_call
     g.candidate = 1  # the filter's own answers: a candidate's margins
     for j in range(N):
         if j == 0:
@@ -654,7 +653,7 @@ def plan_nominal(x: Array, u: Array, u_des: Array, N: int, f: np.void, wsa: NDAr
                 g.plan_u[0, a] = u[a]
         else:  # the filter's answer to the predicted state as it will receive it
             predict(g.x, b, g, g.plan_x[j])
-            if not answer(g.plan_x[j], u_des, f, inner, inner.result):
+            if not answer(g.plan_x[j], u_des, g.t, f, inner, inner.result):
                 return False
             for a in range(3):
                 g.plan_u[j, a] = inner.result.u[a]
@@ -684,6 +683,7 @@ def _filtered_rollout(x: Array, law: int, n: int, f: np.void, wsa: NDArray[np.vo
     g.law = law
     g.candidate = 0
     g.checked = 0
+    g.t = g.t_call
     for i in range(STATE_SIZE):
         g.x[i] = x[i]
     for j in range(b.horizon_steps + 1):
@@ -695,7 +695,7 @@ def _filtered_rollout(x: Array, law: int, n: int, f: np.void, wsa: NDArray[np.vo
         else:
             predict(g.x, b, g, xr)
         sun_safe_command(xr, p, f.constraints, b, g, ul)
-        if not answer(xr, ul, f, inner, inner.result):
+        if not answer(xr, ul, g.t, f, inner, inner.result):
             return FAILED, min(j, n)
         if j < n:
             for i in range(STATE_SIZE):
@@ -768,9 +768,10 @@ from the normalised state otherwise."""
 
 
 @numba.njit(**JIT)
-def gate_call(x: Array, u_des: Array, f: np.void, wsa: NDArray[np.void], r: np.void) -> int:
-    """The gatekeeper at the state x (19,) as received with the filter's answer r.u (replaced in place by
-    the command to apply); returns its GATE_NAMES code. In order:
+def gate_call(x: Array, u_des: Array, t_s: float, f: np.void, wsa: NDArray[np.void], r: np.void) -> int:
+    """The gatekeeper at the state x (19,) as received at time t_s with the filter's answer r.u (replaced in
+    place by the command to apply); returns its GATE_NAMES code. Its rollouts start at t_s (g.t_call): a cone's
+    windows apply at the times they reach. In order:
 
     - on a committed nominal plan (x and r.u are the state and answer it predicted for this sample:
       `backup.predicted`, `backup.same_answer`, bit for bit but for the interface's roundings) -> apply the
@@ -789,6 +790,7 @@ def gate_call(x: Array, u_des: Array, f: np.void, wsa: NDArray[np.void], r: np.v
         return GATE_OFF
     ws = wsa[0]
     g = ws.gate
+    g.t_call = t_s
     n2 = x[0] * x[0] + x[1] * x[1] + x[2] * x[2] + x[3] * x[3]
     raw = abs(n2 - 1.0) <= UNIT_TOLERANCE  # where the rollouts start (UNIT_TOLERANCE)
     xs = g.x0  # (a copy: numba cannot pick between the two arrays, x read-only and ws.x)
@@ -877,48 +879,49 @@ def drive_command(f: np.void, g: np.void, r: np.void) -> None:
 
 
 @numba.njit(**JIT)
-def filter_state(x: Array, u_des: Array, f: np.void, wsa: NDArray[np.void], r: np.void) -> None:
-    """One whole filter call: state x (19,), desired wheel accelerations u_des (3,) -> result record r (its
-    answer u_held, the command u that makes the drive hold it: `drive_command`); wsa: the filter's workspaces
-    (`new_workspace`)."""
+def filter_state(x: Array, u_des: Array, t_s: float, f: np.void, wsa: NDArray[np.void], r: np.void) -> None:
+    """One whole filter call: state x (19,) at time t_s (s from the run's start), desired wheel accelerations
+    u_des (3,) -> result record r (its answer u_held, the command u that makes the drive hold it:
+    `drive_command`); wsa: the filter's workspaces (`new_workspace`)."""
     ws = wsa[0]
     drive_box(f, wsa)
-    if answer(x, u_des, f, ws, r):
-        _gate_and_finish(x, u_des, f, wsa, r)
+    if answer(x, u_des, t_s, f, ws, r):
+        _gate_and_finish(x, u_des, t_s, f, wsa, r)
     for a in range(3):
         r.u_held[a] = r.u[a]
     drive_command(f, ws.gate, r)
 
 
 @numba.njit(**JIT)
-def _gate_and_finish(x: Array, u_des: Array, f: np.void, wsa: NDArray[np.void], r: np.void) -> None:
+def _gate_and_finish(x: Array, u_des: Array, t_s: float, f: np.void, wsa: NDArray[np.void], r: np.void) -> None:
     """`filter_state` of a valid state after its answer: the gatekeeper, then `finish`."""
     ws = wsa[0]
-    r.gate = gate_call(x, u_des, f, wsa, r)
+    r.gate = gate_call(x, u_des, t_s, f, wsa, r)
     if r.gate == GATE_TOWARD_BACKUP:
         # nothing verified, and a variant of the backup law stayed safe longer than the answer: the ASIF's
         # answer to that variant's command instead of u_des (docs/backup.md, "When nothing verifies")
         # (r.u_des stays the primary's command; iterations and solves count both answers' QPs)
         iterations, solves = r.iterations, r.solves
-        answer(x, ws.gate.longest_u, f, ws, r)
+        answer(x, ws.gate.longest_u, t_s, f, ws, r)
         r.gate = GATE_TOWARD_BACKUP
         r.iterations += iterations
         r.solves += solves
         for a in range(3):
             r.u_des[a] = u_des[a]
-    finish(ws, r)
+    finish(f.constraints.n_rows, ws, r)
 
 
 @numba.njit(**JIT)
-def filter_many(X: Array, U_des: Array, f: NDArray[np.void], ws: NDArray[np.void], R: NDArray[np.void]) -> None:
-    """`filter_state` of states X (N, 19) with commands U_des (N, 3) into results R (N,)."""
+def filter_many(X: Array, U_des: Array, T: Array, f: NDArray[np.void], ws: NDArray[np.void], R: NDArray[np.void]
+                ) -> None:
+    """`filter_state` of states X (N, 19) at times T (N,) with commands U_des (N, 3) into results R (N,)."""
     for k in range(X.shape[0]):
-        filter_state(X[k], U_des[k], f[0], ws, R[k])
+        filter_state(X[k], U_des[k], T[k], f[0], ws, R[k])
 
 
 __all__ = [
     "ACTIVE_MULTIPLIER", "BIG", "DISTANCE", "FILTER_DTYPE", "HARD", "MIN_ROW_NORM", "NO_LEVEL", "OFF", "RESULT_DTYPE",
-    "SLACKED", "WORKSPACES", "WORKSPACE_DTYPE", "answer", "assemble", "constraint_levels", "drive_box", "drive_command",
+    "SLACKED", "WORKSPACES", "WORKSPACE_DTYPE", "answer", "assemble", "drive_box", "drive_command",
     "extract", "filter_many", "filter_record", "filter_state", "finish", "gate_call", "new_workspace", "plan_nominal",
     "prepare", "prioritize", "row_modes", "solve",
 ]  # fmt: skip

@@ -10,7 +10,7 @@ classified failures, a report beside the paper's table.
 - `report`: the table, the classification, summary.json / runs.csv / outcome.npz and the figure.
 
 A run fails when a non-slacked constraint has h < 0 at a sample (the paper's criterion; also
-reported including the RK4 substeps between samples). Slacked constraints (communication) are
+reported including the RK4 substeps between samples). Slacked constraints are
 reported apart.
 """
 

@@ -10,20 +10,20 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
-from rta_attitude.config.schema import CONSTRAINT_NAMES, Config
+from rta_attitude.config.schema import Config
 from rta_attitude.constraints import ConstraintSet
 from rta_attitude.dynamics.spacecraft import thermal_rates
 from rta_attitude.dynamics.state import ENERGY, OMEGA, PSI, TEMP
 
 Array = NDArray[np.float64]
 
-UNRECOVERABLE_RULES: tuple[str, ...] = ("battery_energy", "temperature_heating", "exclusion_zone_escape",
+UNRECOVERABLE_RULES: tuple[str, ...] = ("battery_energy", "temperature_heating", "pointing_escape",
                                         "wheel_momentum", "momentum_battery")
 """The rules of `unavoidable`, and the viability oracle's `momentum_battery` (`viability.rules`), applied by
 `classify` to the failed runs only."""
-KEPT_BY_MOMENTUM_BATTERY: tuple[str, ...] = ("battery", "omega_x", "omega_y", "omega_z", "psi_x", "psi_y", "psi_z")
-"""`momentum_battery` proves that no admissible command keeps all of these (the battery, with the rates and
-wheel speeds the bound on the panel's angle assumes)."""
+KEPT_BY_MOMENTUM_BATTERY: tuple[str, ...] = ("battery", "rate", "wheel_speed")
+"""The kinds (`constraints.registry.KINDS`) of which `momentum_battery` proves that no admissible command keeps
+all (the battery, with the rates and wheel speeds the bound on the panel's angle assumes)."""
 
 
 CLASSIFY_STEP_S = 0.05
@@ -41,15 +41,16 @@ def unavoidable(x0: Array, cfg: Config, duration_s: float = math.inf) -> dict[st
     constraint has |omega_i| <= omega_max, so a body axis turns relative to a direction at most at
     Omega = sqrt(3) omega_max (+ n for the moving sun).
 
-    - battery_energy: the +k_B panel turns towards the sun at Omega from t = 0; E_dot <=
+    - battery_energy: the panel (power.panel_normal_body) turns towards the sun at Omega from t = 0; E_dot <=
       P_peak max(0, cos theta_SI(t)) - P_out with theta_SI(t) >= theta_SI(0) - Omega t. E falls until
       cos theta_SI = P_out / P_peak; if the bound on E drops below E_min first, so does E.
-    - temperature_heating: the -j_B face turns away from the sun and the Earth at Omega; the heat
+    - temperature_heating: the thermal face turns away from the sun and the Earth at Omega; the heat
       input is at least that of the bounding angles, so T >= the solution of
       T' = (Q_min(t) - sigma eps A T^4) / (m c_p) (comparison principle); a peak above T_max counts.
-    - exclusion_zone_escape: theta_EZ(0) and its rate; |theta_ddot| <= a_max = sqrt(3) omega_dot_max
-      + 2 Omega^2 / sin(limit) + n^2, so theta_EZ >= limit is lost if theta(0) - theta_dot(0)^2 /
-      (2 a_max) < limit while approaching.
+    - pointing_escape, for every pointing constraint without windows: h = s (theta - alpha) (s = +1
+      keep_out, -1 keep_in) and its rate at t = 0; |theta_ddot| <= a_max = sqrt(3) omega_dot_max
+      + 2 Omega^2 / sin(alpha) + n^2 near the cone's edge, so h >= 0 is lost if h(0) - h_dot(0)^2 /
+      (2 a_max) < 0 while approaching it.
     - wheel_momentum: about body axis i, J_i omega_i - sign D psi_i changes only through the
       gyroscopic torque, so stopping the body about i moves the wheel to psi_i(0) - sign J_i omega_i(0)
       / D; where that lies beyond psi_max, and keeping omega_i inside its limit needs the rate
@@ -61,17 +62,18 @@ def unavoidable(x0: Array, cfg: Config, duration_s: float = math.inf) -> dict[st
         duration_s: run length; a bound that needs longer is not used.
 
     Returns:
-        rule name -> (n, m) bool, columns in CONSTRAINT_NAMES order.
+        rule name -> (n, m) bool, columns in the configuration's row order (`Config.constraint_names`).
     """
     n = len(x0)
     constraints = ConstraintSet(cfg)
+    reg = constraints.registry
     angles = constraints.angles(x0)
-    m = len(CONSTRAINT_NAMES)
+    m = len(reg)
     L, env, pw = cfg.limits, cfg.environment, cfg.power
     Omega = math.sqrt(3.0) * L.omega_max_rad_s
     n_orb = env.mean_motion_rad_s
     out = {r: np.zeros((n, m), dtype=bool) for r in UNRECOVERABLE_RULES}
-    col = {name: i for i, name in enumerate(CONSTRAINT_NAMES)}
+    col = {c.kind: c.row for c in reg if c.kind in ("temperature", "battery")}
 
     # battery: energy lost before the panel can face the sun
     rate = Omega + n_orb
@@ -105,15 +107,17 @@ def unavoidable(x0: Array, cfg: Config, duration_s: float = math.inf) -> dict[st
         np.maximum(T_peak, T, out=T_peak)
     out["temperature_heating"][:, col["temperature"]] = T_peak > L.temperature_max_K + CLASSIFY_MARGIN_K
 
-    # exclusion zone: stopping distance of the approach
+    # pointing constraints: stopping distance of the approach to the cone's edge
     table = constraints.evaluate(x0)
-    h_ez = table["h"][:, col["exclusion_zone"]]
-    k1_ez = cfg.barriers["exclusion_zone"].k1
-    theta_dot = table["psi1"][:, col["exclusion_zone"]] - k1_ez * table["psi0"][:, col["exclusion_zone"]]
-    a_max = (math.sqrt(3.0) * L.omega_dot_max_rad_s2 + 2.0 * rate**2 / math.sin(L.exclusion_angle_rad)
-             + n_orb**2)
-    reach = h_ez - np.where(theta_dot < 0, theta_dot**2 / (2.0 * a_max), 0.0)
-    out["exclusion_zone_escape"][:, col["exclusion_zone"]] = reach < 0
+    for c in reg.pointing:
+        if c.windowed or not c.enabled:
+            continue
+        i = c.row
+        h = table["h"][:, i]
+        h_dot = table["psi1"][:, i] - cfg.gains(c.name).k1 * table["psi0"][:, i]  # Psi_1 - k1 Psi_0
+        a_max = math.sqrt(3.0) * L.omega_dot_max_rad_s2 + 2.0 * rate**2 / math.sin(c.limit) + n_orb**2
+        reach = h - np.where(h_dot < 0, h_dot**2 / (2.0 * a_max), 0.0)
+        out["pointing_escape"][:, i] = reach < 0
 
     # wheels: momentum exchanged in stopping the body about each axis
     J = cfg.spacecraft.J
@@ -122,8 +126,9 @@ def unavoidable(x0: Array, cfg: Config, duration_s: float = math.inf) -> dict[st
     w0 = x0[:, OMEGA]
     psi_stop = x0[:, PSI] - sign * J * w0 / D
     must_stop = np.abs(w0) > L.omega_max_rad_s
-    for a, name in enumerate(("psi_x", "psi_y", "psi_z")):
-        out["wheel_momentum"][:, col[name]] = must_stop[:, a] & (np.abs(psi_stop[:, a]) > L.psi_max_rad_s)
+    wheels = [c.row for c in reg if c.kind == "wheel_speed"]
+    for a, i in enumerate(wheels):
+        out["wheel_momentum"][:, i] = must_stop[:, a] & (np.abs(psi_stop[:, a]) > L.psi_max_rad_s)
     return out
 
 
@@ -133,7 +138,7 @@ def classify(x0: Array, violated: NDArray[np.bool_], cfg: Config,
 
     Args:
         x0: initial states (n, 19).
-        violated: (n, m) constraints violated in each run (CONSTRAINT_NAMES order).
+        violated: (n, m) constraints violated in each run (the configuration's row order).
         cfg: configuration.
 
     Returns:
@@ -147,7 +152,7 @@ def classify(x0: Array, violated: NDArray[np.bool_], cfg: Config,
     enforced = default_enforce(cfg)
     momentum = (rules_apply(model) and all(g in enforced for g in ("omega", "psi", "battery"))
                 and math.isfinite(duration_s))
-    kept = np.array([n in KEPT_BY_MOMENTUM_BATTERY for n in CONSTRAINT_NAMES])
+    kept = np.array([c.kind in KEPT_BY_MOMENTUM_BATTERY for c in ConstraintSet(cfg).registry])
     rules: list[str] = []
     out = np.zeros(len(x0), dtype=bool)
     for k in range(len(x0)):

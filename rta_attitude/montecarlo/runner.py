@@ -32,7 +32,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from rta_attitude.config.schema import Config
-from rta_attitude.constraints.base import N_CONSTRAINTS
+from rta_attitude.constraints.base import MAX_ROWS
 from rta_attitude.constraints.geometry import CONTEXT_DTYPE
 from rta_attitude.constraints.rows import safety_values
 from rta_attitude.dynamics.plant import Plant
@@ -49,14 +49,14 @@ from rta_attitude.montecarlo import DEFAULT_CHUNK_RUNS
 from rta_attitude.simulation.closed_loop import advance, loop_record
 
 Array = NDArray[np.float64]
-M = N_CONSTRAINTS
+M = MAX_ROWS
 PROGRESS_RUNS = 20
 """Runs per compiled call, between two progress updates."""
 
 
 @dataclass
 class BatchOutcome:
-    """Per-run results (N runs, m constraints in CONSTRAINT_NAMES order).
+    """Per-run results (N runs, m constraints in the configuration's row order, `Config.constraint_names`).
 
     Attributes:
         violated_samples: (N, m) h < 0 at some sample t_k (the paper's criterion).
@@ -65,7 +65,7 @@ class BatchOutcome:
         min_h_samples: (N, m) smallest h over the samples.
         qp_steps, fallback_steps, qp_failures: (N,) steps that needed the QP, that ended in the
             fallback, and whose first QP failed.
-        max_comm_slack: (N,) largest |delta| of the slacked constraints (rad for communication).
+        max_comm_slack: (N,) largest |delta| of the slacked constraints (in their h's units).
         gate_steps: (N, len(GATE_NAMES)) steps by what the gatekeeper did (all 'off' without a
             backup law; `filter.outcome.GATE_NAMES`).
         x_final: (N, 19) state at the end.
@@ -88,7 +88,7 @@ class BatchOutcome:
 @numba.njit(**LEAF)
 def _mark(h: Array, t: float, sample: bool, k: int, viol_s: NDArray[np.bool_], viol_sub: NDArray[np.bool_],
           first: Array) -> None:
-    for i in range(M):
+    for i in range(viol_s.shape[1]):
         if h[i] < 0:
             if sample:
                 viol_s[k, i] = True
@@ -121,8 +121,9 @@ def run_batch(X0: Array, steps: int, loop: NDArray[np.void], viol_s: NDArray[np.
     work = np.zeros((RK4_WORK_ROWS, STATE_SIZE))
     hs = np.empty((S, M))
     h = np.empty(M)
+    n = c.n_rows
     slacked = np.zeros(M, dtype=np.bool_)
-    for i in range(M):
+    for i in range(n):
         slacked[i] = c.gains[i].enabled != 0 and c.gains[i].slack_weight > 0
     sub_t = np.empty(S)
     for j in range(S):
@@ -134,13 +135,13 @@ def run_batch(X0: Array, steps: int, loop: NDArray[np.void], viol_s: NDArray[np.
         reset(ws[0].gate)  # each run starts without a committed plan
         if record:
             traj[k, 0] = x
-        for i in range(M):
+        for i in range(n):
             first[k, i] = np.nan
             min_h[k, i] = np.inf
         for step in range(steps):
             t = step * dt
-            safety_values(x, p, c, ctx[0], h)
-            for i in range(M):
+            safety_values(x, t, p, c, ctx[0], h)
+            for i in range(n):
                 if h[i] < min_h[k, i]:
                     min_h[k, i] = h[i]
             _mark(h, t, True, k, viol_s, viol_sub, first)
@@ -153,7 +154,7 @@ def run_batch(X0: Array, steps: int, loop: NDArray[np.void], viol_s: NDArray[np.
                 fb_steps[k] += 1
             qp_fail[k] += r[0].qp_failed
             gate_steps[k, r[0].gate] += 1
-            for i in range(M):
+            for i in range(n):
                 if slacked[i] and abs(r[0].slack[i]) > max_slack[k]:
                     max_slack[k] = abs(r[0].slack[i])
             for j in range(S - 1):  # the last substep is the next sample, checked there
@@ -161,8 +162,8 @@ def run_batch(X0: Array, steps: int, loop: NDArray[np.void], viol_s: NDArray[np.
             x[:] = subs[S - 1]
             if record:
                 traj[k, step + 1] = x
-        safety_values(x, p, c, ctx[0], h)
-        for i in range(M):
+        safety_values(x, steps * dt, p, c, ctx[0], h)
+        for i in range(n):
             if h[i] < min_h[k, i]:
                 min_h[k, i] = h[i]
         _mark(h, steps * dt, True, k, viol_s, viol_sub, first)
@@ -170,9 +171,9 @@ def run_batch(X0: Array, steps: int, loop: NDArray[np.void], viol_s: NDArray[np.
     lp.sensors.stream = stream0
 
 
-def _new_outcome(N: int, steps: int, record: bool) -> BatchOutcome:
-    return BatchOutcome(np.zeros((N, M), dtype=bool), np.zeros((N, M), dtype=bool), np.full((N, M), np.nan),
-                        np.full((N, M), np.inf), np.zeros(N, dtype=np.int64), np.zeros(N, dtype=np.int64),
+def _new_outcome(N: int, m: int, steps: int, record: bool) -> BatchOutcome:
+    return BatchOutcome(np.zeros((N, m), dtype=bool), np.zeros((N, m), dtype=bool), np.full((N, m), np.nan),
+                        np.full((N, m), np.inf), np.zeros(N, dtype=np.int64), np.zeros(N, dtype=np.int64),
                         np.zeros(N, dtype=np.int64), np.zeros(N), np.zeros((N, len(GATE_NAMES)), dtype=np.int64),
                         np.empty((N, STATE_SIZE)),
                         np.empty((N, steps + 1, STATE_SIZE)) if record else None)
@@ -196,7 +197,7 @@ def run_runs(cfg: Config, x0: Array, duration_s: float, record: bool = False,
     x0 = _check_states(x0)
     steps = round(duration_s / cfg.filter.sample_time_s)
     N = x0.shape[0]
-    out = _new_outcome(N, steps, record)
+    out = _new_outcome(N, len(cfg.constraint_names), steps, record)
     loop = loop_record(cfg, rta=True, pd=False)
     traj = out.trajectory if out.trajectory is not None else np.empty((1, 1, STATE_SIZE))
     for a in range(0, N, PROGRESS_RUNS):
@@ -227,7 +228,8 @@ def run_runs_stepped(cfg: Config, x0: Array, duration_s: float, plant: Callable[
     steps = round(duration_s / dt)
     S = cfg.substeps
     N = x0.shape[0]
-    out = _new_outcome(N, steps, record)
+    m = len(cfg.constraint_names)
+    out = _new_outcome(N, m, steps, record)
     build = make_plant if plant is None else plant
     filt = AsifFilter(cfg)
     slacked = filt.slacked
@@ -245,7 +247,7 @@ def run_runs_stepped(cfg: Config, x0: Array, duration_s: float, plant: Callable[
         filt.reset()
         with build(cfg, x0[k]) as p:
             run = run_stepped(cfg, scenario, steps, p, filt, stream=first_run + k)
-        h = np.empty((steps * S + 1, M))
+        h = np.empty((steps * S + 1, m))
         h[::S] = run.h
         for j in range(S - 1):
             h[1 + j::S] = run.h_sub[:, j]
@@ -261,7 +263,7 @@ def run_runs_stepped(cfg: Config, x0: Array, duration_s: float, plant: Callable[
         out.qp_failures[k] = int(run.results["qp_failed"].sum())
         out.gate_steps[k] = np.bincount(run.results["gate"], minlength=len(GATE_NAMES))
         if slacked.any():
-            out.max_comm_slack[k] = float(np.fmax.reduce(np.abs(run.results["slack"][:, slacked]), axis=None,
+            out.max_comm_slack[k] = float(np.fmax.reduce(np.abs(run.results["slack"][:, :m][:, slacked]), axis=None,
                                                          initial=0.0))
         out.x_final[k] = run.x[-1]
         if out.trajectory is not None:

@@ -489,8 +489,10 @@ def load_run(
     if residual > RESIDUAL_TOLERANCE:
         notes.append(f"re-integrating the recorded commands does not reproduce the recorded states (largest "
                      f"relative difference {residual:.3g}): minima between samples are estimates")
-    h = constraints.safety_values(x)
-    h_min, h_arg = substep_minima(h[:-1], constraints.safety_values(subs), t_s[:-1], dt_steps)
+    h = constraints.safety_values(x, t_s)
+    S = run_cfg.substeps
+    t_sub = t_s[:-1] + dt_steps * np.arange(1, S + 1)[:, None] / S  # (S, N): each substep's time
+    h_min, h_arg = substep_minima(h[:-1], constraints.safety_values(subs, t_sub), t_s[:-1], dt_steps)
     omega_dot = spacecraft.omega_dot(x[:-1], u, plant)
 
     # filter records

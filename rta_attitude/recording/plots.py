@@ -1,24 +1,32 @@
-"""Paper-style 3x3 figure of one run (or several overlaid): Figs. 11-14 of McQuinn et al.
+"""Paper-style figure of one run (or several overlaid): Figs. 11-14 of McQuinn et al., for any configured
+pointing constraints.
 
-Panels: (a) sensor boresight and sun direction in Hill, (b) sensor-sun angle, (c) antenna-Earth
-angle, (d) temperature, (e) omega, (f) omega_dot, (g) psi, (h) psi_dot, (i) energy. Limits are
-dashed black lines, the unsafe side is shaded red, the safe side green, as in the paper.
+Panels: (a) the first pointing constraint's boresight and its target in Hill x-y; one panel per pointing
+constraint (`constraints.pointing`, in order): its boresight's angle to its target against the half-angle;
+the temperature of the thermal face; omega; omega_dot; psi; psi_dot; the energy. The first two cones take
+the paper's places (b) and (c) of the 3x3 grid, so the default configuration draws the paper's figure; a
+third and later cones add rows below it, (j), (k), ... (one panel each: a cone's margin is read off its own
+limit line, which a shared panel would lose). Limits are dashed black lines, the unsafe side is shaded red,
+the safe side green, as in the paper; a windowed cone's times outside its windows are shaded grey.
+
+Also the labels every picture of a run uses for what it draws (`body_label`, `target_label`, `limit_text`).
 matplotlib is imported here only (Agg backend), so the core never needs it.
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, Protocol
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
-from rta_attitude.config.schema import Config
+from rta_attitude.config.schema import Config, PointingConstraint
 from rta_attitude.constraints import ConstraintSet
 from rta_attitude.dynamics import quaternion as quat
-from rta_attitude.dynamics.spacecraft import sun_hill
+from rta_attitude.dynamics.environment import sun_direction, target_direction, target_kind
 from rta_attitude.dynamics.state import ENERGY, OMEGA, PSI, TEMP, THETA_S, Q
 from rta_attitude.errors import RtaError
 from rta_attitude.files import atomic
@@ -26,6 +34,13 @@ from rta_attitude.files import atomic
 Array = NDArray[np.float64]
 CELSIUS_OFFSET_K = 273.15
 AXIS_COLORS = ("tab:blue", "tab:orange", "tab:green")
+PANEL_COLUMNS = 3
+PAPER_CONE_SLOTS = (1, 2)
+"""The grid slots (row-major) of the first two cones: the paper's (b) and (c)."""
+FIXED_SLOTS = 9
+"""Slots of the paper's 3x3 grid; cones after the first two take the slots after it."""
+TARGET_LABELS = {"sun": "sun", "earth": "Earth", "orbit_normal": "orbit normal", "velocity": "velocity"}
+"""How a named target is written in figures and texts; fixed vectors are written out (`target_label`)."""
 
 
 class RunSeries(Protocol):
@@ -78,12 +93,105 @@ def _shade(ax: Any, lo: float | None, hi: float | None, safe_lo: float, safe_hi:
     ax.set_ylim(y0, y1)
 
 
+def body_label(v: ArrayLike) -> str:
+    """A body direction as written in figures: '+i_B', '-k_B' for a body axis, else its components
+    ('[0.58, 0.58, 0.58]_B')."""
+    v = np.asarray(v, dtype=float)
+    for i, letter in enumerate("ijk"):
+        for sign, text in ((1.0, "+"), (-1.0, "-")):
+            if np.allclose(v, sign * np.eye(3)[i], rtol=0.0, atol=1e-12):
+                return f"{text}{letter}_B"
+    return "[" + ", ".join(f"{c:.2f}" for c in v) + "]_B"
+
+
+def target_label(target: str, vector: ArrayLike | None = None) -> str:
+    """A target as written in figures: 'sun', 'Earth', 'orbit normal', 'velocity'; a fixed vector with its
+    frame ('[0.00, 0.00, 1.00]_H' in Hill, '..._I' inertial)."""
+    if target in TARGET_LABELS:
+        return TARGET_LABELS[target]
+    frame = "H" if target == "hill" else "I"
+    return "[" + ", ".join(f"{c:.2f}" for c in np.asarray(vector, dtype=float)) + f"]_{frame}"
+
+
+def limit_text(kind: str, half_angle_rad: float) -> str:
+    """A cone's limit on the angle: '>= 40.0 deg' (keep_out: outside the cone) or '<= 90.0 deg' (keep_in)."""
+    return f"{'<=' if kind == 'keep_in' else '>='} {math.degrees(half_angle_rad):.1f} deg"
+
+
+def cone_targets(cone: PointingConstraint, theta_S_rad: ArrayLike, beta_rad: float) -> Array:
+    """A cone's target direction in Hill (N, 3) at sun angles theta_S (N,) (`environment.target_direction`)."""
+    code, vector = target_kind(cone.target)
+    if cone.target_vector is not None:
+        vector = cone.target_vector
+    return target_direction(code, np.asarray(vector, dtype=float), np.asarray(theta_S_rad, dtype=float), beta_rad)
+
+
+def outside_windows_s(windows_s: Sequence[tuple[float, float]], t0_s: float, t1_s: float) -> list[tuple[float, float]]:
+    """The spans of [t0, t1] (s) outside a cone's windows; none for a cone without windows (always on)."""
+    if not windows_s:
+        return []
+    spans, start = [], t0_s
+    for a, b in windows_s:
+        if a > start:
+            spans.append((start, min(a, t1_s)))
+        start = max(start, b)
+    if start < t1_s:
+        spans.append((start, t1_s))
+    return [(a, b) for a, b in spans if b > a]
+
+
+def cone_slots(n_cones: int) -> list[int]:
+    """The grid slots (row-major, PANEL_COLUMNS wide) of n cone panels: the paper's (b) and (c), then the
+    slots after the 3x3 grid."""
+    return [*PAPER_CONE_SLOTS, *range(FIXED_SLOTS, FIXED_SLOTS + max(0, n_cones - len(PAPER_CONE_SLOTS)))][:n_cones]
+
+
+def _first_cone_panel(ax: Any, plt: Any, runs: Sequence[tuple[str, RunSeries]], cfg: Config) -> None:
+    """(a): the first cone's boresight and its target in Hill x-y (without cones, +i_B and the sun)."""
+    cone = cfg.pointing[0] if cfg.pointing else None
+    axis = np.array(cone.boresight_body if cone else (1.0, 0.0, 0.0))
+    name = body_label(axis) + (f" ({cone.name})" if cone else "")
+    where = target_label(cone.target, cone.target_vector) if cone else "sun"
+    beta = cfg.environment.sun_beta_rad
+    for k, (label, run) in enumerate(runs):
+        x = np.asarray(run.x)
+        target = cone_targets(cone, x[:, THETA_S], beta) if cone else sun_direction(x[:, THETA_S], beta)
+        boresight = np.einsum("kij,i->kj", quat.attitude_matrices(x[:, Q]), axis)  # A(q)^T b: b in Hill
+        if k == 0:
+            ax.plot(target[:, 0], target[:, 1], color="gold", lw=2, marker="o" if np.ptp(target[:, :2]) == 0 else None,
+                    label=f"{where}")
+        ax.plot(boresight[:, 0], boresight[:, 1], ls="-" if k == 0 else "--", lw=1, label=f"{body_label(axis)} {label}")
+    ax.add_patch(plt.Circle((0, 0), 1.0, fill=False, color="0.7", lw=0.8))
+    ax.set_aspect("equal")
+    ax.set(title=f"(a) {name} and {where}, Hill x-y", xlabel="x_H", ylabel="y_H")
+
+
+def _cone_panel(ax: Any, letter: str, cone: PointingConstraint, runs: Sequence[tuple[str, RunSeries]],
+                angles_rad: Sequence[Array]) -> None:
+    """One cone's panel: its boresight's angle to its target over time against its half-angle."""
+    for k, ((label, run), theta) in enumerate(zip(runs, angles_rad, strict=True)):
+        ax.plot(np.asarray(run.t_s), np.degrees(theta), ls="-" if k == 0 else "--", label=label)
+    t0 = min(float(np.asarray(run.t_s)[0]) for _, run in runs)
+    t1 = max(float(np.asarray(run.t_s)[-1]) for _, run in runs)
+    for i, (a, b) in enumerate(outside_windows_s(cone.windows_s, t0, t1)):
+        ax.axvspan(a, b, color="0.5", alpha=0.15, lw=0, label="outside its windows" if i == 0 else None)
+    half = math.degrees(cone.half_angle_rad)
+    if cone.keep_in:
+        _shade(ax, None, half, -np.inf, half)
+    else:
+        _shade(ax, half, None, half, np.inf)
+    ax.set(title=f"({letter}) {cone.name}: {body_label(cone.boresight_body)} to "
+                 f"{target_label(cone.target, cone.target_vector)}",
+           ylabel=f"angle [deg] ({cone.kind.replace('_', ' ')} {limit_text(cone.kind, cone.half_angle_rad)})")
+
+
 def plot_runs(runs: Sequence[tuple[str, RunSeries]], cfg: Config, path: str | Path, title: str = "") -> Path:
-    """Draw the 3x3 figure of one or more runs (overlaid, labelled) and save it as PNG.
+    """Draw the figure of one or more runs (overlaid, labelled) and save it as PNG: the paper's 3x3 grid, and a
+    row more for every three cones after the second (module docstring).
 
     Args:
         runs: (label, series) pairs; the first is drawn solid, others dashed.
-        cfg: configuration (limits).
+        cfg: configuration (limits, the pointing constraints).
         path: output PNG path.
         title: figure title.
 
@@ -93,22 +201,25 @@ def plot_runs(runs: Sequence[tuple[str, RunSeries]], cfg: Config, path: str | Pa
     plt = _pyplot()
     L = cfg.limits
     u_max = cfg.u_max_rad_s2
-    fig, axes = plt.subplots(3, 3, figsize=(15, 11))
+    slots = cone_slots(len(cfg.pointing))
+    rows = max(FIXED_SLOTS, (max(slots) + 1) if slots else 0)
+    rows = -(-rows // PANEL_COLUMNS)
+    fig, axes = plt.subplots(rows, PANEL_COLUMNS, figsize=(15, 11 / 3 * rows), squeeze=False)
     ax = axes.ravel()
     w_lim = np.degrees(L.omega_max_rad_s)
     wd_lim = np.degrees(L.omega_dot_max_rad_s2)
+    constraints = ConstraintSet(cfg)
+    angles = [constraints.angles(np.asarray(run.x)) for _, run in runs]
+    _first_cone_panel(ax[0], plt, runs, cfg)
+    for slot, cone in zip(slots, cfg.pointing, strict=True):
+        _cone_panel(ax[slot], chr(ord("a") + slot), cone, runs, [a[cone.name] for a in angles])
+    for slot in range(len(ax)):
+        if slot not in slots and (slot in PAPER_CONE_SLOTS or slot >= FIXED_SLOTS):
+            ax[slot].set_axis_off()
     for k, (label, run) in enumerate(runs):
         ls = "-" if k == 0 else "--"
         t, x = np.asarray(run.t_s), np.asarray(run.x)
         tu = t[:-1]
-        sun = np.array([sun_hill(float(th)) for th in x[:, THETA_S]])  # (cos, sin): the sun in the Hill x-y plane
-        boresight = quat.attitude_matrices(x[:, Q])[:, 0, :]  # row 0 of A(q): +i_B in Hill
-        angles = ConstraintSet(cfg).angles(x)
-        if k == 0:
-            ax[0].plot(sun[:, 0], sun[:, 1], color="gold", lw=2, label="sun r_S")
-        ax[0].plot(boresight[:, 0], boresight[:, 1], ls=ls, lw=1, label=f"+i_B {label}")
-        ax[1].plot(t, np.degrees(angles["sensor_sun"]), ls=ls, label=label)
-        ax[2].plot(t, np.degrees(angles["antenna_earth"]), ls=ls, label=label)
         ax[3].plot(t, x[:, TEMP] - CELSIUS_OFFSET_K, ls=ls, label=label)
         for i in range(3):
             lab = f"{'xyz'[i]} {label}" if len(runs) > 1 else "xyz"[i]
@@ -117,15 +228,8 @@ def plot_runs(runs: Sequence[tuple[str, RunSeries]], cfg: Config, path: str | Pa
             ax[6].plot(t, x[:, PSI.start + i], ls=ls, color=AXIS_COLORS[i], label=lab)
             ax[7].plot(tu, np.asarray(run.u)[:, i], ls=ls, color=AXIS_COLORS[i], label=lab)
         ax[8].plot(t, x[:, ENERGY] / 1000.0, ls=ls, label=label)
-    ax[0].add_patch(plt.Circle((0, 0), 1.0, fill=False, color="0.7", lw=0.8))
-    ax[0].set_aspect("equal")
-    ax[0].set(title="(a) sensor boresight and sun, Hill x-y", xlabel="x_H", ylabel="y_H")
-    ax[1].set(title="(b) sensor-to-sun angle", ylabel="theta_EZ [deg]")
-    _shade(ax[1], np.degrees(L.exclusion_angle_rad), None, np.degrees(L.exclusion_angle_rad), np.inf)
-    ax[2].set(title="(c) antenna-to-Earth angle", ylabel="theta_GS [deg]")
-    _shade(ax[2], None, np.degrees(L.comm_angle_rad), -np.inf, np.degrees(L.comm_angle_rad))
     T_max = L.temperature_max_K - CELSIUS_OFFSET_K
-    ax[3].set(title="(d) temperature, -j_B face", ylabel="T [degC]")
+    ax[3].set(title=f"(d) temperature, {body_label(cfg.thermal.face_normal_body)} face", ylabel="T [degC]")
     _shade(ax[3], None, T_max, -np.inf, T_max)
     ax[4].set(title="(e) angular rate", ylabel="omega [deg/s]")
     _shade(ax[4], -w_lim, w_lim, -w_lim, w_lim)
@@ -142,17 +246,21 @@ def plot_runs(runs: Sequence[tuple[str, RunSeries]], cfg: Config, path: str | Pa
     E_min = L.energy_min_J / 1000.0
     ax[8].set(title="(i) battery energy", ylabel="E [kJ]")
     _shade(ax[8], E_min, None, E_min, np.inf)
-    for a in ax[1:]:
-        a.set_xlabel("t [s]")
-        a.grid(alpha=0.3)
+    for slot in (*slots, *range(3, FIXED_SLOTS)):
+        ax[slot].set_xlabel("t [s]")
+        ax[slot].grid(alpha=0.3)
     for a in (ax[0], ax[4], ax[5], ax[6], ax[7]):
         a.legend(fontsize=7, loc="best")
+    for slot, cone in zip(slots, cfg.pointing, strict=True):
+        if len(runs) > 1 or cone.windows_s:
+            ax[slot].legend(fontsize=7, loc="best")
     if len(runs) > 1:
-        for a in (ax[1], ax[2], ax[3], ax[8]):
+        for a in (ax[3], ax[8]):
             a.legend(fontsize=7, loc="best")
     fig.suptitle(title)
     fig.tight_layout()
     return _save(plt, fig, path)
 
 
-__all__ = ["RunSeries", "plot_runs"]
+__all__ = ["RunSeries", "body_label", "cone_slots", "cone_targets", "limit_text", "outside_windows_s", "plot_runs",
+           "target_label"]

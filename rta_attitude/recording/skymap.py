@@ -1,46 +1,57 @@
-"""Boresight sky map: the sensor (+i_B) and the antenna (+j_B) over time on the celestial sphere seen
-from the spacecraft, centred on the sun, with the keep-out cone, the Earth and the antenna's limit.
+"""Boresight sky maps: each pointing constraint's boresight over time on the celestial sphere seen from the
+spacecraft, on a map of its own centred on the constraint's target, with the cone's limit about it.
 
-Map frame. The sun turns in Hill (theta_S_dot = -n), so the frame is taken afresh at every sample k
-from that sample's sun direction (`dynamics.spacecraft.sun_hill`):
+One map per cone, each centred on its own target, rather than one map with a legend. What a pointing
+constraint bounds is an angle from its target; on an azimuthal equidistant map centred on that target the
+angle *is* the distance from the centre, so the limit is an exact circle of radius alpha and the margin is
+read off with a ruler (the 30 deg rings). One map centred on the sun keeps that only for the cones about the
+sun: a cone about the Earth becomes a distorted curve that moves across the map as the sun turns (the
+paper's antenna limit of 90 deg about the Earth reached past the anti-sun rim), and with several cones and
+boresights on one map their tracks and limits cross and cannot be told apart. The sun and the Earth are
+still drawn on every map (coloured by time) so that each can be placed against the others; runs side by
+side (`analyze --compare`) give one row of maps each.
 
-    pole   p_k = r_S = [cos theta_S, sin theta_S, 0]       (Hill)   the map centre
-    up       u = z_H = [0, 0, 1]                                    +Y on the map (orbit normal)
-    right  r_k = p_k x z_H = [sin theta_S, -cos theta_S, 0]         +X on the map
+Map frame. Taken at every sample k from that sample's target direction p_k (in Hill, `environment`): the
+sun turns in Hill (theta_S_dot = -n), a target fixed in the inertial frame turns too, and a target fixed in
+Hill (the Earth) gives the same frame at every sample:
 
-Rule for the reference azimuth: the orbit normal z_H points up. The sun is always in the orbit plane,
-so z_H is always perpendicular to it: the rule needs no projection and is never undefined. (right,
-up) is the sky as seen from the spacecraft looking at the sun with the orbit normal up (right x up
-= -p: a view from inside the sphere, not a globe seen from outside). The Earth (-x_H,
-`spacecraft.EARTH_HILL`, the ground station) is in the orbit plane too, so it always lies on the
-map's horizontal axis, angle(r_S, -x_H) from the centre, and moves along it as the sun turns.
+    pole   p_k                                                   the map centre
+    up     u_k = z_H - (z_H . p_k) p_k, normalised               +Y on the map (orbit normal)
+    right  r_k = p_k x u_k                                        +X on the map
 
-Projection: azimuthal equidistant (a polar plot of the sphere about the sun). A direction d at
-angle rho = atan2(|d x p|, d . p) from the sun and azimuth phi = atan2(d . u, d . r) is drawn at
+Rule for the reference azimuth: the orbit normal z_H points up. For the sun in the paper (beta = 0) and for
+the Earth z_H is perpendicular to the pole, so u = z_H and r = p x z_H (the sun's map: [sin theta_S,
+-cos theta_S, 0]; the Earth's, -x_H: r = +y_H, the velocity to the right). For a sun out of the orbit plane
+(beta != 0) z_H is projected; for a pole within 1e-6 of +-z_H (the orbit normal as a target) the rule
+takes the along-track y_H instead (`UP_FALLBACK_HILL`, the map's up is then labelled +y_H). (right, up) is
+the sky as seen from the spacecraft looking at the target (right x up = -p: a view from inside the sphere,
+not a globe seen from outside).
+
+Projection: azimuthal equidistant (a polar plot of the sphere about the target). A direction d at angle
+rho = atan2(|d x p|, d . p) from the centre and azimuth phi = atan2(d . u, d . r) is drawn at
 
     (X, Y) = rho[deg] (cos phi, sin phi)
 
-Why this one and not Lambert's equal-area projection: the constraint the map is about is an angle
-from its centre. Here the distance of a sensor point from the centre *is* the exclusion-zone angle
-theta_EZ (read it off the 30 deg rings), and the keep-out cone theta_EZ < FOV/2 + beta is exactly
-the disc of that radius; every ring is a true angle from the sun. Lambert's r = 2 sin(rho/2) would
-keep areas (the density of points over time) but squeeze the radial scale away from the sun, so a
-margin could not be read off the map. The price: shapes far from the sun stretch (the anti-sun
-point is the whole rim rho = 180 deg), so the antenna's limit, a circle of comm_fov/2 about the
-Earth, is drawn as a distorted curve; it moves with the Earth and is drawn at a few times.
+Why this one and not Lambert's equal-area projection: Lambert's r = 2 sin(rho/2) would keep areas (the
+density of points over time) but squeeze the radial scale away from the centre, so a margin could not be
+read off the map. The price: shapes far from the centre stretch (the antipode is the whole rim rho = 180
+deg); no limit is drawn there, every limit being a circle about the centre.
 
-Points are coloured by time; samples whose command the filter changed (|u - u_des| > 1e-9 rad/s^2 on
-some axis at the step that starts there; never without RTA) have a black core. The angles named
-in each panel's title are `constraints.ConstraintSet.angles`, the geometry the barriers act on.
+A keep_out cone shades its disc (where the boresight must not go), a keep_in cone the ring outside its
+circle. Points are coloured by time; samples whose command the filter changed (|u - u_des| > 1e-9
+rad/s^2 on some axis at the step that starts there; never without RTA) have a black core; samples
+outside a windowed cone's windows are drawn small and faint (the constraint does not apply there). The
+angles named in each panel's title are `constraints.ConstraintSet.angles`, the geometry the barriers act on.
 
-`sky_track` returns the map coordinates without matplotlib (NumPy and the package's compiled
-geometry: `quaternion.attitude_matrices`, `sun_hill`, `ConstraintSet.angles`), so it is testable
-alone; `plot_skymap` draws one run or several side by side (`analyze --compare`) and writes
-`skymap.png`. matplotlib is imported only through `plots._pyplot` (Agg backend).
+`sky_track` returns the map coordinates without matplotlib (NumPy and the package's compiled geometry:
+`quaternion.attitude_matrices`, `environment`, `ConstraintSet.angles` and `safety_values`), so it is
+testable alone; `plot_skymap` draws one run or several and writes `skymap.png`. matplotlib is imported only
+through `plots._pyplot` (Agg backend).
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -49,29 +60,36 @@ from typing import Any, Protocol
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from rta_attitude.config.schema import Config
-from rta_attitude.constraints import ConstraintSet, communication, exclusion_zone
+from rta_attitude.config.schema import Config, PointingConstraint
+from rta_attitude.constraints import ConstraintSet
 from rta_attitude.dynamics import quaternion as quat
-from rta_attitude.dynamics.spacecraft import EARTH_HILL, sun_hill
+from rta_attitude.dynamics.environment import EARTH_HILL, sun_direction
 from rta_attitude.dynamics.state import THETA_S, Q
-from rta_attitude.recording.plots import _pyplot, _save
+from rta_attitude.recording.plots import _pyplot, _save, body_label, cone_targets, limit_text, target_label
 
 Array = NDArray[np.float64]
 
 UP_HILL = (0.0, 0.0, 1.0)
-"""The map's +Y: the orbit normal z_H (the reference azimuth)."""
+"""The map's +Y: the orbit normal z_H (the reference azimuth), made perpendicular to the pole."""
+UP_FALLBACK_HILL = (0.0, 1.0, 0.0)
+"""The map's +Y where the pole is along +-z_H: the along-track y_H."""
+POLE_GUARD = 1e-6
+"""|z_H - (z_H . p) p| below this: the pole counts as along z_H (UP_FALLBACK_HILL)."""
 INTERVENTION_TOLERANCE_RAD_S2 = 1e-9
 """|u - u_des| above which a step counts as one where the filter changed the command (far above the
 rounding of a bag's torque round trip, ~1e-14 rad/s^2)."""
-COMM_SNAPSHOTS = 5
-"""Number of times (evenly spaced, first and last included) at which the antenna's limit is drawn."""
 CIRCLE_POINTS = 721
 RIM_JUMP_DEG = 90.0
 """A drawn curve is cut where two neighbouring points are farther apart on the map (it crossed the
-anti-sun point, which is the whole rim)."""
+antipode, which is the whole rim)."""
 RINGS_DEG = (30, 60, 90, 120, 150, 180)
 RING_LABEL_AZIMUTH_DEG = 112.0
 TIME_CMAP = "viridis"
+MAP_COLUMNS = 3
+"""Maps per row of the figure at most (one run's cones wrap onto further rows)."""
+KIND_COLORS = {"keep_out": "tab:red", "keep_in": "tab:blue"}
+CENTRE_MARKERS = {"sun": ("*", "gold", 260), "earth": ("D", "tab:blue", 90)}
+"""(marker, colour, size) of the map centre by target; other targets: a black plus."""
 
 
 class SkyRun(Protocol):
@@ -90,48 +108,80 @@ class SkyRun(Protocol):
 
 
 @dataclass(frozen=True)
+class ConeTrack:
+    """One pointing constraint's map, centred on its target; coordinates (X, Y) in degrees, |(X, Y)| = angle
+    from the target.
+
+    Attributes:
+        name, kind, target: the constraint's name, kind ('keep_out', 'keep_in') and target (TARGET_NAMES).
+        target_text, boresight_text: how the target and the boresight are written (`plots.target_label`,
+            `plots.body_label`).
+        half_angle_rad: the cone's half-angle.
+        boresight: the boresight at each sample (N + 1, 2).
+        sun, earth: the sun's and the Earth's direction at each sample, in this map (N + 1, 2).
+        angle_rad: the boresight's angle to the target (N + 1,) (`ConstraintSet.angles`).
+        applies: the constraint holds at the sample (N + 1,) (inside its windows, or it has none).
+        limit: the limit, the circle at half_angle_rad about the centre (CIRCLE_POINTS, 2).
+        up_text: what the map's +Y is ('+z_H', or '+y_H' for a pole along z_H).
+    """
+
+    name: str
+    kind: str
+    target: str
+    target_text: str
+    boresight_text: str
+    half_angle_rad: float
+    boresight: Array
+    sun: Array
+    earth: Array
+    angle_rad: Array
+    applies: NDArray[np.bool_]
+    limit: Array
+    up_text: str
+
+    @property
+    def keep_in(self) -> bool:
+        return self.kind == "keep_in"
+
+
+@dataclass(frozen=True)
 class SkyTrack:
-    """One run on the sky map; map coordinates (X, Y) in degrees, |(X, Y)| = angle from the sun.
+    """One run's maps: one per configured pointing constraint, in order.
 
     Attributes:
         t_s: sample times (N + 1,), s.
-        sensor, antenna, earth: +i_B, +j_B and the Earth direction at each sample (N + 1, 2).
         intervened: the filter changed the command of the step starting at the sample (N + 1,); the
             last sample starts no step (False).
-        keep_out: the keep-out circle, angle FOV/2 + beta from the sun (CIRCLE_POINTS, 2).
-        comm_limits: (t, curve) pairs: the antenna's limit comm_fov/2 about the Earth in the map
-            frame of time t (CIRCLE_POINTS, 2), NaN where the curve is cut at the rim.
-        sensor_sun_rad, antenna_earth_rad: theta_EZ and theta_GS at the samples (N + 1,)
-            (`ConstraintSet.angles`).
-        keep_out_rad, comm_rad: FOV/2 + beta and comm_fov/2 (`Limits.exclusion_angle_rad`, `comm_angle_rad`).
+        cones: one `ConeTrack` per pointing constraint (`constraints.pointing`, in order).
     """
 
     t_s: Array
-    sensor: Array
-    antenna: Array
-    earth: Array
     intervened: NDArray[np.bool_]
-    keep_out: Array
-    comm_limits: tuple[tuple[float, Array], ...]
-    sensor_sun_rad: Array
-    antenna_earth_rad: Array
-    keep_out_rad: float
-    comm_rad: float
+    cones: tuple[ConeTrack, ...]
 
 
-def sun_frames(theta_S_rad: ArrayLike) -> Array:
-    """Map frames of sun angles theta_S (N,): (N, 3, 3), rows right, up, pole (the sun) in Hill."""
-    th = np.asarray(theta_S_rad, dtype=float).reshape(-1)
-    sun = np.zeros((th.size, 3))
-    for k, theta in enumerate(th):
-        sun[k, 0], sun[k, 1] = sun_hill(float(theta))
-    up = np.broadcast_to(np.array(UP_HILL), sun.shape)
-    return np.stack([np.cross(sun, up), up, sun], axis=1)
+def map_frames(pole_hill: ArrayLike) -> Array:
+    """Map frames of unit pole directions (N, 3) in Hill: (N, 3, 3), rows right, up, pole (module docstring:
+    up is z_H made perpendicular to the pole, y_H where the pole is along z_H)."""
+    p = np.asarray(pole_hill, dtype=float).reshape(-1, 3)
+    up = np.array(UP_HILL) - (p @ np.array(UP_HILL))[:, None] * p
+    norm = np.linalg.norm(up, axis=1)
+    near = norm < POLE_GUARD
+    if near.any():
+        up[near] = np.array(UP_FALLBACK_HILL) - (p[near] @ np.array(UP_FALLBACK_HILL))[:, None] * p[near]
+        norm[near] = np.linalg.norm(up[near], axis=1)
+    up = up / norm[:, None]
+    return np.stack([np.cross(p, up), up, p], axis=1)
+
+
+def sun_frames(theta_S_rad: ArrayLike, beta_rad: float = 0.0) -> Array:
+    """Map frames centred on the sun at sun angles theta_S (N,): (N, 3, 3), rows right, up, pole (the sun)."""
+    return map_frames(sun_direction(np.asarray(theta_S_rad, dtype=float).reshape(-1), beta_rad))
 
 
 def project(d_hill: ArrayLike, frames: ArrayLike) -> Array:
     """Azimuthal equidistant map coordinates (..., 2), deg, of unit directions d (..., 3) in Hill in
-    map frames (..., 3, 3) (`sun_frames`; broadcast against d). The anti-sun point goes to (180, 0)."""
+    map frames (..., 3, 3) (`map_frames`; broadcast against d). The antipode goes to (180, 0)."""
     c = np.einsum("...ij,...j->...i", np.asarray(frames, dtype=float), np.asarray(d_hill, dtype=float))
     s = np.hypot(c[..., 0], c[..., 1])
     rho = np.degrees(np.arctan2(s, c[..., 2]))
@@ -171,90 +221,127 @@ def intervened_steps(run: SkyRun) -> NDArray[np.bool_]:
     return np.asarray(np.any(np.abs(u - u_des) > INTERVENTION_TOLERANCE_RAD_S2, axis=1))
 
 
-def body_axis_in_hill(A: Array, axis_body: tuple[float, float, float]) -> Array:
-    """A(q)^T e for attitude matrices (N, 3, 3) (Hill -> body): body axis e in Hill (N, 3)."""
-    return np.einsum("kij,i->kj", A, np.asarray(axis_body))
+def body_axis_in_hill(A: Array, axis_body: ArrayLike) -> Array:
+    """A(q)^T e for attitude matrices (N, 3, 3) (Hill -> body): body direction e in Hill (N, 3)."""
+    return np.einsum("kij,i->kj", A, np.asarray(axis_body, dtype=float))
 
 
-def sky_track(run: SkyRun, cfg: Config) -> SkyTrack:
-    """The run on the sun-centred map (no matplotlib).
+def cone_track(cone: PointingConstraint, A: Array, x: Array, angle_rad: Array, h: Array, beta_rad: float) -> ConeTrack:
+    """One cone's map of states x (N, 19) with attitude matrices A (N, 3, 3), its angles (N,) and h (N,)."""
+    frames = map_frames(cone_targets(cone, x[:, THETA_S], beta_rad))
+    sun = sun_direction(x[:, THETA_S], beta_rad)
+    earth = np.broadcast_to(np.array(EARTH_HILL), sun.shape)
+    along_z = float(np.linalg.norm(np.cross(frames[0, 2], UP_HILL))) < POLE_GUARD
+    return ConeTrack(
+        name=cone.name, kind=cone.kind, target=cone.target, target_text=target_label(cone.target, cone.target_vector),
+        boresight_text=body_label(cone.boresight_body), half_angle_rad=cone.half_angle_rad,
+        boresight=project(body_axis_in_hill(A, cone.boresight_body), frames), sun=project(sun, frames),
+        earth=project(earth, frames), angle_rad=np.asarray(angle_rad, dtype=float),
+        applies=np.asarray(~np.isposinf(h)), limit=small_circle(frames[0, 2], cone.half_angle_rad, frames[0]),
+        up_text="+y_H" if along_z else "+z_H",
+    )  # fmt: skip
+
+
+def sky_track(run: SkyRun, cfg: Config, constraints: ConstraintSet | None = None) -> SkyTrack:
+    """The run's maps, one per pointing constraint (no matplotlib).
 
     Args:
         run: the run's samples and commands.
-        cfg: configuration (the exclusion and communication limits).
+        cfg: configuration (the pointing constraints, the sun's beta angle).
+        constraints: a ConstraintSet of cfg made once by a caller that maps many runs.
     """
     t = np.asarray(run.t_s, dtype=float)
     x = np.asarray(run.x, dtype=float)
-    frames = sun_frames(x[:, THETA_S])
     A = quat.attitude_matrices(x[:, Q])
-    earth = np.array(EARTH_HILL)
     inter = np.zeros(len(t), dtype=bool)
     inter[: len(run.u)] = intervened_steps(run)
-    angles = ConstraintSet(cfg).angles(x)
-    L = cfg.limits
-    snaps = np.unique(np.linspace(0, len(t) - 1, COMM_SNAPSHOTS).round().astype(int))
-    return SkyTrack(
-        t_s=t,
-        sensor=project(body_axis_in_hill(A, exclusion_zone.AXIS_BODY), frames),
-        antenna=project(body_axis_in_hill(A, communication.AXIS_BODY), frames),
-        earth=project(np.broadcast_to(earth, (len(t), 3)), frames),
-        intervened=inter,
-        keep_out=small_circle(frames[0, 2], L.exclusion_angle_rad, frames[0]),
-        comm_limits=tuple((float(t[k]), small_circle(earth, L.comm_angle_rad, frames[k])) for k in snaps),
-        sensor_sun_rad=angles["sensor_sun"],
-        antenna_earth_rad=angles["antenna_earth"],
-        keep_out_rad=L.exclusion_angle_rad,
-        comm_rad=L.comm_angle_rad,
-    )
+    cs = constraints or ConstraintSet(cfg)
+    angles = cs.angles(x)
+    h = cs.safety_values(x, t)
+    beta = cfg.environment.sun_beta_rad
+    return SkyTrack(t_s=t, intervened=inter,
+                    cones=tuple(cone_track(c, A, x, angles[c.name], h[:, cs.registry.index(c.name)], beta)
+                                for c in cfg.pointing))
 
 
-def _draw(ax: Any, plt: Any, label: str, tr: SkyTrack, norm: Any, cmap: Any) -> None:
-    """One run's panel."""
+def _grid(ax: Any, plt: Any, up_text: str) -> None:
+    """The rings of true angle from the centre, the axes and the up/down labels."""
     for r in RINGS_DEG:
         ax.add_patch(plt.Circle((0, 0), r, fill=False, color="0.8" if r < 180 else "0.4", lw=0.6 if r < 180 else 1.0))
         ax.text(r * np.cos(np.radians(RING_LABEL_AZIMUTH_DEG)), r * np.sin(np.radians(RING_LABEL_AZIMUTH_DEG)),
                 f"{r}°", fontsize=7, color="0.45", ha="center", va="bottom")
     ax.axhline(0.0, color="0.85", lw=0.6, zorder=0)
     ax.axvline(0.0, color="0.85", lw=0.6, zorder=0)
-    ax.text(2, 92, "+z_H", fontsize=7, color="0.45")
-    ax.text(2, -98, "-z_H", fontsize=7, color="0.45")
-    keep_deg = np.degrees(tr.keep_out_rad)
-    ax.fill(tr.keep_out[:, 0], tr.keep_out[:, 1], color="tab:red", alpha=0.15, lw=0)
-    ax.plot(tr.keep_out[:, 0], tr.keep_out[:, 1], color="tab:red", lw=1.5,
-            label=f"sensor keep-out: {keep_deg:.0f}° (FOV/2 + beta) from the sun")
-    comm_deg = np.degrees(tr.comm_rad)
-    for k, (t, curve) in enumerate(tr.comm_limits):
-        ax.plot(curve[:, 0], curve[:, 1], ls="--", lw=1.0, color=cmap(norm(t)),
-                label=f"antenna limit: {comm_deg:.0f}° (comm_fov/2) from Earth, at {len(tr.comm_limits)} times"
-                if k == 0 else None)
-    ax.scatter(tr.earth[:, 0], tr.earth[:, 1], c=tr.t_s, cmap=cmap, norm=norm, marker="D", s=14, lw=0,
-               label="Earth (-x_H, ground station)")
-    for name, pts, marker in (("antenna +j_B", tr.antenna, "s"), ("sensor +i_B", tr.sensor, "o")):
-        ax.scatter(pts[:, 0], pts[:, 1], c=tr.t_s, cmap=cmap, norm=norm, marker=marker, s=16, lw=0, label=name)
-        hit = tr.intervened
-        ax.scatter(pts[hit, 0], pts[hit, 1], color="k", marker=".", s=1.5, lw=0)
-    for name, pts in (("+j_B", tr.antenna), ("+i_B", tr.sensor), ("Earth", tr.earth)):
-        ax.annotate(name, pts[0], xytext=(8, 8), textcoords="offset points", fontsize=8, zorder=6,
-                    bbox={"boxstyle": "round,pad=0.15", "fc": "white", "alpha": 0.75, "lw": 0})
-        ax.scatter(*pts[0], marker="o", s=70, facecolors="none", edgecolors="k", lw=1.0, zorder=4)
-        ax.scatter(*pts[-1], marker="X", s=50, color="k", lw=0, zorder=4)
-    ax.scatter([0.0], [0.0], marker="*", s=260, color="gold", edgecolors="k", linewidths=0.6, zorder=5, label="sun")
+    ax.text(2, 92, up_text, fontsize=7, color="0.45")
+    ax.text(2, -98, up_text.replace("+", "-"), fontsize=7, color="0.45")
+
+
+def _limit(ax: Any, plt: Any, cone: ConeTrack) -> None:
+    """The cone's limit about the centre: a keep_out's disc or a keep_in's outer ring shaded (where the
+    boresight must not go), its circle drawn."""
+    from matplotlib.patches import Wedge
+
+    half_deg = math.degrees(cone.half_angle_rad)
+    if cone.keep_in:
+        ax.add_patch(Wedge((0, 0), 180.0, 0.0, 360.0, width=180.0 - half_deg, color="tab:red", alpha=0.12, lw=0))
+    else:
+        ax.fill(cone.limit[:, 0], cone.limit[:, 1], color="tab:red", alpha=0.15, lw=0)
+    word = "keep in" if cone.keep_in else "keep out"
+    ax.plot(cone.limit[:, 0], cone.limit[:, 1], color=KIND_COLORS[cone.kind], lw=1.5,
+            label=f"{cone.name}: {word}, {half_deg:.0f}° from the {cone.target_text}")
+
+
+def _tracks(ax: Any, tr: SkyTrack, cone: ConeTrack, norm: Any, cmap: Any) -> None:
+    """The boresight, and the sun and the Earth where they are not the centre, coloured by time."""
+    for name, pts, target, marker in (("sun", cone.sun, "sun", "*"), ("Earth (-x_H)", cone.earth, "earth", "D")):
+        if cone.target != target:
+            ax.scatter(pts[:, 0], pts[:, 1], c=tr.t_s, cmap=cmap, norm=norm, marker=marker, s=14, lw=0, label=name)
+    on, off = cone.applies, ~cone.applies
+    pts = cone.boresight
+    ax.scatter(pts[on, 0], pts[on, 1], c=tr.t_s[on], cmap=cmap, norm=norm, marker="o", s=16, lw=0,
+               label=f"{cone.boresight_text} boresight")
+    if off.any():
+        ax.scatter(pts[off, 0], pts[off, 1], c=tr.t_s[off], cmap=cmap, norm=norm, marker="o", s=5, lw=0, alpha=0.3,
+                   label="outside its windows")
+    hit = tr.intervened
+    ax.scatter(pts[hit, 0], pts[hit, 1], color="k", marker=".", s=1.5, lw=0)
+    ax.annotate(cone.boresight_text, pts[0], xytext=(8, 8), textcoords="offset points", fontsize=8, zorder=6,
+                bbox={"boxstyle": "round,pad=0.15", "fc": "white", "alpha": 0.75, "lw": 0})
+    ax.scatter(*pts[0], marker="o", s=70, facecolors="none", edgecolors="k", lw=1.0, zorder=4)
+    ax.scatter(*pts[-1], marker="X", s=50, color="k", lw=0, zorder=4)
+    marker, color, size = CENTRE_MARKERS.get(cone.target, ("P", "k", 90))
+    ax.scatter([0.0], [0.0], marker=marker, s=size, color=color, edgecolors="k", linewidths=0.6, zorder=5,
+               label=f"{cone.target_text} (the centre)")
+
+
+def _title(label: str, cone: ConeTrack) -> str:
+    """'<run>: <name>' and the extreme angle that the limit bounds, over the samples where it applies."""
+    worst = "max" if cone.keep_in else "min"
+    theta = np.degrees(cone.angle_rad[cone.applies])
+    where = " in its windows" if not cone.applies.all() else ""
+    value = f"{(theta.max() if cone.keep_in else theta.min()):.1f}°" if theta.size else "n/a (never in a window)"
+    return (f"{label}: {cone.name}\n{cone.boresight_text} to {cone.target_text}: {worst}{where} {value} "
+            f"(limit {limit_text(cone.kind, cone.half_angle_rad).replace(' deg', '°')})")
+
+
+def _draw(ax: Any, plt: Any, label: str, tr: SkyTrack, cone: ConeTrack, norm: Any, cmap: Any) -> None:
+    """One cone's map of one run."""
+    _grid(ax, plt, cone.up_text)
+    _limit(ax, plt, cone)
+    _tracks(ax, tr, cone, norm, cmap)
     handles, labels = ax.get_legend_handles_labels()
     handles += [ax.scatter([], [], marker="o", s=70, facecolors="none", edgecolors="k", lw=1.0),
-                ax.scatter([], [], marker="X", s=50, color="k", lw=0)]
-    labels += ["start of a track", "end of a track"]
-    core = (ax.scatter([], [], marker="o", s=16, color="0.75", lw=0), ax.scatter([], [], marker=".", s=4, color="k"))
-    handles.append(core)
-    labels.append(f"black core: the filter changed the command ({int(tr.intervened.sum())} of {len(tr.t_s) - 1} "
-                  "steps)")
-    ez, gs = np.degrees(tr.sensor_sun_rad), np.degrees(tr.antenna_earth_rad)
-    ax.set_title(f"{label}\nsensor-sun min {ez.min():.1f}° (limit >= {keep_deg:.0f}°), "
-                 f"antenna-Earth max {gs.max():.1f}° (limit <= {comm_deg:.0f}°)", fontsize=9)
+                ax.scatter([], [], marker="X", s=50, color="k", lw=0),
+                (ax.scatter([], [], marker="o", s=16, color="0.75", lw=0), ax.scatter([], [], marker=".", s=4,
+                                                                                       color="k"))]
+    labels += ["start of the track", "end of the track",
+               f"black core: the filter changed the command ({int(tr.intervened.sum())} of {len(tr.t_s) - 1} steps)"]
+    ax.set_title(_title(label, cone), fontsize=9)
     ax.set_xlim(-190, 190)
     ax.set_ylim(-190, 190)
     ax.set_aspect("equal")
-    ax.set_xlabel("centre: the sun; radius: angle from the sun [deg]; up: orbit normal z_H; right: r_S x z_H",
-                  fontsize=8)
+    ax.set_xlabel(f"centre: the {cone.target_text}; radius: angle from it [deg]; up: {cone.up_text}; "
+                  "right: centre x up", fontsize=8)
     ax.set_xticks([])
     ax.set_yticks([])
     for side in ax.spines.values():
@@ -263,11 +350,12 @@ def _draw(ax: Any, plt: Any, label: str, tr: SkyTrack, norm: Any, cmap: Any) -> 
 
 
 def plot_skymap(runs: Sequence[tuple[str, SkyRun]], cfg: Config, path: str | Path, title: str = "") -> Path:
-    """Draw the sky map of one or more runs (one panel each, side by side, one time scale) and save it as PNG.
+    """Draw the sky maps of one or more runs (one map per pointing constraint, MAP_COLUMNS to a row; each run's
+    maps on rows of their own; one time scale) and save them as PNG.
 
     Args:
         runs: (label, run) pairs.
-        cfg: configuration (limits).
+        cfg: configuration (the pointing constraints).
         path: output PNG path.
         title: figure title.
 
@@ -275,17 +363,27 @@ def plot_skymap(runs: Sequence[tuple[str, SkyRun]], cfg: Config, path: str | Pat
         The path written.
     """
     plt = _pyplot()
-    tracks = [(label, sky_track(run, cfg)) for label, run in runs]
+    constraints = ConstraintSet(cfg)
+    tracks = [(label, sky_track(run, cfg, constraints)) for label, run in runs]
+    n_cones = len(cfg.pointing)
+    columns = max(1, min(n_cones, MAP_COLUMNS))
+    rows_per_run = max(1, -(-n_cones // columns))
     cmap = plt.get_cmap(TIME_CMAP)
     norm = plt.Normalize(min(float(tr.t_s[0]) for _, tr in tracks), max(float(tr.t_s[-1]) for _, tr in tracks))
-    fig, axes = plt.subplots(1, len(tracks), figsize=(7.4 * len(tracks) + 1.0, 7.8), squeeze=False,
-                             layout="constrained")
-    for ax, (label, tr) in zip(axes[0], tracks):
-        _draw(ax, plt, label, tr, norm, cmap)
-    fig.colorbar(plt.cm.ScalarMappable(norm=norm, cmap=cmap), ax=list(axes[0]), shrink=0.7, label="t [s]")
-    fig.suptitle(title or "boresights on the sky, sun-centred")
+    fig, axes = plt.subplots(rows_per_run * len(tracks), columns, figsize=(7.4 * columns + 1.0,
+                             7.8 * rows_per_run * len(tracks)), squeeze=False, layout="constrained")
+    for r, (label, tr) in enumerate(tracks):
+        panels = list(axes[r * rows_per_run:(r + 1) * rows_per_run].ravel())
+        for ax, cone in zip(panels, tr.cones, strict=False):
+            _draw(ax, plt, label, tr, cone, norm, cmap)
+        for ax in panels[len(tr.cones):]:
+            ax.set_axis_off()
+            if not tr.cones:
+                ax.text(0.5, 0.5, f"{label}: no pointing constraint configured", ha="center", transform=ax.transAxes)
+    fig.colorbar(plt.cm.ScalarMappable(norm=norm, cmap=cmap), ax=list(axes.ravel()), shrink=0.7, label="t [s]")
+    fig.suptitle(title or "boresights on the sky, each centred on its constraint's target")
     return _save(plt, fig, path)
 
 
-__all__ = ["SkyRun", "SkyTrack", "body_axis_in_hill", "intervened_steps", "plot_skymap", "project", "ring",
-           "sky_track", "small_circle", "sun_frames"]
+__all__ = ["ConeTrack", "SkyRun", "SkyTrack", "body_axis_in_hill", "cone_track", "intervened_steps", "map_frames",
+           "plot_skymap", "project", "ring", "sky_track", "small_circle", "sun_frames"]

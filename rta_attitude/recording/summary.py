@@ -9,7 +9,8 @@ from typing import Any
 
 import numpy as np
 
-from rta_attitude.config.schema import CONSTRAINT_NAMES, Config
+from rta_attitude.config.schema import Config
+from rta_attitude.constraints.registry import registry
 from rta_attitude.dynamics.state import STATE_NAMES
 from rta_attitude.files import atomic
 from rta_attitude.recording.analysis import RESIDUAL_TOLERANCE, BagRun
@@ -24,8 +25,11 @@ def summarize_run(run: BagRun, cfg: Config) -> dict[str, Any]:
     """
     meta = {"scenario": run.scenario, "rta": run.rta, "preset": run.preset if run.rta else None,
             "config": cfg.source, "dt_s": run.dt_s, "substeps": cfg.substeps}
+    constraints = registry(cfg)
+    if constraints.names != run.names:
+        raise ValueError(f"the run's constraints {run.names} are not the configuration's {constraints.names}")
     out = summarize(
-        run.names, run.t_s, run.h, run.h_substep_min, run.h_substep_argmin_s, run.omega_dot,
+        constraints, run.t_s, run.h, run.h_substep_min, run.h_substep_argmin_s, run.omega_dot,
         cfg.limits.omega_dot_max_rad_s2, run.slack if run.rta else None, run.intervening if run.rta else None,
         run.box_active if run.rta else None, run.status if run.rta else None, run.fallback if run.rta else None,
         run.solve_time_s if run.rta else None, run.slacked, meta,
@@ -79,9 +83,9 @@ def compare_summaries(a: Mapping[str, Any], b: Mapping[str, Any]) -> list[dict[s
             and not isinstance(va, bool) and not isinstance(vb, bool) else None
         rows.append({"quantity": name, "a": va, "b": vb, "b_minus_a": diff})
 
-    for name in CONSTRAINT_NAMES:
-        ca, cb = a["constraints"].get(name), b["constraints"].get(name)
-        if ca is None or cb is None:
+    for name, ca in a["constraints"].items():
+        cb = b["constraints"].get(name)
+        if cb is None:
             continue
         row(f"{name} min h [{ca['unit']}]", ca["min_h"], cb["min_h"])
         row(f"{name} first violation [s]", ca["first_violation_s"], cb["first_violation_s"])

@@ -34,7 +34,7 @@ from std_msgs.msg import ColorRGBA
 from visualization_msgs.msg import Marker, MarkerArray
 
 from rta_attitude import topics
-from rta_attitude.dynamics import spacecraft
+from rta_attitude.config.schema import PointingConstraint
 from rta_attitude.dynamics.sensors import (
     F_CHARGE_AH,
     F_OMEGA,
@@ -50,7 +50,7 @@ from rta_attitude.dynamics.sensors import (
 from rta_attitude.dynamics.state import AXES, STATE_NAMES, STATE_SIZE, Q
 from rta_attitude.errors import MessageError
 from rta_attitude.filter.asif import FilterCounters, FilterResult
-from rta_attitude.recording.scene import Scene, margin_level
+from rta_attitude.recording.scene import Scene, margin_level, target_owners
 
 Array = NDArray[np.float64]
 NS_PER_S = 1_000_000_000
@@ -870,21 +870,53 @@ def run_status_from_msg(msg: Any) -> tuple[str, dict[str, Any]]:
 
 SCENE_NS = "rta_attitude"
 """Marker namespace of the scene; markers are replaced by (namespace, id) at every message."""
-SCENE_IDS: dict[str, int] = {
-    "body": 0, "axis_x": 1, "axis_y": 2, "axis_z": 3, "sensor": 4, "sensor_fov": 5, "sun": 6, "keep_out": 7,
-    "antenna": 8, "earth": 9, "comm": 10, "panel": 11, "text": 12,
-}  # fmt: skip
-"""Marker id of each part of the scene (tests and viewers find a part by its id)."""
-SCENE_LENGTHS: dict[str, float] = {
-    "axis": 0.8, "sensor": 1.6, "antenna": 1.6, "panel": 1.2, "sun": 2.4, "earth": 2.4, "sensor_fov": 1.2,
-    "keep_out": 2.0, "comm": 2.0,
-}  # fmt: skip
+SCENE_IDS: dict[str, int] = {"body": 0, "axis_x": 1, "axis_y": 2, "axis_z": 3, "panel": 4, "text": 5}
+"""Marker id of each part of the scene that does not depend on the configuration (tests and viewers find a part
+by its id); the cones' parts follow (`cone_marker_ids`)."""
+CONE_ID_BASE = 10
+CONE_ID_STRIDE = 3
+"""Pointing constraint i (its place in `constraints.pointing`) draws its boresight with id CONE_ID_BASE +
+CONE_ID_STRIDE i, its cone with the next id, and, if it is the first cone aimed at its target, the target's
+arrow with the one after (`cone_marker_ids`): ids that stay put while the cones' list keeps its order."""
+SCENE_LENGTHS: dict[str, float] = {"axis": 0.8, "panel": 1.2, "boresight": 1.6, "target": 2.4, "cone": 2.0}
 """Drawn lengths in scene units (directions matter, lengths do not; the body box is not to scale)."""
+BORESIGHT_STEP = 0.1
+"""Boresight i is drawn BORESIGHT_STEP (i % 3) shorter, so that boresights along one axis stay apart."""
 BODY_BOX = (0.5, 0.35, 0.2)
 CONE_GENERATORS = 8
 CONE_RIM_POINTS = 24
 LEVEL_RGBA = ((0.2, 0.8, 0.2, 1.0), (1.0, 0.6, 0.0, 1.0), (0.9, 0.1, 0.1, 1.0))
 """Colour of a margin level (recording.scene.margin_level): ok, within the warning band, violated."""
+INACTIVE_RGBA = (0.6, 0.6, 0.6, 1.0)
+"""A boresight outside its cone's windows (the constraint does not apply there)."""
+KIND_RGBA = {"keep_out": (1.0, 0.3, 0.1, 0.8), "keep_in": (0.3, 0.55, 1.0, 0.8)}
+"""A cone by kind: keep_out red-ish, keep_in blue-ish."""
+INACTIVE_CONE_ALPHA = 0.2
+"""A cone's opacity outside its windows."""
+TARGET_RGBA = {"sun": (1.0, 0.85, 0.1, 1.0), "earth": (0.2, 0.45, 1.0, 1.0)}
+OTHER_TARGET_RGBA = (0.65, 0.35, 0.85, 1.0)
+TEXT_RGBA = (1.0, 1.0, 1.0, 1.0)
+TEXT_SENTINEL_CHARS = 16
+"""Length of the sentinel texts the templates are serialized with (bytes 0x01: found once)."""
+
+
+def cone_marker_ids(index: int) -> tuple[int, int, int]:
+    """(boresight, cone, target arrow) marker ids of pointing constraint `index` (CONE_ID_BASE)."""
+    first = CONE_ID_BASE + CONE_ID_STRIDE * index
+    return first, first + 1, first + 2
+
+
+def scene_marker_ids(cones: Sequence[PointingConstraint]) -> dict[str, int]:
+    """Every marker id of the scene of these pointing constraints by part: SCENE_IDS, then for each cone
+    '<name>/boresight', '<name>/cone' and, for the first cone aimed at a target, '<name>/target'."""
+    ids = dict(SCENE_IDS)
+    owners = target_owners(cones)
+    for i, cone in enumerate(cones):
+        bore, cone_id, target = cone_marker_ids(i)
+        ids[f"{cone.name}/boresight"], ids[f"{cone.name}/cone"] = bore, cone_id
+        if owners[i] == i:
+            ids[f"{cone.name}/target"] = target
+    return ids
 
 
 def cone_points(half_angle_rad: float, length: float) -> Array:
@@ -903,7 +935,7 @@ def cone_points(half_angle_rad: float, length: float) -> Array:
 def x_to(d: Array) -> Array:
     """The unit quaternion (x y z w) of the shortest rotation that takes +x to the unit vector d (the pose
     of a cone drawn about +x): vector part +x cross d = (0, -d_z, d_y), scalar part 1 + d_x, normalised;
-    a half turn about z for d = -x. Plain floats: the scene node calls it twice a step."""
+    a half turn about z for d = -x. Plain floats: the scene node calls it for every cone at every step."""
     dx, dy, dz = float(d[0]), float(d[1]), float(d[2])
     w = 1.0 + dx
     n = math.sqrt(w * w + dy * dy + dz * dz)
@@ -912,129 +944,165 @@ def x_to(d: Array) -> Array:
     return np.array([0.0, -dz / n, dy / n, w / n])
 
 
-def _set_quaternion(o: Any, q: Array) -> None:
-    o.x, o.y, o.z, o.w = (float(c) for c in q)
+def _cdr_string_tail(data: bytes | bytearray, start: int) -> int:
+    """The offset just past a CDR string whose uint32 length field is at `start`."""
+    return start + 4 + struct.unpack_from("<I", data, start)[0]
 
 
 class SceneBuilder:
     """The scene's two messages for one state, serialized: a geometry_msgs/TransformStamped hill -> body
     (rotation = q: it maps body vectors to Hill, A(q)^T) and a visualization_msgs/MarkerArray in the hill
-    frame (SCENE_IDS): the body box (pose q) and its axes, the sensor boresight +i_B and its field of view
-    (half-angle FOV/2), the sun and the keep-out cone (FOV/2 + beta), the antenna +j_B, the Earth and the
-    communication cone (comm_fov/2), the panel normal +k_B and a text (TEXT_BYTES, padded with spaces).
-    Arrows are two points (tail at the origin, head along the direction); cones are LINE_LISTs about +x
-    (`cone_points`) posed by `x_to` their axis. The sensor and its field of view are coloured by the
-    exclusion-zone margin, the antenna by the communication margin (LEVEL_RGBA).
+    frame: the body box (pose q) and its axes, the panel normal, and for each configured pointing constraint
+    (`cone_marker_ids`) an arrow along its boresight, coloured by its margin (LEVEL_RGBA; grey outside its
+    windows), and a cone of its half-angle about its target (KIND_RGBA: keep_out red-ish, keep_in
+    blue-ish; faint outside its windows); one arrow per distinct target (TARGET_RGBA), drawn with the first
+    cone aimed at it; and a text (SCENE_IDS["text"]). Arrows are two points (tail at the origin, head along
+    the direction); cones are LINE_LISTs about +x (`cone_points`) posed by `x_to` their target.
 
-    Speed: the scene node may draw every step of the lockstep loop, and building and serializing ~13
+    Speed: the scene node may draw every step of the lockstep loop, and building and serializing ~15
     markers with ~200 points through rclpy took ~0.4 ms a step. So both messages are built once as
     message objects, serialized by rclpy into templates, and each `build` writes only what changes (stamps,
-    arrow heads, poses, colours, the text, all fixed-size) into the templates' bytes at offsets found once
-    by serializing marker values; a test decodes the result with rosbags.
+    arrow heads, poses, colours: all fixed-size) into the templates' bytes at offsets found once by
+    serializing marker values; a test decodes the result with rosbags.
+
+    The text is the one field whose size changes. The text marker is the array's last element, so the bytes
+    after its text are only the rest of that marker (empty mesh fields), whose CDR bytes depend on nothing but
+    where they start modulo 4 (their alignment): `build` writes the template up to the text's length field,
+    then the text's own length, its bytes and NUL, then the rest for that alignment (the four variants are
+    taken from rclpy at construction). A text is thus sent at its own length, without padding, up to
+    TEXT_BYTES (longer texts are cut).
 
     Args:
-        sensor_fov_rad: the sensor's full field of view (limits.exclusion_fov_rad).
-        keep_out_rad, comm_rad: FOV/2 + beta and comm_fov/2.
+        cones: the configuration's pointing constraints (`Config.pointing`), in order.
         warn_rad: margins below this are drawn as warnings.
     """
 
-    TEXT_BYTES = 240
-    """The text marker's length in bytes (ASCII; longer texts are cut)."""
+    TEXT_BYTES = 1024
+    """The longest text sent, in bytes (ASCII; longer texts are cut)."""
 
-    def __init__(self, sensor_fov_rad: float, keep_out_rad: float, comm_rad: float, warn_rad: float) -> None:
+    def __init__(self, cones: Sequence[PointingConstraint], warn_rad: float) -> None:
         from rclpy.serialization import serialize_message  # here: this module is read without rclpy (bags)
 
         self.warn_rad = warn_rad
+        self.cones = tuple(cones)
+        self.ids = scene_marker_ids(self.cones)
+        self.owners = target_owners(self.cones)
         transform = TransformStamped()
         transform.header.frame_id = topics.HILL_FRAME
         transform.child_frame_id = topics.BODY_FRAME
-        m: dict[str, Marker] = {}
-        L = SCENE_LENGTHS
-        grey, axis_rgba = (0.6, 0.6, 0.6, 1.0), ((0.9, 0.2, 0.2, 1.0), (0.2, 0.8, 0.2, 1.0), (0.3, 0.5, 1.0, 1.0))
-
-        def shape(name: str, kind: int, scale: tuple[float, float, float], rgba: tuple[float, ...]) -> Marker:
-            mk = Marker()
-            mk.header.frame_id = topics.HILL_FRAME
-            mk.ns, mk.id, mk.action, mk.type = SCENE_NS, SCENE_IDS[name], Marker.ADD, kind
-            mk.pose.orientation.w = 1.0
-            mk.scale.x, mk.scale.y, mk.scale.z = scale
-            mk.color = ColorRGBA(r=rgba[0], g=rgba[1], b=rgba[2], a=rgba[3])
-            m[name] = mk
-            return mk
-
-        def arrow(name: str, rgba: tuple[float, ...], shaft: float) -> None:
-            shape(name, Marker.ARROW, (shaft, 2.0 * shaft, 3.0 * shaft), rgba).points = [Point(), Point(x=1.0)]
-
-        shape("body", Marker.CUBE, BODY_BOX, (0.75, 0.75, 0.8, 0.9))
-        for i, a in enumerate("xyz"):
-            arrow(f"axis_{a}", axis_rgba[i], 0.03)
-        arrow("sensor", LEVEL_RGBA[0], 0.05)
-        for name, half, rgba in (("sensor_fov", sensor_fov_rad / 2, LEVEL_RGBA[0]),
-                                 ("keep_out", keep_out_rad, (1.0, 0.3, 0.1, 0.8)),
-                                 ("comm", comm_rad, (0.3, 0.55, 1.0, 0.8))):
-            shape(name, Marker.LINE_LIST, (0.01, 0.0, 0.0), rgba).points = [
-                Point(x=float(p[0]), y=float(p[1]), z=float(p[2])) for p in cone_points(half, L[name])]
-        arrow("sun", (1.0, 0.85, 0.1, 1.0), 0.06)
-        arrow("antenna", LEVEL_RGBA[0], 0.05)
-        arrow("earth", (0.2, 0.45, 1.0, 1.0), 0.06)
-        arrow("panel", grey, 0.04)
-        shape("text", Marker.TEXT_VIEW_FACING, (0.0, 0.0, 0.15), (1.0, 1.0, 1.0, 1.0)).pose.position.z = 2.8
-        _set_quaternion(m["comm"].pose.orientation, x_to(np.array(spacecraft.EARTH_HILL)))
-        markers = MarkerArray(markers=sorted(m.values(), key=lambda mk: mk.id))
+        markers, text_marker = self._markers()
+        by_id = {mk.id: mk for mk in (*markers, text_marker)}
+        m = {name: by_id[i] for name, i in self.ids.items()}
         # sentinels: values that occur nowhere else in the serialized messages, one per field written later
         sentinel = iter(range(1, 1_000_000))
 
-        def mark(obj: Any, fields: str) -> tuple[float, ...]:
-            vals = tuple(1.0e300 / (7 + next(sentinel)) for _ in fields)  # float64 values no real field holds
+        def mark(obj: Any, fields: str, single: bool = False) -> tuple[float, ...]:
+            """Distinct values no real field holds, set into obj's fields (float32-exact for the colours)."""
+            vals = tuple(float(np.float32(1.0e30 / (7 + next(sentinel)))) if single else 1.0e300 / (7 + next(sentinel))
+                         for _ in fields)
             for f, v in zip(fields, vals, strict=True):
                 setattr(obj, f, v)
             return vals
 
-        stamps, rgba_marks, text = [], {}, b"\x01" * self.TEXT_BYTES
-        for i, mk in enumerate(markers.markers):
+        stamps = []
+        for i, mk in enumerate((*markers, text_marker)):
             mk.header.stamp = Time(sec=0x5CE70000 + i, nanosec=0x0A0B0C00 + i)
             stamps.append(struct.pack("<iI", mk.header.stamp.sec, mk.header.stamp.nanosec))
         transform.header.stamp = Time(sec=0x5CE7FFFF, nanosec=0x0A0B0CFF)
-        heads = {name: mark(m[name].points[1], "xyz") for name in
-                 ("axis_x", "axis_y", "axis_z", "sensor", "antenna", "panel", "sun", "earth")}
-        poses = {name: mark(m[name].pose.orientation, "xyzw") for name in ("body", "sensor_fov", "keep_out")}
+        head_names = ["axis_x", "axis_y", "axis_z", "panel", *(f"{c.name}/boresight" for c in self.cones),
+                      *(n for n in self.ids if n.endswith("/target"))]
+        heads = {name: mark(m[name].points[1], "xyz") for name in head_names}
+        poses = {name: mark(m[name].pose.orientation, "xyzw")
+                 for name in ("body", *(f"{c.name}/cone" for c in self.cones))}
         rotation = mark(transform.transform.rotation, "xyzw")
-        for name, code in (("sensor", 0.125), ("sensor_fov", 0.375), ("antenna", 0.625), ("text", 0.875)):
-            c = m[name].color
-            c.r, c.g, c.b, c.a = code, code + 1 / 64, code + 2 / 64, code + 3 / 64  # exact in float32
-            rgba_marks[name] = struct.pack("<4f", c.r, c.g, c.b, c.a)
-        m["text"].text = text.decode()
+        colours = {name: mark(m[name].color, "rgba", single=True)
+                   for name in ("text", *(f"{c.name}/{part}" for c in self.cones for part in ("boresight", "cone")))}
         self._tf = bytearray(serialize_message(transform))
-        self._mk = bytearray(serialize_message(markers))
-        if self._tf[:2] != b"\x00\x01" or self._mk[:2] != b"\x00\x01":
+        texts = ["\x01" * (TEXT_SENTINEL_CHARS + extra) for extra in range(4)]  # every alignment of the text's end
+        variants = []
+        for t in texts:
+            text_marker.text = t
+            variants.append(bytes(serialize_message(MarkerArray(markers=[*markers, text_marker]))))
+        if self._tf[:2] != b"\x00\x01" or variants[0][:2] != b"\x00\x01":
             raise RuntimeError("scene templates: expected little-endian CDR")
 
-        def at(buf: bytearray, pattern: bytes) -> int:
+        def at(buf: bytes | bytearray, pattern: bytes) -> int:
             i = buf.find(pattern)
             if i < 0 or buf.find(pattern, i + 1) >= 0:
                 raise RuntimeError("scene templates: a field was not found exactly once")
             return i
 
-        d8 = struct.Struct("<d")
+        self._text_length = at(variants[0], texts[0].encode()) - 4
+        if struct.unpack_from("<I", variants[0], self._text_length)[0] != TEXT_SENTINEL_CHARS + 1:
+            raise RuntimeError("scene templates: the text's length field is not where it was expected")
+        self._mk = bytearray(variants[0][:self._text_length])
+        self._tails: list[bytes] = [b""] * 4
+        for extra, buf in enumerate(variants):  # (rclpy leaves its padding bytes as they were: not compared)
+            if struct.unpack_from("<I", buf, self._text_length)[0] != TEXT_SENTINEL_CHARS + extra + 1:
+                raise RuntimeError("scene templates: the text moved with its length")
+            end = _cdr_string_tail(buf, self._text_length)
+            self._tails[(end - 4) % 4] = buf[end:]
+        d8, f4 = struct.Struct("<d"), struct.Struct("<f")
         self._mk_stamps = [at(self._mk, p) for p in stamps]
         self._tf_stamp = at(self._tf, struct.pack("<iI", transform.header.stamp.sec, transform.header.stamp.nanosec))
         self._tf_rotation = at(self._tf, b"".join(d8.pack(v) for v in rotation))
         self._heads = {n: at(self._mk, b"".join(d8.pack(v) for v in vals)) for n, vals in heads.items()}
         self._poses = {n: at(self._mk, b"".join(d8.pack(v) for v in vals)) for n, vals in poses.items()}
-        self._colors = {n: at(self._mk, p) for n, p in rgba_marks.items()}
-        self._text = at(self._mk, text)
-        initial_colors = {"sensor": LEVEL_RGBA[0], "sensor_fov": LEVEL_RGBA[0], "antenna": LEVEL_RGBA[0],
-                          "text": (1.0, 1.0, 1.0, 1.0)}
-        for name, rgba in initial_colors.items():
-            struct.pack_into("<4f", self._mk, self._colors[name], *rgba)
+        self._colors = {n: at(self._mk, b"".join(f4.pack(v) for v in vals)) for n, vals in colours.items()}
+        struct.pack_into("<4f", self._mk, self._colors["text"], *TEXT_RGBA)
+        for cone in self.cones:
+            struct.pack_into("<4f", self._mk, self._colors[f"{cone.name}/boresight"], *LEVEL_RGBA[0])
+            struct.pack_into("<4f", self._mk, self._colors[f"{cone.name}/cone"], *KIND_RGBA[cone.kind])
 
-    def _level_rgba(self, margin_rad: float) -> tuple[float, ...]:
+    def _markers(self) -> tuple[list[Marker], Marker]:
+        """The markers in id order, and the text marker (the array's last: see the class docstring)."""
+        L = SCENE_LENGTHS
+        axis_rgba = ((0.9, 0.2, 0.2, 1.0), (0.2, 0.8, 0.2, 1.0), (0.3, 0.5, 1.0, 1.0))
+        out: list[Marker] = []
+
+        def shape(marker_id: int, kind: int, scale: tuple[float, float, float], rgba: tuple[float, ...]) -> Marker:
+            mk = Marker()
+            mk.header.frame_id = topics.HILL_FRAME
+            mk.ns, mk.id, mk.action, mk.type = SCENE_NS, marker_id, Marker.ADD, kind
+            mk.pose.orientation.w = 1.0
+            mk.scale.x, mk.scale.y, mk.scale.z = scale
+            mk.color = ColorRGBA(r=rgba[0], g=rgba[1], b=rgba[2], a=rgba[3])
+            out.append(mk)
+            return mk
+
+        def arrow(marker_id: int, rgba: tuple[float, ...], shaft: float) -> None:
+            shape(marker_id, Marker.ARROW, (shaft, 2.0 * shaft, 3.0 * shaft), rgba).points = [Point(), Point(x=1.0)]
+
+        shape(SCENE_IDS["body"], Marker.CUBE, BODY_BOX, (0.75, 0.75, 0.8, 0.9))
+        for i, a in enumerate("xyz"):
+            arrow(SCENE_IDS[f"axis_{a}"], axis_rgba[i], 0.03)
+        arrow(SCENE_IDS["panel"], (0.6, 0.6, 0.6, 1.0), 0.04)
+        for i, cone in enumerate(self.cones):
+            bore, cone_id, target = cone_marker_ids(i)
+            arrow(bore, LEVEL_RGBA[0], 0.05)
+            shape(cone_id, Marker.LINE_LIST, (0.01, 0.0, 0.0), KIND_RGBA[cone.kind]).points = [
+                Point(x=float(p[0]), y=float(p[1]), z=float(p[2])) for p in cone_points(cone.half_angle_rad, L["cone"])]
+            if self.owners[i] == i:
+                arrow(target, TARGET_RGBA.get(cone.target, OTHER_TARGET_RGBA), 0.06)
+        text = Marker()
+        text.header.frame_id = topics.HILL_FRAME
+        text.ns, text.id, text.action, text.type = SCENE_NS, SCENE_IDS["text"], Marker.ADD, Marker.TEXT_VIEW_FACING
+        text.pose.orientation.w = 1.0
+        text.pose.position.z = 2.8
+        text.scale.z = 0.15
+        text.color = ColorRGBA(r=1.0, g=1.0, b=1.0, a=1.0)
+        return out, text
+
+    def _boresight_rgba(self, margin_rad: float) -> tuple[float, ...]:
+        if math.isinf(margin_rad) and margin_rad > 0:
+            return INACTIVE_RGBA
         return LEVEL_RGBA[int(margin_level(margin_rad, self.warn_rad))]
 
     def build(self, q: Array, sc: Scene, k: int, t_ns: int, text: str, text_level: int = 0) -> tuple[bytes, bytes]:
         """The serialized transform and markers of the state with attitude q (4,) (body in Hill, x y z w),
-        sample k of its scene `sc` (`recording.scene.scene_of_states`), stamped t_ns; `text` drawn in the
-        colour of `text_level` (0 ok: white, 1 warning, 2 error)."""
+        sample k of its scene `sc` (`recording.scene.scene_of_states`, of the same pointing constraints),
+        stamped t_ns; `text` (ASCII; NULs dropped, cut at TEXT_BYTES) drawn in the colour of `text_level`
+        (0 ok: white, 1 warning, 2 error)."""
         L = SCENE_LENGTHS
         sec, nanosec = divmod(int(t_ns), NS_PER_S)
         mk, tf = self._mk, self._tf
@@ -1047,24 +1115,30 @@ class SceneBuilder:
         axes = sc.body_axes[k] * L["axis"]
         for i, a in enumerate("xyz"):
             struct.pack_into("<3d", mk, self._heads[f"axis_{a}"], *axes[i].tolist())
-        for name in ("sensor", "antenna", "panel", "sun"):
-            struct.pack_into("<3d", mk, self._heads[name], *(getattr(sc, name)[k] * L[name]).tolist())
-        struct.pack_into("<3d", mk, self._heads["earth"], *(sc.earth * L["earth"]).tolist())
-        struct.pack_into("<4d", mk, self._poses["sensor_fov"], *x_to(sc.sensor[k]).tolist())
-        struct.pack_into("<4d", mk, self._poses["keep_out"], *x_to(sc.sun[k]).tolist())
-        sensor = self._level_rgba(float(sc.sensor_margin_rad[k]))
-        struct.pack_into("<4f", mk, self._colors["sensor"], *sensor)
-        struct.pack_into("<4f", mk, self._colors["sensor_fov"], *sensor)
-        struct.pack_into("<4f", mk, self._colors["antenna"], *self._level_rgba(float(sc.antenna_margin_rad[k])))
-        struct.pack_into("<4f", mk, self._colors["text"], *(LEVEL_RGBA[text_level] if text_level else
-                                                            (1.0, 1.0, 1.0, 1.0)))
-        raw = text.encode("ascii", "replace")[: self.TEXT_BYTES]
-        mk[self._text:self._text + self.TEXT_BYTES] = raw + b" " * (self.TEXT_BYTES - len(raw))
-        return bytes(tf), bytes(mk)
+        struct.pack_into("<3d", mk, self._heads["panel"], *(sc.panel[k] * L["panel"]).tolist())
+        for i, (view, owner) in enumerate(zip(sc.cones, self.owners, strict=True)):
+            name = view.name
+            length = L["boresight"] - BORESIGHT_STEP * (i % 3)
+            struct.pack_into("<3d", mk, self._heads[f"{name}/boresight"], *(view.boresight[k] * length).tolist())
+            target = view.target_hill[k]
+            struct.pack_into("<4d", mk, self._poses[f"{name}/cone"], *x_to(target).tolist())
+            if owner == i:
+                struct.pack_into("<3d", mk, self._heads[f"{name}/target"], *(target * L["target"]).tolist())
+            margin = float(view.margin_rad[k])
+            struct.pack_into("<4f", mk, self._colors[f"{name}/boresight"], *self._boresight_rgba(margin))
+            r, g, b, a = KIND_RGBA[view.kind]
+            struct.pack_into("<4f", mk, self._colors[f"{name}/cone"], r, g, b,
+                             INACTIVE_CONE_ALPHA if math.isinf(margin) and margin > 0 else a)
+        struct.pack_into("<4f", mk, self._colors["text"], *(LEVEL_RGBA[text_level] if text_level else TEXT_RGBA))
+        raw = text.replace("\x00", "").encode("ascii", "replace")[: self.TEXT_BYTES]
+        end = self._text_length + 4 + len(raw) + 1
+        return bytes(tf), b"".join((mk, struct.pack("<I", len(raw) + 1), raw, b"\x00", self._tails[(end - 4) % 4]))
+
 
 __all__ = [
-    "NS_PER_S", "SCENE_IDS", "SCENE_NS", "STAMP_OFFSETS", "UNIT_NORM_EPS", "CdrLayout", "FilterStatusBuilder",
-    "Layouts", "SceneBuilder", "clock_cdr", "cone_points", "layouts", "state_cdr", "state_messages_cdr", "torque_cdr",
+    "CONE_ID_BASE", "CONE_ID_STRIDE", "NS_PER_S", "SCENE_IDS", "SCENE_NS", "STAMP_OFFSETS", "UNIT_NORM_EPS",
+    "CdrLayout", "FilterStatusBuilder", "Layouts", "SceneBuilder", "clock_cdr", "cone_marker_ids", "cone_points",
+    "layouts", "scene_marker_ids", "state_cdr", "state_messages_cdr", "torque_cdr",
     "x_to", "battery_msg", "cdr_stamp_ns", "clock_msg",
     "diagnostic_values", "filter_record", "filter_status_msg", "odometry_fields", "odometry_msg",
     "quaternion_from_msg", "state_fields", "state_messages", "wheels_msg",

@@ -236,7 +236,7 @@ class FilterNode(RtaNode):
     # ------------------------------------------------------------------ the call
     def _filter(self, t_ns: int, x: np.ndarray, tau_des: np.ndarray, source: str) -> None:
         D = self.cfg.spacecraft.wheel_inertia_kgm2
-        res = self.filter.filter(x, torque_to_wheel_accel(tau_des, D))
+        res = self.filter.filter(x, torque_to_wheel_accel(tau_des, D), self.sim_s(t_ns))  # t from the state's stamp
         res = self._guard(res)
         self.answered_ns = max(self.answered_ns, t_ns)
         self.out[topics.TORQUE_CMD].publish(convert.torque_cdr(wheel_accel_to_torque(res.u, D), t_ns))
@@ -261,7 +261,7 @@ class FilterNode(RtaNode):
         record = res.record.copy()
         record["u"] = record["u_held"] = 0.0
         record["status"], record["fallback"] = outcome.FALLBACK, outcome.OUTPUT_GUARD
-        return FilterResult(record, res.policy, res.levels)
+        return FilterResult(record, res.policy, res.levels, res.names)
 
     def close(self) -> None:
         super().close()

@@ -20,10 +20,10 @@ publishes, stamped like the state:
 - `scene/transform` (geometry_msgs/TransformStamped, hill -> body, rotation = the state's q), which
   Foxglove's and Lichtblick's 3D panels read as a transform on any topic (no tf2_msgs wheel on PyPI);
 - `scene/markers` (visualization_msgs/MarkerArray, frame hill; `convert.SceneBuilder`): the body and
-  its axes, the sensor boresight and field of view, the sun and the keep-out cone (FOV/2 + beta), the
-  antenna, the Earth and the communication cone, the panel normal, coloured by margin (ok, within
-  `scene_warn_deg`, violated), and a text with the time, the filter's status, the constraints it
-  intervenes for and the two pointing angles against their limits.
+  its axes, the panel normal, and for every configured pointing constraint its boresight (coloured by its
+  margin: ok, within `scene_warn_deg`, violated; grey outside its windows) and its cone about its target,
+  one arrow per distinct target, and a text (`scene_text`: lines of at most TEXT_LINE_CHARS) with the time,
+  the filter's status, the constraints it intervenes for and each cone's angle against its limit.
 
 The node (of its own) runs without use_sim_time (it draws by the states' stamps, and reading /clock would cost it a
 message a step); a state older than the last one drawn (a replay that starts over) starts it over.
@@ -31,7 +31,9 @@ message a step); a state older than the last one drawn (a replay that starts ove
 With RTA a state is drawn when its filter_status (same stamp) has come too, so the text belongs to the
 state drawn; a state whose status never comes (a filter that died) is drawn without it once
 PENDING_MAX later states are waiting. Every geometric fact comes from the core (`recording.scene`:
-A(q), the sun direction, the constraint axes and `ConstraintSet.angles`).
+A(q), the targets' directions, the boresights, `ConstraintSet.angles` and `safety_values`); the constraints'
+names come from the configuration (`Config.constraint_names`), so a node reads the filter_status of a
+filter of the same configuration.
 
 Bad input: a state that the fast CDR reader cannot read, with wrong names or non-finite values, is
 counted (`state_rejected`) and not drawn; nothing of the loop depends on this node.
@@ -39,8 +41,10 @@ counted (`state_rejected`) and not drawn; nothing of the loop depends on this no
 
 from __future__ import annotations
 
+import functools
 import math
 import struct
+import textwrap
 import time
 from collections.abc import Callable, Sequence
 from typing import Any
@@ -48,10 +52,10 @@ from typing import Any
 import numpy as np
 
 from rta_attitude import topics
-from rta_attitude.constraints import CONSTRAINT_NAMES, ConstraintSet
+from rta_attitude.constraints import ConstraintSet
 from rta_attitude.dynamics.state import STATE_NAMES, Q
 from rta_attitude.recording.cdr import Cdr, CdrError, read_diagnostics, read_state
-from rta_attitude.recording.scene import scene_of_states
+from rta_attitude.recording.scene import Scene, cone_text, scene_of_states
 from rta_attitude.ros import convert, interface, spin
 from rta_attitude.ros.spin import RtaNode
 
@@ -63,6 +67,8 @@ HOSTED_PENDING_MAX = 100_000
 executor may take many states before their statuses."""
 LEVELS = {"pass": 0, "solved": 1}
 """filter_status QP status -> text level (anything else, a fallback: 2)."""
+TEXT_LINE_CHARS = 60
+"""The scene text's longest line (longer ones are wrapped), so that it fits a 3D panel."""
 
 
 _U32 = struct.Struct("<I")
@@ -73,15 +79,21 @@ def _cdr_name(name: str) -> bytes:
 
 
 _GAVE_WAY = _cdr_name("gave_way")
-_CONSTRAINTS = tuple((n, _cdr_name(topics.CONSTRAINT_STATUS_PREFIX + n)) for n in CONSTRAINT_NAMES)
 
 
-def filter_summary(data: bytes) -> tuple[int, str, str, list[str]]:
+@functools.cache
+def _entry_names(names: tuple[str, ...]) -> tuple[tuple[str, bytes], ...]:
+    """Each constraint's name and its filter_status entry's name as CDR bytes."""
+    return tuple((n, _cdr_name(topics.CONSTRAINT_STATUS_PREFIX + n)) for n in names)
+
+
+def filter_summary(data: bytes, names: Sequence[str]) -> tuple[int, str, str, list[str]]:
     """(stamp [ns], message of the `filter` entry, gave_way, the constraints intervening) of a serialized
-    filter_status (little-endian CDR, the layout of `convert.FilterStatusBuilder`), read without decoding
-    its ~120 key-value pairs (a full read took ~0.1 ms, at every step): the `filter` entry's head, then its
-    last key `gave_way`, then each constraint entry's name and message (`intervening`, `ok`, `violated`) in
-    order. Raises CdrError on anything else (the caller then reads it with `read_diagnostics`)."""
+    filter_status (little-endian CDR, the layout of `convert.FilterStatusBuilder`) of the constraints `names`
+    (`Config.constraint_names`), read without decoding its ~120 key-value pairs (a full read took ~0.1 ms, at
+    every step): the `filter` entry's head, then its last key `gave_way`, then each constraint entry's name and
+    message (`intervening`, `ok`, `violated`) in order. Raises CdrError on anything else (the caller then reads
+    it with `read_diagnostics`)."""
     if len(data) < 8 or data[:2] != b"\x00\x01":
         raise CdrError("not little-endian CDR")
     c = Cdr(data)
@@ -97,7 +109,7 @@ def filter_summary(data: bytes) -> tuple[int, str, str, list[str]]:
     c.pos = i + len(_GAVE_WAY)
     gave_way = c.string()
     intervening = []
-    for name, pattern in _CONSTRAINTS:
+    for name, pattern in _entry_names(tuple(names)):
         j = data.find(pattern, c.pos)
         if j < 0:
             raise CdrError(f"no {name} entry")
@@ -107,12 +119,13 @@ def filter_summary(data: bytes) -> tuple[int, str, str, list[str]]:
     return t_ns, message, gave_way, intervening
 
 
-def summary_from_values(values: dict[str, dict[str, str]]) -> tuple[str, str, list[str]]:
-    """(message, gave_way, intervening) of a filter_status read by `recording.cdr.read_diagnostics`."""
+def summary_from_values(values: dict[str, dict[str, str]], names: Sequence[str]) -> tuple[str, str, list[str]]:
+    """(message, gave_way, intervening) of a filter_status read by `recording.cdr.read_diagnostics`, of the
+    constraints `names`."""
     qp = values.get(topics.QP_STATUS_NAME, {})
     status, fallback = qp.get(topics.KEY_STATUS, "?"), qp.get(topics.KEY_FALLBACK, topics.NO_FALLBACK)
     message = status + (f" ({fallback})" if fallback != topics.NO_FALLBACK else "")
-    inter = [n for n in CONSTRAINT_NAMES
+    inter = [n for n in names
              if values.get(topics.CONSTRAINT_STATUS_PREFIX + n, {}).get(topics.KEY_INTERVENING) == "true"]
     return message, qp.get("gave_way", ""), inter
 
@@ -124,6 +137,21 @@ def filter_text(message: str, gave_way: str, intervening: Sequence[str]) -> tupl
     if intervening:
         line += "\nintervening: " + ", ".join(intervening)
     return line, LEVELS.get(message.split(" ")[0], 2)
+
+
+def wrap_lines(text: str, width: int = TEXT_LINE_CHARS) -> str:
+    """text with every line longer than `width` broken at spaces (continuations indented two spaces; a word
+    longer than a line is broken too)."""
+    out: list[str] = []
+    for line in text.split("\n"):
+        out += textwrap.wrap(line, width, subsequent_indent="  ", break_on_hyphens=False) or [""]
+    return "\n".join(out)
+
+
+def scene_text(t_s: float, status: str, sc: Scene, k: int = 0) -> str:
+    """The scene's text at sample k of `sc`: the time and the filter's status lines (`filter_text`), then
+    one line per pointing constraint (`recording.scene.cone_text`), no line longer than TEXT_LINE_CHARS."""
+    return wrap_lines("\n".join([f"t = {t_s:.0f} s   {status}", *(cone_text(c, k) for c in sc.cones)]))
 
 
 class SceneNode(RtaNode):
@@ -143,9 +171,8 @@ class SceneNode(RtaNode):
         self.every: int = self.knobs["scene_every"]
         self.dt_ns = round(self.cfg.filter.sample_time_s * convert.NS_PER_S)
         self.constraints = ConstraintSet(self.cfg)
-        L = self.cfg.limits
-        self.builder = convert.SceneBuilder(L.exclusion_fov_rad, L.exclusion_angle_rad, L.comm_angle_rad,
-                                            math.radians(self.knobs["scene_warn_deg"]))
+        self.names = self.cfg.constraint_names
+        self.builder = convert.SceneBuilder(self.cfg.pointing, math.radians(self.knobs["scene_warn_deg"]))
         self.counts.update(state_rejected=0, drawn=0, drawn_without_status=0)
         # compiled kernels loaded (compiled on a cold cache, ~20-40 s) before any reader or writer exists: the
         # plant starts stepping once this node reads `state`, so it must be able to draw by then (a fresh
@@ -206,10 +233,10 @@ class SceneNode(RtaNode):
         """A serialized `filter_status` (its subscription's callback, or the host's call)."""
         try:
             try:
-                t_ns, *summary = filter_summary(data)
+                t_ns, *summary = filter_summary(data, self.names)
             except (CdrError, ValueError, IndexError, UnicodeDecodeError, struct.error):
                 t_ns, values = read_diagnostics(Cdr(data))
-                summary = list(summary_from_values(values))
+                summary = list(summary_from_values(values, self.names))
         except (CdrError, ValueError, IndexError, UnicodeDecodeError, struct.error):
             return  # the text then says the status is missing; the filter's own checks count bad statuses
         if t_ns <= self.drawn_ns or not self._wanted(t_ns):
@@ -228,11 +255,7 @@ class SceneNode(RtaNode):
         if info is None:
             info = ("filter off (no RTA)", 0) if not self.rta else ("filter status missing", 2)
         line, level = info
-        deg = math.degrees
-        text = (f"t = {t_s:.0f} s   {line}\nsensor-sun {deg(sc.sensor_sun_rad[0]):.1f} deg (keep-out "
-                f"{deg(sc.keep_out_rad):.1f})   antenna-Earth {deg(sc.antenna_earth_rad[0]):.1f} deg (limit "
-                f"{deg(sc.comm_rad):.1f})")
-        transform, markers = self.builder.build(x[Q], sc, 0, t_ns, text, level)
+        transform, markers = self.builder.build(x[Q], sc, 0, t_ns, scene_text(t_s, line, sc), level)
         self.outs[topics.SCENE_TRANSFORM].publish(transform)
         self.outs[topics.SCENE_MARKERS].publish(markers)
         if self.sink is not None:

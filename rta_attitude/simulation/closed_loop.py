@@ -24,9 +24,8 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
-from rta_attitude.config.schema import CONSTRAINT_NAMES, Config, Scenario
+from rta_attitude.config.schema import Config, Scenario
 from rta_attitude.constraints import ConstraintSet
-from rta_attitude.constraints.base import N_CONSTRAINTS
 from rta_attitude.constraints.geometry import CONTEXT_DTYPE
 from rta_attitude.constraints.rows import safety_values
 from rta_attitude.dynamics.controller import CONTROLLER_DTYPE, controller_record, desired_command, pd_command
@@ -68,7 +67,6 @@ from rta_attitude.simulation.trajectory import Trajectory, substep_minima
 
 Array = NDArray[np.float64]
 log = logging.getLogger(__name__)
-M = N_CONSTRAINTS
 
 LOOP_DTYPE = np.dtype([
     ("plant", PLANT_DTYPE),          # the spacecraft that is simulated
@@ -96,15 +94,16 @@ def loop_record(cfg: Config, rta: bool = True, pd: bool = True) -> NDArray[np.vo
 def advance(x: Array, y: Array, u_des: Array, k: int, lp: np.void, ins: np.void, ws: NDArray[np.void], r: np.void,
             u: Array,
             subs: Array, hs: Array, ctx: np.void, work: Array) -> None:
-    """Sample k of the loop from the true state x (19,), read as y (`sensors.read`: measured, then across
-    the message interface), with the
-    desired command u_des (3,), already across the torque interface: filter of y (result r) if RTA,
+    """Sample k (t = k dt) of the loop from the true state x (19,), read as y (`sensors.read`: measured, then
+    across the message interface), with the
+    desired command u_des (3,), already across the torque interface: filter of y at t (result r) if RTA,
     torque interface, the actuator (`sensors.actuate`, instruments ins) and its saturation (u), RK4 hold
     of x (subs (substeps, 19): the states after each substep, the last is x(t + dt)) and the safety
-    values of every substep (hs (substeps, m)). work: `rk4_work()` scratch."""
+    values of every substep at its time (hs (substeps, m)). work: `rk4_work()` scratch."""
     p = lp.plant
+    t = k * lp.dt_s
     if lp.rta:
-        filter_state(y, u_des, lp.filter, ws, r)
+        filter_state(y, u_des, t, lp.filter, ws, r)
         torque_round_trip(r.u, p, u)
     else:
         for a in range(3):
@@ -113,7 +112,7 @@ def advance(x: Array, y: Array, u_des: Array, k: int, lp: np.void, ins: np.void,
     saturate(u, p, u)
     rk4_hold(x, u, lp.dt_s, lp.substeps, p, subs, work)
     for j in range(lp.substeps):
-        safety_values(subs[j], p, lp.filter.constraints, ctx, hs[j])
+        safety_values(subs[j], t + lp.dt_s * (j + 1) / lp.substeps, p, lp.filter.constraints, ctx, hs[j])
 
 
 @numba.njit(**LEAF)
@@ -142,7 +141,7 @@ def run_scenario(x0: Array, steps: int, sched_t: Array, sched_q: Array, loop: ND
     subs = np.empty((lp.substeps, STATE_SIZE))
     work = np.zeros((RK4_WORK_ROWS, STATE_SIZE))
     X[0] = x0
-    safety_values(X[0], p, lp.filter.constraints, ctx[0], H[0])
+    safety_values(X[0], 0.0, p, lp.filter.constraints, ctx[0], H[0])
     for k in range(steps):
         t = k * lp.dt_s
         Q_C[k] = sched_q[_command_at(sched_t, t)]
@@ -184,7 +183,7 @@ class ClosedLoop:
         dt = float(lp[0]["dt_s"])
         n = round(self.scenario.duration_s / dt)
         if cfg.plant.simulator == "compiled":
-            run = StepArrays.empty(n, cfg.substeps)
+            run = StepArrays.empty(n, cfg.substeps, len(cfg.constraint_names))
             sched_t = np.asarray(self.scenario.schedule_s, dtype=float)
             sched_q = np.ascontiguousarray(self.scenario.schedule_q, dtype=float)
             run_scenario(np.ascontiguousarray(self.scenario.x0, dtype=float), n, sched_t, sched_q, lp, run.x,
@@ -202,16 +201,17 @@ class ClosedLoop:
         R = run.results
         t = dt * np.arange(n + 1)
         h_min, h_arg = substep_minima(run.h[:-1], np.moveaxis(run.h_sub, 1, 0), t[:-1], dt)
-        res = FilterResult(R, cfg.filter.fallback, cfg.filter.priorities)
+        res = FilterResult(R, cfg.filter.fallback, cfg.priority_levels, cfg.constraint_names)
         if self.rta:
             status, fallback = res.status, res.fallback
             bc, slack, inter, box = res.bc, res.slack, res.intervening, res.box_active
         else:
             status, fallback = np.full(n, "off"), np.full(n, "")
-            bc, slack, inter, box = (np.zeros((n, M)), np.zeros((n, M)), np.zeros((n, M), dtype=bool),
+            m = len(cfg.constraint_names)
+            bc, slack, inter, box = (np.zeros((n, m)), np.zeros((n, m)), np.zeros((n, m), dtype=bool),
                                      np.zeros((n, 3), dtype=bool))
         return Trajectory(
-            names=CONSTRAINT_NAMES, t_s=t, x=run.x, q_c=run.q_c, u_des=run.u_des, u=run.u, omega_dot=run.omega_dot,
+            names=cfg.constraint_names, t_s=t, x=run.x, q_c=run.q_c, u_des=run.u_des, u=run.u, omega_dot=run.omega_dot,
             h=run.h, h_substep_min=h_min, h_substep_argmin_s=h_arg, bc=bc, slack=slack, intervening=inter,
             box_active=box, status=np.asarray(status, dtype=str), fallback=np.asarray(fallback, dtype=str),
             iterations=R["iterations"].copy() if self.rta else np.zeros(n, dtype=np.int64),
@@ -246,10 +246,10 @@ class StepArrays:
     results: NDArray[np.void]
 
     @classmethod
-    def empty(cls, steps: int, substeps: int) -> StepArrays:
-        """Arrays for `steps` steps of `substeps` substeps (results zeroed)."""
-        return cls(np.empty((steps + 1, STATE_SIZE)), np.empty((steps, STATE_SIZE)), np.empty((steps + 1, M)),
-                   np.empty((steps, substeps, M)),
+    def empty(cls, steps: int, substeps: int, m: int) -> StepArrays:
+        """Arrays for `steps` steps of `substeps` substeps and m constraints (results zeroed)."""
+        return cls(np.empty((steps + 1, STATE_SIZE)), np.empty((steps, STATE_SIZE)), np.empty((steps + 1, m)),
+                   np.empty((steps, substeps, m)),
                    np.empty((steps, 4)), np.empty((steps, 3)), np.empty((steps, 3)), np.empty((steps, 3)),
                    np.zeros(steps, RESULT_DTYPE))
 
@@ -271,7 +271,7 @@ def run_stepped(cfg: Config, scenario: Scenario, steps: int, plant: Plant, filt:
         stream: the sensors' noise sequence (the Monte Carlo: the run's index).
     """
     S = cfg.substeps
-    run = StepArrays.empty(steps, S)
+    run = StepArrays.empty(steps, S, len(cfg.constraint_names))
     ctrl = controller_record(cfg, scenario.controller == "pd")
     truth = simulated_model(cfg)
     constraints = ConstraintSet(cfg)
@@ -280,7 +280,9 @@ def run_stepped(cfg: Config, scenario: Scenario, steps: int, plant: Plant, filt:
     sched_q = np.ascontiguousarray(scenario.schedule_q, dtype=float)
     instruments = Instruments(cfg, stream)
     run.x[0] = plant.x
-    run.h[0] = constraints.safety_values(plant.x)
+    run.h[0] = constraints.safety_values(plant.x, 0.0)
+    dt = plant.dt_s
+    sub_t = dt * np.arange(1, S + 1) / S
     for k in range(steps):
         x = run.x[k]
         run.y[k] = instruments.measure(x, k)
@@ -288,7 +290,7 @@ def run_stepped(cfg: Config, scenario: Scenario, steps: int, plant: Plant, filt:
         run.q_c[k] = sched_q[_command_at(sched_t, k * plant.dt_s)]
         run.u_des[k] = torque_to_wheel_accel(wheel_accel_to_torque(desired_command(y, run.q_c[k], ctrl), D), D)
         if filt is not None:
-            result = filt.filter(y, run.u_des[k])
+            result = filt.filter(y, run.u_des[k], k * dt)
             run.results[k] = result.record
             u = torque_to_wheel_accel(wheel_accel_to_torque(result.u, D), D)
         else:
@@ -296,7 +298,7 @@ def run_stepped(cfg: Config, scenario: Scenario, steps: int, plant: Plant, filt:
         run.u[k] = saturated(instruments.actuate(u, k), truth)
         run.omega_dot[k] = omega_dot(x, run.u[k], truth)
         x_next, subs = plant.step(run.u[k])
-        run.h_sub[k] = constraints.safety_values(subs)
+        run.h_sub[k] = constraints.safety_values(subs, k * dt + sub_t)
         run.x[k + 1] = x_next
         run.h[k + 1] = run.h_sub[k, -1]
     return run

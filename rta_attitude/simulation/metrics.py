@@ -9,16 +9,11 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from rta_attitude.config.schema import CONSTRAINT_NAMES
+from rta_attitude.config.schema import Config
+from rta_attitude.constraints.registry import Registry, registry
 from rta_attitude.dynamics.state import AXES
 
 Array = NDArray[np.float64]
-
-H_UNITS: dict[str, str] = {
-    "exclusion_zone": "rad", "communication": "rad", "temperature": "K", "battery": "J",
-    **{f"omega_{a}": "rad^2/s^2" for a in AXES}, **{f"psi_{a}": "rad^2/s^2" for a in AXES},
-}  # fmt: skip
-"""Unit of each constraint's h."""
 
 
 def first_violation(t_s: Array, h: Array) -> float | None:
@@ -28,7 +23,7 @@ def first_violation(t_s: Array, h: Array) -> float | None:
 
 
 def summarize(
-    names: tuple[str, ...],
+    constraints: Registry,
     t_s: Array,
     h: Array,
     h_substep_min: Array | None = None,
@@ -47,7 +42,8 @@ def summarize(
     """A run's summary as a JSON-ready dict.
 
     Args:
-        names: constraint names (m,).
+        constraints: the run's constraints (`constraints.registry`): names (m,), units, how h reads in
+            engineers' units (each constraint's `display`: deg, deg/s, K, J, rad/s).
         t_s: sample times (N + 1,), s.
         h: physical h at the samples (N + 1, m).
         h_substep_min, h_substep_argmin_s: minimum of h within each step and its time (N, m);
@@ -57,11 +53,13 @@ def summarize(
         slacked: names of the constraints that carry a slack (reported, not counted as failures).
         meta: extra fields copied into the summary.
     """
+    names = constraints.names
     out: dict[str, Any] = dict(meta or {})
     out["steps"] = int(len(t_s) - 1)
     out["duration_s"] = float(t_s[-1] - t_s[0])
     cons: dict[str, Any] = {}
     for i, name in enumerate(names):
+        info = constraints[name]
         hi = h[:, i]
         min_h, first = float(hi.min()), first_violation(t_s, hi)
         steps_violated = int(np.count_nonzero(hi < 0))
@@ -70,10 +68,12 @@ def summarize(
             sub = first_violation(h_substep_argmin_s[:, i], h_substep_min[:, i])
             if sub is not None and (first is None or sub < first):
                 first = sub
+        active = math.isfinite(min_h)  # a windowed cone has h = +inf outside its windows
         cons[name] = {
-            "min_h": min_h, "unit": H_UNITS.get(name, ""), "first_violation_s": first,
-            "violated_samples": steps_violated, "slacked": name in slacked,
-            "violated_initially": bool(hi[0] < 0),
+            "min_h": min_h if active else None, "unit": info.unit,
+            "min_margin": info.display(min_h) if active else None, "margin_unit": info.display_unit,
+            "first_violation_s": first, "violated_samples": steps_violated, "slacked": name in slacked,
+            "violated_initially": bool(hi[0] < 0), "active": active,
         }  # fmt: skip
     out["constraints"] = cons
     out["violated"] = sorted(n for n, c in cons.items() if c["first_violation_s"] is not None and not c["slacked"])
@@ -110,15 +110,16 @@ def summarize(
     return out
 
 
-def summarize_trajectory(traj: Any, omega_dot_max_rad_s2: float, slacked: tuple[str, ...]) -> dict[str, Any]:
-    """`summarize` of a simulation.Trajectory."""
+def summarize_trajectory(traj: Any, cfg: Config) -> dict[str, Any]:
+    """`summarize` of a simulation.Trajectory run with the configuration cfg (the scenario's: its slack
+    weights applied, `Config.for_scenario`)."""
     meta = {"scenario": traj.scenario, "rta": traj.rta, "preset": traj.preset if traj.rta else None}
     meta.update({k: v for k, v in traj.meta.items() if isinstance(v, (str, int, float, bool))})
     return summarize(
-        traj.names, traj.t_s, traj.h, traj.h_substep_min, traj.h_substep_argmin_s, traj.omega_dot,
-        omega_dot_max_rad_s2, traj.slack if traj.rta else None, traj.intervening if traj.rta else None,
+        registry(cfg), traj.t_s, traj.h, traj.h_substep_min, traj.h_substep_argmin_s, traj.omega_dot,
+        cfg.limits.omega_dot_max_rad_s2, traj.slack if traj.rta else None, traj.intervening if traj.rta else None,
         traj.box_active if traj.rta else None, traj.status if traj.rta else None,
-        traj.fallback if traj.rta else None, traj.solve_time_s if traj.rta else None, slacked, meta,
+        traj.fallback if traj.rta else None, traj.solve_time_s if traj.rta else None, cfg.slacked_constraints, meta,
     )  # fmt: skip
 
 
@@ -128,16 +129,19 @@ def format_summary(summary: dict[str, Any]) -> str:
     title = f"scenario {summary.get('scenario', '?')}  rta={rta}  duration {summary['duration_s']:.0f} s"
     if "simulator" in summary:
         title += f"  plant: {summary['simulator']}, filter model: {summary.get('filter_model', '?')}"
-    lines = [title, f"{'constraint':<16}{'min h':>14} {'unit':<10}{'first violation':>16}  note"]
-    for name in CONSTRAINT_NAMES:
-        c = summary["constraints"].get(name)
-        if c is None:
-            continue
+    lines = [title, f"{'constraint':<16}{'min h':>12} {'unit':<10}{'min margin':>12} {'unit':<6}"
+                     f"{'first violation':>16}  note"]
+    for name, c in summary["constraints"].items():
         fv = "-" if c["first_violation_s"] is None else f"{c['first_violation_s']:.1f} s"
         note = "slacked" if c["slacked"] else ("VIOLATED" if c["first_violation_s"] is not None else "ok")
         if c.get("violated_initially"):
             note += " (initial state outside the safe set)"
-        lines.append(f"{name:<16}{c['min_h']:>14.5g} {c['unit']:<10}{fv:>16}  {note}")
+        if c["min_h"] is None:
+            lines.append(f"{name:<16}{'-':>12} {c['unit']:<10}{'-':>12} {c['margin_unit']:<6}{fv:>16}  "
+                         f"not active (outside its windows)")
+            continue
+        lines.append(f"{name:<16}{c['min_h']:>12.4g} {c['unit']:<10}{c['min_margin']:>12.4g} {c['margin_unit']:<6}"
+                     f"{fv:>16}  {note}")
     for name, a in summary.get("angular_acceleration", {}).items():
         fv = "-" if a["first_exceed_s"] is None else f"{a['first_exceed_s']:.1f} s"
         lines.append(f"{name:<16}{a['max_abs_deg_s2']:>14.4g} {'deg/s^2 max':<10}{fv:>16}  limit {a['limit_deg_s2']:g}")
@@ -153,4 +157,4 @@ def format_summary(summary: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
-__all__ = ["H_UNITS", "first_violation", "format_summary", "summarize", "summarize_trajectory"]
+__all__ = ["first_violation", "format_summary", "summarize", "summarize_trajectory"]

@@ -1,9 +1,13 @@
 """Warm-start laws: simple closed-loop attitude laws whose exactly simulated trajectory is either a
 witness by itself or the optimiser's initial guess.
 
-The sun-safe attitude (rows i, j, k of the body axes in Hill): k_B = r_S (panel on the sun),
-j_B = the unit part of r_E perpendicular to r_S (antenna on the Earth side), i_B = j_B x k_B (sensor
-perpendicular to the sun). Laws (tried in LAWS order):
+The sun-safe attitude (`sun_safe_matrix`): the panel's normal p (`power.panel_normal_body`) on the sun, r_S,
+and, about that line, the part of the thermal face's inward normal -f (`thermal.face_normal_body`)
+perpendicular to p turned to the unit part of r_E perpendicular to r_S: the panel charges and the face looks
+away from the Earth. In the paper's layout (p = k_B, f = -j_B) that is k_B = r_S, j_B = the Earth side of r_S
+(antenna on the Earth side), i_B = j_B x k_B (the +i_B sensor perpendicular to the sun, outside its keep-out
+cone). The laws know no pointing constraint: with another layout a law may cross a cone, and its trajectory is
+then no witness (every candidate is checked against every enforced group). Laws (tried in LAWS order):
 
 - `sun_safe_ff`: rate command w_ref = clip(-(kp/kd) dq_v, +-0.7 w_max) towards the sun-safe attitude,
   tracked by u = clip(s (w x H)/D + s J (w_ref - w) / (tau D), U): the gyroscopic feed-forward
@@ -25,8 +29,9 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
+from rta_attitude.dynamics.environment import EARTH_HILL
 from rta_attitude.viability.model import constraint_values, exact_step, sun_hill
-from rta_attitude.viability.params import N_X, OracleModel
+from rta_attitude.viability.params import N_X, OracleModel, substep_times
 
 Array = NDArray[np.float64]
 
@@ -64,16 +69,33 @@ def quat_from_matrix(a: Array) -> Array:
     return q if q[3] >= 0 else -q
 
 
+def _triad(a: Array, b: Array) -> tuple[Array, Array, Array]:
+    """The right-handed orthonormal triad (a, b', a x b') of a unit vector a and b' the unit part of b
+    perpendicular to a."""
+    b = b - (b @ a) * a
+    b = b / np.linalg.norm(b)
+    return a, b, np.cross(a, b)
+
+
 def sun_safe_matrix(theta_S_rad: float, m: OracleModel) -> Array:
-    """The sun-safe attitude, rows i_B, j_B, k_B in Hill (3, 3). At a Sun-Earth conjunction
-    (r_E parallel to r_S) j_B is taken as z_Hill x r_S."""
-    k = sun_hill(theta_S_rad)
-    e = np.array(m.earth_hill)
-    j = e - (e @ k) * k
+    """The sun-safe attitude A (Hill -> body, (3, 3); its rows are the body axes in Hill), module docstring:
+    A r_S = p and A r_E_perp = -f_perp (p the panel's normal, f the face's, r_E_perp and f_perp the unit parts of
+    r_E and -f perpendicular to r_S and p). At a Sun-Earth conjunction (r_E parallel to r_S) r_E_perp is taken as
+    z_Hill x r_S (in its orbit-plane part); with the face along the panel, f_perp is the body axis farthest from p
+    made perpendicular to it."""
+    s = sun_hill(theta_S_rad, m)
+    e = np.array(EARTH_HILL)
+    j = e - (e @ s) * s
     if np.linalg.norm(j) < 1e-6:
-        j = np.array([-k[1], k[0], 0.0])
+        j = np.array([-s[1], s[0], 0.0])
+    p = np.array(m.panel_normal_body)
+    g = -np.array(m.face_normal_body)
+    if np.linalg.norm(g - (g @ p) * p) < 1e-6:
+        g = np.eye(3)[int(np.argmin(np.abs(p)))]
     j = j / np.linalg.norm(j)
-    return np.vstack([np.cross(j, k), j, k])
+    hill = (s, j, np.cross(s, j))
+    body = _triad(p, g)
+    return np.outer(body[0], hill[0]) + np.outer(body[1], hill[1]) + np.outer(body[2], hill[2])
 
 
 def attitude_error(x: Array, m: OracleModel) -> Array:
@@ -114,8 +136,8 @@ def law_command(x: Array, law: str, m: OracleModel, rate_limit_fraction: float =
 
 
 def simulate_law(x0: Array, steps: int, m: OracleModel, law: str,
-                 stop_enforce: tuple[str, ...] | None = None) -> tuple[Array, Array, Array]:
-    """Closed loop of a law (command at each sample, held over the step), exact model.
+                 stop_enforce: tuple[str, ...] | None = None, t0_s: float = 0.0) -> tuple[Array, Array, Array]:
+    """Closed loop of a law (command at each sample, held over the step), exact model, from x0 at time t0_s (s).
 
     With `stop_enforce`, stops after the first step in which an enforced constraint has h < 0 at a
     substep (the arrays are then shorter).
@@ -129,13 +151,14 @@ def simulate_law(x0: Array, steps: int, m: OracleModel, law: str,
     subs = np.empty((steps * S, N_X))
     xs[0] = x0
     step = exact_step(m)
+    times = substep_times(t0_s, steps * S + 1, m)[1:]
     for k in range(steps):
         us[k] = law_command(xs[k], law, m)
         xn, sb = step(xs[k], us[k])
         xs[k + 1] = np.asarray(xn).ravel()
         subs[k * S:(k + 1) * S] = np.asarray(sb).T
         if stop_enforce:
-            h = constraint_values(subs[k * S:(k + 1) * S], m)
+            h = constraint_values(subs[k * S:(k + 1) * S], m, times[k * S:(k + 1) * S])
             if any(float(np.min(h[g])) < 0.0 for g in stop_enforce):
                 return us[:k + 1], xs[:k + 2], subs[:(k + 1) * S]
     return us, xs, subs

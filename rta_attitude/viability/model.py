@@ -11,26 +11,43 @@ as an independent check. State (13,) = the project's first 13 entries; u = psi_d
     T_dot     = (aAS max(0, c_S) + (aAS A_f + sigma eps A T_E^4) F max(0, c_E) - sigma eps A T^4) / (m c_p)
     E_dot     = P_peak max(0, c_panel) - P_out
 
+c_S, c_E: the thermal face's normal f (`thermal.face_normal_body`) against the sun and the Earth, f . A r_S and
+f . A r_E; c_panel: the panel's normal (`power.panel_normal_body`) against the sun. r_S, r_E and every cone's
+target are `dynamics.environment`'s (the sun with its beta angle, nadir, ...), theta_S the state's x[12].
+
 One zero-order-hold step is `substeps` classical RK4 steps, the quaternion renormalised after each
 (as the plant). `exact` expressions use max(0, .) itself; inside the optimiser the heat input uses a
 smooth upper bound and the panel power a smooth lower bound of it (`smooth_over`, `smooth_under`), so
 for one attitude history the optimiser's T is >= and its E is <= the exact ones.
 
-Constraint values h (safe >= 0), natural units, `constraint_values`:
-exclusion_zone angle(+i_B, sun) - (FOV/2 + beta) (rad); communication FOV/2 - angle(+j_B, Earth)
-(rad); temperature T_max - T (K); battery E - E_min (J); omega w_max - max_i |w_i| (rad/s);
-psi psi_max - max_i |psi_i| (rad/s).
+Constraint values h (safe >= 0), natural units, per group (`constraint_values`): a keep_out cone
+angle(e, r) - alpha, a keep_in cone alpha - angle(e, r) (rad; e its boresight, r its target in body axes, +inf
+at times outside its windows); temperature T_max - T (K); battery E - E_min (J); the rates w_max - max_i |w_i|
+and the wheels psi_max - max_i |psi_i| (rad/s).
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from functools import lru_cache
 
 import casadi as ca
 import numpy as np
 from numpy.typing import NDArray
 
-from rta_attitude.viability.params import GROUPS, N_X, OracleModel
+from rta_attitude.dynamics.environment import EARTH_HILL, INERTIAL_FIXED, SUN, sun_direction, target_direction
+from rta_attitude.viability.params import (
+    BATTERY,
+    KEEP_IN,
+    N_X,
+    POINTING_KINDS,
+    RATE,
+    TEMPERATURE,
+    WHEEL_SPEED,
+    OracleCone,
+    OracleModel,
+    substep_times,
+)
 
 Array = NDArray[np.float64]
 
@@ -46,9 +63,21 @@ def attitude_matrix(q: Array) -> Array:
     return (q4 * q4 - qv @ qv) * np.eye(3) + 2.0 * np.outer(qv, qv) - 2.0 * q4 * cx
 
 
-def sun_hill(theta_S_rad: float) -> Array:
-    """r_S = [cos theta_S, sin theta_S, 0] in Hill."""
-    return np.array([np.cos(theta_S_rad), np.sin(theta_S_rad), 0.0])
+def sun_hill(theta_S_rad: float, m: OracleModel) -> Array:
+    """r_S (3,) in Hill at theta_S, with the configured beta angle (`dynamics.environment.sun_direction`)."""
+    return sun_direction(float(theta_S_rad), m.sun_beta_rad)
+
+
+def along(e: Sequence[float] | Array, v: Array) -> Array:
+    """e . v over the last axis of body vectors v (..., 3) for a body axis e (3,); a zero component of e adds no
+    term and a unit one reads v's component as it is (an axis along a body axis costs one entry of v)."""
+    out = None
+    for i in range(3):
+        if e[i] == 0.0:
+            continue
+        term = v[..., i] if e[i] == 1.0 else (-v[..., i] if e[i] == -1.0 else e[i] * v[..., i])
+        out = term if out is None else out + term
+    return np.zeros(np.shape(v)[:-1]) if out is None else out
 
 
 def _rotate(xs: Array, v: Array) -> Array:
@@ -58,26 +87,44 @@ def _rotate(xs: Array, v: Array) -> Array:
             - 2.0 * q4[:, None] * np.cross(qv, v))
 
 
-def constraint_values(xs: Array, m: OracleModel) -> dict[str, Array]:
-    """h (n,) of every constraint group (GROUPS) at states xs (n, 13) or (13,), natural units."""
+def cone_cos(xs: Array, cone: OracleCone, m: OracleModel) -> Array:
+    """cos of the angle between a cone's boresight and its target (n,), at states xs (n, 13)."""
+    r = target_direction(cone.target_kind, np.array(cone.target_vector), xs[:, 12], m.sun_beta_rad)
+    return along(cone.boresight_body, _rotate(xs, r))
+
+
+def constraint_values(xs: Array, m: OracleModel, t_s: float | Array = 0.0) -> dict[str, Array]:
+    """h (n,) of every constraint group (`OracleModel.groups`) at states xs (n, 13) or (13,) and times t_s (s,
+    broadcast to (n,); they matter to windowed cones only), natural units (module docstring)."""
     xs = np.atleast_2d(np.asarray(xs, dtype=float))
-    th = xs[:, 12]
-    s_b = _rotate(xs, np.stack([np.cos(th), np.sin(th), np.zeros_like(th)], axis=1))
-    e_b = _rotate(xs, np.broadcast_to(np.array(m.earth_hill), s_b.shape))
-    return {
-        "exclusion_zone": np.arccos(np.clip(s_b[:, 0], -1.0, 1.0)) - m.exclusion_angle_rad,
-        "communication": m.comm_angle_rad - np.arccos(np.clip(e_b[:, 1], -1.0, 1.0)),
-        "temperature": m.temperature_max_K - xs[:, 10],
-        "battery": xs[:, 11] - m.energy_min_J,
-        "omega": m.omega_max_rad_s - np.max(np.abs(xs[:, 4:7]), axis=1),
-        "psi": m.psi_max_rad_s - np.max(np.abs(xs[:, 7:10]), axis=1),
-    }
+    out: dict[str, Array] = {}
+    for group in m.groups:
+        kind = m.kind(group)
+        if kind in POINTING_KINDS:
+            cone = m.cone(group)
+            theta = np.arccos(np.clip(cone_cos(xs, cone, m), -1.0, 1.0))
+            h = cone.half_angle_rad - theta if kind == KEEP_IN else theta - cone.half_angle_rad
+            if cone.windows_s:
+                h = np.where(cone.applies(np.broadcast_to(np.asarray(t_s, dtype=float), h.shape)), h, np.inf)
+            out[group] = h
+        elif kind == TEMPERATURE:
+            out[group] = m.temperature_max_K - xs[:, 10]
+        elif kind == BATTERY:
+            out[group] = xs[:, 11] - m.energy_min_J
+        elif kind == RATE:
+            out[group] = m.omega_max_rad_s - np.max(np.abs(xs[:, 4:7]), axis=1)
+        elif kind == WHEEL_SPEED:
+            out[group] = m.psi_max_rad_s - np.max(np.abs(xs[:, 7:10]), axis=1)
+        else:
+            raise ValueError(f"constraint group {group!r} has kind {kind!r}, which the oracle does not model")
+    return out
 
 
-def min_margins(x0: Array, subs: Array, m: OracleModel) -> dict[str, float]:
-    """The smallest h of every group over x0 and the substep states subs (k, 13)."""
-    vals = constraint_values(np.vstack([x0[None, :], subs]), m)
-    return {g: float(np.min(vals[g])) for g in GROUPS}
+def min_margins(x0: Array, subs: Array, m: OracleModel, t0_s: float = 0.0) -> dict[str, float]:
+    """The smallest h of every group over x0 (at time t0_s) and the substep states subs (k, 13) after it."""
+    states = np.vstack([x0[None, :], subs])
+    vals = constraint_values(states, m, substep_times(t0_s, len(states), m))
+    return {g: float(np.min(vals[g])) for g in m.groups}
 
 
 def is_safe(margins: dict[str, float], enforce: tuple[str, ...]) -> bool:
@@ -111,10 +158,43 @@ def ca_attitude(q: ca.SX) -> ca.SX:
     return (q4 * q4 - ca.dot(qv, qv)) * ca.SX.eye(3) + 2.0 * (qv @ qv.T) - 2.0 * q4 * ca.skew(qv)
 
 
-def ca_directions(x: ca.SX, m: OracleModel) -> tuple[ca.SX, ca.SX]:
-    """(sun in body, Earth in body) of a state expression."""
-    a = ca_attitude(x[0:4])
-    return a @ ca.vertcat(ca.cos(x[12]), ca.sin(x[12]), 0.0), a @ ca.DM(m.earth_hill)
+def ca_along(e: Sequence[float] | Array, v: ca.SX) -> ca.SX:
+    """e . v for a body axis e (3,) and a body vector expression v (3,), as `along` (zero components of e add
+    no term, unit ones read v's entry as it is)."""
+    out = None
+    for i in range(3):
+        if e[i] == 0.0:
+            continue
+        term = v[i] if e[i] == 1.0 else (-v[i] if e[i] == -1.0 else e[i] * v[i])
+        out = term if out is None else out + term
+    return ca.SX(0.0) if out is None else out
+
+
+def _times(c: float, z: ca.SX) -> ca.SX:
+    return z if c == 1.0 else c * z
+
+
+def ca_sun_hill(theta_S: ca.SX, m: OracleModel) -> ca.SX:
+    """r_S in Hill, [cos beta cos theta_S, cos beta sin theta_S, sin beta] (`dynamics.environment.sun_hill`)."""
+    cb = m.sun_cos_beta
+    return ca.vertcat(_times(cb, ca.cos(theta_S)), _times(cb, ca.sin(theta_S)), m.sun_sin_beta)
+
+
+def ca_target_hill(cone: OracleCone, theta_S: ca.SX, m: OracleModel) -> ca.SX | ca.DM:
+    """A cone's target in Hill at theta_S (`dynamics.environment.target_direction`): the sun; a vector fixed in
+    the inertial frame, R_z(theta_S) v; else the fixed Hill vector."""
+    v = cone.target_vector
+    if cone.target_kind == SUN:
+        return ca_sun_hill(theta_S, m)
+    if cone.target_kind == INERTIAL_FIXED:
+        c, s = ca.cos(theta_S), ca.sin(theta_S)
+        return ca.vertcat(c * v[0] - s * v[1], s * v[0] + c * v[1], v[2])
+    return ca.DM(v)
+
+
+def ca_cone_cos(x: ca.SX, a: ca.SX, cone: OracleCone, m: OracleModel) -> ca.SX:
+    """cos(angle(boresight, target)) = e . A r of a state expression x (13,) with attitude matrix a = A(q)."""
+    return ca_along(cone.boresight_body, a @ ca_target_hill(cone, x[12], m))
 
 
 def ca_dynamics(m: OracleModel, exact: bool) -> ca.Function:
@@ -123,8 +203,8 @@ def ca_dynamics(m: OracleModel, exact: bool) -> ca.Function:
     u = ca.SX.sym("u", 3)
     q, w, psi, temp = x[0:4], x[4:7], x[7:10], x[10]
     a = ca_attitude(q)
-    s_b = a @ ca.vertcat(ca.cos(x[12]), ca.sin(x[12]), 0.0)
-    e_b = a @ ca.DM(m.earth_hill)
+    s_b = a @ ca_sun_hill(x[12], m)
+    e_b = a @ ca.DM(EARTH_HILL)
     jd = ca.DM(m.inertia_kgm2)
     d = m.wheel_inertia_kgm2
     h = jd * w - d * psi if m.gyrostat else jd * w
@@ -138,10 +218,12 @@ def ca_dynamics(m: OracleModel, exact: bool) -> ca.Function:
                     ca.horzcat(-q1, -q2, -q3))
     over = (lambda z: ca.fmax(0.0, z)) if exact else smooth_over
     under = (lambda z: ca.fmax(0.0, z)) if exact else smooth_under
-    view = m.earth_view_factor * (over(-e_b[1]) if m.clamp_view_factor else -e_b[1])
-    t_dot = (m.solar_W * over(-s_b[1]) + (m.albedo_W + m.sigma_eps_A_W_K4 * m.earth_T4_K4) * view
+    c_earth = ca_along(m.face_normal_body, e_b)
+    view = m.earth_view_factor * (over(c_earth) if m.clamp_view_factor else c_earth)
+    t_dot = (m.solar_W * over(ca_along(m.face_normal_body, s_b))
+             + (m.albedo_W + m.sigma_eps_A_W_K4 * m.earth_T4_K4) * view
              - m.sigma_eps_A_W_K4 * temp**4) / m.heat_capacity_J_K
-    e_dot = m.panel_peak_W * under(s_b[2]) - m.load_W
+    e_dot = m.panel_peak_W * under(ca_along(m.panel_normal_body, s_b)) - m.load_W
     xdot = ca.vertcat(0.5 * (xi @ w_rel), torque / jd, u, t_dot, e_dot, -m.mean_motion_rad_s)
     return ca.Function("f", [x, u], [xdot])
 
@@ -189,6 +271,6 @@ def simulate(x0: Array, u: Array, m: OracleModel) -> tuple[Array, Array]:
     return np.vstack([np.asarray(x0, dtype=float)[None, :], np.asarray(xs).T]), np.asarray(subs).T.copy()
 
 
-__all__ = ["SMOOTH_EPS", "attitude_matrix", "ca_attitude", "ca_directions", "ca_dynamics", "constraint_values",
-           "exact_step", "is_safe", "min_margins", "rk4_chain", "simulate", "smooth_over", "smooth_under", "sun_hill",
-           "worst_normalised"]
+__all__ = ["SMOOTH_EPS", "along", "attitude_matrix", "ca_along", "ca_attitude", "ca_cone_cos", "ca_dynamics",
+           "ca_sun_hill", "ca_target_hill", "cone_cos", "constraint_values", "exact_step", "is_safe", "min_margins",
+           "rk4_chain", "simulate", "smooth_over", "smooth_under", "sun_hill", "worst_normalised"]

@@ -4,10 +4,12 @@
 built from it (so a different configuration is a different compiled block, keyed by the source's
 hash) and `functools.lru_cache` can key on it. Nothing here imports casadi.
 
-Constraint names are the config's groups (`BARRIER_GROUPS`): exclusion_zone, communication,
-temperature, battery, omega (three axes, reported as the worst), psi (three wheels, the worst).
-By default the oracle enforces the enabled constraints without a slack (slack_weight == 0): the
-ones the Monte Carlo counts as failures.
+The oracle's constraint groups are the configuration's (`Config.groups`, in that order): every pointing
+constraint by name (a cone of `constraints.pointing`, `OracleCone`), then the fixed groups of
+`config.schema.FIXED_GROUPS` (the thermal node's temperature, the battery, the body rates and the wheel speeds,
+the last two reported as the worst of their three axes). What each group is comes from the registry's kind
+(`constraints.registry.KINDS`), never from its name. By default the oracle enforces the hard groups (enabled,
+no slack): the ones the Monte Carlo counts as failures.
 """
 
 from __future__ import annotations
@@ -19,21 +21,62 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from rta_attitude.config.schema import BARRIER_GROUPS, Config
-from rta_attitude.dynamics.spacecraft import EARTH_HILL, plant_record
+from rta_attitude.config.schema import Config, unit_vector
+from rta_attitude.constraints.registry import KINDS, registry
+from rta_attitude.dynamics.environment import target_kind
+from rta_attitude.dynamics.spacecraft import plant_record
 from rta_attitude.errors import ConfigError
 
 Array = NDArray[np.float64]
 
+KEEP_OUT, KEEP_IN, TEMPERATURE, BATTERY, RATE, WHEEL_SPEED = KINDS
+"""The registry's kinds of constraint, as the oracle names them."""
+POINTING_KINDS = (KEEP_OUT, KEEP_IN)
 N_X = 13
 """Oracle state: the first 13 entries of the project's state (q, omega, psi, T, E, theta_S); the
 Clohessy-Wiltshire entries do not couple into the attitude and are left out."""
-GROUPS: tuple[str, ...] = BARRIER_GROUPS
-"""Constraint names the oracle knows (the config's `constraints:` groups)."""
 ENERGY_SCALE_J = 1000.0
 """Scale of the battery row inside the optimiser, J."""
 TEMPERATURE_SCALE_K = 100.0
 """Scale of the temperature state inside the optimiser, K."""
+UNITS: dict[str, str] = {KEEP_OUT: "rad", KEEP_IN: "rad", TEMPERATURE: "K", BATTERY: "J", RATE: "rad/s",
+                         WHEEL_SPEED: "rad/s"}
+"""Units of the oracle's h by kind (`model.constraint_values`): a cone's angle margin, T_max - T, E - E_min, and
+limit - max_i |.| for the rates and the wheel speeds."""
+
+
+@dataclass(frozen=True)
+class OracleCone:
+    """One pointing constraint (`constraints.pointing` entry) as the oracle reads it: the body axis `boresight_body`
+    (unit) stays outside (keep_out) or inside (keep_in) the cone of half-angle `half_angle_rad` about a target."""
+
+    name: str
+    kind: str
+    """KEEP_OUT or KEEP_IN."""
+    boresight_body: tuple[float, float, float]
+    """Unit vector, body axes (normalised here)."""
+    target_kind: int
+    """`dynamics.environment`'s code: SUN, EARTH, HILL_FIXED or INERTIAL_FIXED."""
+    target_vector: tuple[float, float, float]
+    """The target in Hill (EARTH, HILL_FIXED) or in the inertial frame (INERTIAL_FIXED); unused for SUN."""
+    half_angle_rad: float
+    windows_s: tuple[tuple[float, float], ...] = ()
+    """(start, end) times, s from the run's t = 0, within which the cone applies; empty: always."""
+
+    @property
+    def keep_in(self) -> bool:
+        return self.kind == KEEP_IN
+
+    def applies(self, t_s: float | Array) -> NDArray[np.bool_]:
+        """Whether the cone applies at times t_s (...): inside one of its windows (ends included), or always
+        without windows (`constraints.windows.window_phase` == 'inside')."""
+        t = np.asarray(t_s, dtype=float)
+        if not self.windows_s:
+            return np.ones(t.shape, dtype=bool)
+        out = np.zeros(t.shape, dtype=bool)
+        for start, end in self.windows_s:
+            out |= (t >= start) & (t <= end)
+        return out
 
 
 @dataclass(frozen=True)
@@ -59,9 +102,16 @@ class OracleModel:
     earth_T4_K4: float
     panel_peak_W: float
     load_W: float
-    earth_hill: tuple[float, float, float]
-    exclusion_angle_rad: float
-    comm_angle_rad: float
+    sun_beta_rad: float
+    """The sun's angle out of the orbit plane (`environment.sun_beta_rad`)."""
+    face_normal_body: tuple[float, float, float]
+    """The thermal node's face, outward unit normal, body axes (`thermal.face_normal_body`)."""
+    panel_normal_body: tuple[float, float, float]
+    """The solar panel's unit normal, body axes (`power.panel_normal_body`)."""
+    cones: tuple[OracleCone, ...]
+    """The pointing constraints, in the configuration's order."""
+    constraints: tuple[tuple[str, str, str], ...]
+    """(name, group, kind) of every constraint, in the registry's row order."""
     temperature_max_K: float
     energy_min_J: float
     omega_max_rad_s: float
@@ -87,15 +137,68 @@ class OracleModel:
         return np.array(self.u_max_rad_s2)
 
     @property
+    def sun_cos_beta(self) -> float:
+        return math.cos(self.sun_beta_rad)
+
+    @property
+    def sun_sin_beta(self) -> float:
+        return math.sin(self.sun_beta_rad)
+
+    @property
     def x_scale(self) -> Array:
         """Scale of each state entry inside the optimiser (13,)."""
         w, p = self.omega_max_rad_s, self.psi_max_rad_s
         return np.array([1.0, 1.0, 1.0, 1.0, w, w, w, p, p, p, TEMPERATURE_SCALE_K, ENERGY_SCALE_J, 1.0])
 
+    @property
+    def groups(self) -> tuple[str, ...]:
+        """The constraint groups (`Config.groups`): the cones by name, then the fixed groups."""
+        return tuple(dict.fromkeys(group for _, group, _ in self.constraints))
+
+    def kind(self, group: str) -> str:
+        """The registry's kind of a group (KINDS).
+
+        Raises:
+            KeyError: not a group of this model.
+        """
+        for _, g, kind in self.constraints:
+            if g == group:
+                return kind
+        raise KeyError(f"unknown constraint group {group!r}; known: {', '.join(self.groups)}")
+
+    def kinds(self, groups: Sequence[str]) -> frozenset[str]:
+        """The kinds of some groups."""
+        return frozenset(self.kind(g) for g in groups)
+
+    def cone(self, group: str) -> OracleCone:
+        """The pointing constraint of a group."""
+        for c in self.cones:
+            if c.name == group:
+                return c
+        raise KeyError(f"no pointing constraint {group!r}; known: {', '.join(c.name for c in self.cones)}")
+
     def scale(self, group: str) -> float:
         """Scale of a constraint's row: the optimiser keeps h >= margin * scale (natural units of h)."""
-        return {"exclusion_zone": 1.0, "communication": 1.0, "temperature": self.temperature_max_K,
-                "battery": ENERGY_SCALE_J, "omega": self.omega_max_rad_s, "psi": self.psi_max_rad_s}[group]
+        return {KEEP_OUT: 1.0, KEEP_IN: 1.0, TEMPERATURE: self.temperature_max_K, BATTERY: ENERGY_SCALE_J,
+                RATE: self.omega_max_rad_s, WHEEL_SPEED: self.psi_max_rad_s}[self.kind(group)]
+
+    def unit(self, group: str) -> str:
+        """The unit of a group's h in `model.constraint_values` (UNITS)."""
+        return UNITS[self.kind(group)]
+
+
+def oracle_cones(cfg: Config) -> tuple[OracleCone, ...]:
+    """The configuration's pointing constraints as OracleCone records (unit vectors normalised)."""
+    out = []
+    for c in cfg.pointing:
+        code, vector = target_kind(c.target)
+        if c.target_vector is not None:
+            vector = unit_vector(f"constraints.pointing.{c.name}.target_vector", c.target_vector)
+        out.append(OracleCone(c.name, c.kind, unit_vector(f"constraints.pointing.{c.name}.boresight_body",
+                                                          c.boresight_body),
+                              code, tuple(float(v) for v in vector), c.half_angle_rad,  # type: ignore[arg-type]
+                              tuple((float(a), float(b)) for a, b in c.windows_s)))
+    return tuple(out)
 
 
 def from_config(cfg: Config) -> OracleModel:
@@ -120,9 +223,11 @@ def from_config(cfg: Config) -> OracleModel:
         earth_T4_K4=float(p["earth_T4_K4"]),
         panel_peak_W=float(p["panel_peak_W"]),
         load_W=float(p["load_W"]),
-        earth_hill=tuple(float(v) for v in EARTH_HILL),  # type: ignore[arg-type]
-        exclusion_angle_rad=L.exclusion_angle_rad,
-        comm_angle_rad=L.comm_angle_rad,
+        sun_beta_rad=float(cfg.environment.sun_beta_rad),
+        face_normal_body=unit_vector("thermal.face_normal_body", cfg.thermal.face_normal_body),
+        panel_normal_body=unit_vector("power.panel_normal_body", cfg.power.panel_normal_body),
+        cones=oracle_cones(cfg),
+        constraints=tuple((c.name, c.group, c.kind) for c in registry(cfg)),
         temperature_max_K=L.temperature_max_K,
         energy_min_J=L.energy_min_J,
         omega_max_rad_s=L.omega_max_rad_s,
@@ -137,16 +242,28 @@ def from_config(cfg: Config) -> OracleModel:
 
 
 def default_enforce(cfg: Config) -> tuple[str, ...]:
-    """The constraints a witness must keep: enabled and without a slack (what the Monte Carlo counts)."""
-    return tuple(g for g in GROUPS if cfg.barriers[g].enabled and cfg.barriers[g].slack_weight == 0)
+    """The groups a witness must keep: the hard ones (enabled, no slack; what the Monte Carlo counts), in
+    `Config.groups` order."""
+    hard = {c.group for c in registry(cfg) if c.hard}
+    return tuple(g for g in cfg.groups if g in hard)
 
 
-def check_enforce(enforce: Sequence[str]) -> tuple[str, ...]:
-    """`enforce` in GROUPS order; ConfigError on an unknown name."""
-    unknown = sorted(set(enforce) - set(GROUPS))
-    if unknown:
-        raise ConfigError(f"unknown constraint(s) {', '.join(unknown)}; known: {', '.join(GROUPS)}")
-    return tuple(g for g in GROUPS if g in set(enforce))
+def check_enforce(enforce: Sequence[str], cfg: Config) -> tuple[str, ...]:
+    """`enforce` in `Config.groups` order.
+
+    Raises:
+        ConfigError: a name that is not one of the configuration's groups.
+    """
+    for name in enforce:
+        if name not in cfg.groups:
+            raise ConfigError(f"enforce: unknown constraint group {name!r}; known: {', '.join(cfg.groups)}")
+    return tuple(g for g in cfg.groups if g in set(enforce))
+
+
+def substep_times(t0_s: float, n: int, m: OracleModel) -> Array:
+    """Times (n,) of the states x0, then n - 1 substeps after it, s: t0 + dt i / substeps, i = 0 .. n - 1
+    (a node k is i = k substeps; the one formula every part of the oracle uses)."""
+    return t0_s + m.dt_s * (np.arange(n, dtype=np.float64) / m.substeps)
 
 
 def as_oracle_state(x0: Array | Sequence[float]) -> Array:
@@ -170,5 +287,6 @@ def as_oracle_state(x0: Array | Sequence[float]) -> Array:
     return x
 
 
-__all__ = ["ENERGY_SCALE_J", "GROUPS", "N_X", "OracleModel", "as_oracle_state", "check_enforce", "default_enforce",
-           "from_config"]
+__all__ = ["BATTERY", "ENERGY_SCALE_J", "KEEP_IN", "KEEP_OUT", "N_X", "POINTING_KINDS", "RATE", "TEMPERATURE",
+           "UNITS", "WHEEL_SPEED", "OracleCone", "OracleModel", "as_oracle_state", "check_enforce",
+           "default_enforce", "from_config", "oracle_cones", "substep_times"]

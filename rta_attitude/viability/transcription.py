@@ -7,8 +7,19 @@ after each, smooth bounds of max(0, .)), the constraint rows at substeps 1 .. S-
 the rows at node N. Wheel rows only at the nodes: psi is affine within a held step (RK4 integrates it
 exactly), so |psi_i| peaks at an end of the step. Every row is tightened by margin * scale.
 
+Rows (`row_names`, in the registry's order): one per enforced pointing constraint, c = e . r_B, the cosine of
+the angle between its boresight e and its target r (body axes, `model.ca_cone_cos`), for any boresight and
+target: keep_out c <= cos(alpha) - d, keep_in c >= cos(alpha) + d (arccos is decreasing). A cone
+with time windows has its row bounded only at the nodes and substeps whose time (t0 + dt i / substeps, t0 the
+start state's time) lies inside a window; elsewhere the row is free (`g_bounds`). Then T / 100 <= (T_max - d) /
+100, E / 1000 >= (E_min + d) / 1000, |w_i / w_max| and |psi_i / psi_max| (nodes only) within (limit - d) /
+limit, each bounded where its group is enforced; d = margin * the group's scale (1 for a cone, T_max, 1000 J,
+w_max, psi_max).
+
 Objective (this is a feasibility problem; a regulariser): 1e-2 mean |z_u|^2 + mean_k |w_k / w_max|^2,
-plus, for a receding segment, the parking cost (1 - k_B . r_S) + (i_B . r_S)^2 + |w / w_max|^2 at x_N.
+plus, for a receding segment, the parking cost at x_N (`_terminal_cost`): (1 - p . r_S) + sum over the
+enforced keep_out cones about the sun of (e_perp . r_S)^2 + |w / w_max|^2, p the panel's normal and e_perp the
+part of a cone's boresight perpendicular to it (the paper's: (1 - k_B . r_S) + (i_B . r_S)^2 + |w / w_max|^2).
 
 Speed: the step map G, its Jacobian JG and the Hessian HG of lam^T G are generated once per model as
 casadi SX, compiled to C with the system's C compiler and cached (`cache_dir`), then mapped over the
@@ -34,8 +45,19 @@ import casadi as ca
 import numpy as np
 from numpy.typing import NDArray
 
-from rta_attitude.viability.model import ca_directions, ca_dynamics, rk4_chain
-from rta_attitude.viability.params import N_X, OracleModel
+from rta_attitude.dynamics.environment import SUN
+from rta_attitude.viability.model import ca_along, ca_attitude, ca_cone_cos, ca_dynamics, ca_sun_hill, rk4_chain
+from rta_attitude.viability.params import (
+    BATTERY,
+    KEEP_IN,
+    KEEP_OUT,
+    N_X,
+    POINTING_KINDS,
+    RATE,
+    TEMPERATURE,
+    WHEEL_SPEED,
+    OracleModel,
+)
 
 Array = NDArray[np.float64]
 log = logging.getLogger(__name__)
@@ -56,81 +78,151 @@ def cache_dir() -> Path:
     return Path(base) / "rta_attitude" / "viability"
 
 
-def row_names(with_comm: bool, node: bool) -> tuple[str, ...]:
-    """Rows at a node (`node`) or at an interior substep (no wheel rows there)."""
-    names = ["exclusion_zone", *(["communication"] if with_comm else []), "temperature", "battery",
-             "omega0", "omega1", "omega2"]
-    return tuple(names + (["psi0", "psi1", "psi2"] if node else []))
+def enforced_cones(m: OracleModel, enforce: tuple[str, ...]) -> tuple[int, ...]:
+    """Indices (into m.cones) of the enforced pointing constraints: the cones that get rows."""
+    return tuple(j for j, c in enumerate(m.cones) if c.name in enforce)
+
+
+def row_names(m: OracleModel, cones: tuple[int, ...], node: bool) -> tuple[str, ...]:
+    """Rows at a node (`node`) or at an interior substep: the cones `cones` (indices into m.cones), then every
+    constraint that is not a cone, in the registry's order (no wheel rows at an interior substep)."""
+    names = [m.cones[j].name for j in cones]
+    names += [name for name, _, kind in m.constraints
+              if kind not in POINTING_KINDS and (node or kind != WHEEL_SPEED)]
+    return tuple(names)
+
+
+def _rows_of(m: OracleModel) -> dict[str, tuple[str, str, int]]:
+    """{row name: (group, kind, axis)}: axis, a per-axis row's index within its group (0 for the others)."""
+    out: dict[str, tuple[str, str, int]] = {}
+    seen: dict[str, int] = {}
+    for name, group, kind in m.constraints:
+        out[name] = (group, kind, seen.get(group, 0))
+        seen[group] = seen.get(group, 0) + 1
+    return out
 
 
 def ca_rows(x: ca.SX, names: tuple[str, ...], m: OracleModel) -> ca.SX:
-    """Scaled row values: cos(sensor, sun), cos(antenna, Earth), T / 100, E / 1000, w / w_max, psi / psi_max."""
-    s_b, e_b = ca_directions(x, m)
+    """Scaled row values (module docstring): a cone's cos(boresight, target), T / 100, E / 1000, w_i / w_max,
+    psi_i / psi_max."""
     xs = m.x_scale
-    table = {"exclusion_zone": s_b[0], "communication": e_b[1], "temperature": x[10] / xs[10],
-             "battery": x[11] / xs[11]}
-    for i in range(3):
-        table[f"omega{i}"] = x[4 + i] / xs[4 + i]
-        table[f"psi{i}"] = x[7 + i] / xs[7 + i]
-    return ca.vertcat(*[table[n] for n in names])
+    info = _rows_of(m)
+    a = ca_attitude(x[0:4])  # unused (no node) without a cone row
+    out = []
+    for name in names:
+        group, kind, axis = info[name]
+        if kind in POINTING_KINDS:
+            out.append(ca_cone_cos(x, a, m.cone(group), m))
+        elif kind == TEMPERATURE:
+            out.append(x[10] / xs[10])
+        elif kind == BATTERY:
+            out.append(x[11] / xs[11])
+        elif kind == RATE:
+            out.append(x[4 + axis] / xs[4 + axis])
+        elif kind == WHEEL_SPEED:
+            out.append(x[7 + axis] / xs[7 + axis])
+        else:
+            raise ValueError(f"row {name!r} has kind {kind!r}, which the oracle does not model")
+    return ca.vertcat(*out)
 
 
 def row_bounds(names: tuple[str, ...], enforce: tuple[str, ...], margin: float, m: OracleModel) -> tuple[Array, Array]:
-    """(lo, hi) of the rows `names`, tightened by margin * scale; +-inf where not enforced."""
+    """(lo, hi) of the rows `names`, tightened by margin * scale; +-inf where not enforced (windows aside:
+    `g_bounds`)."""
     lo = np.full(len(names), -np.inf)
     hi = np.full(len(names), np.inf)
     xs = m.x_scale
+    info = _rows_of(m)
     for j, name in enumerate(names):
-        group = name.rstrip("012")
+        group, kind, _ = info[name]
         if group not in enforce:
             continue
         d = margin * m.scale(group)
-        if group == "exclusion_zone":
-            hi[j] = np.cos(m.exclusion_angle_rad) - d
-        elif group == "communication":
-            lo[j] = np.cos(m.comm_angle_rad) + d
-        elif group == "temperature":
+        if kind == KEEP_OUT:
+            hi[j] = np.cos(m.cone(group).half_angle_rad) - d
+        elif kind == KEEP_IN:
+            lo[j] = np.cos(m.cone(group).half_angle_rad) + d
+        elif kind == TEMPERATURE:
             hi[j] = (m.temperature_max_K - d) / xs[10]
-        elif group == "battery":
+        elif kind == BATTERY:
             lo[j] = (m.energy_min_J + d) / xs[11]
-        elif group == "omega":
+        elif kind == RATE:
             lo[j], hi[j] = -(m.omega_max_rad_s - d) / xs[4], (m.omega_max_rad_s - d) / xs[4]
-        else:
+        elif kind == WHEEL_SPEED:
             lo[j], hi[j] = -(m.psi_max_rad_s - d) / xs[7], (m.psi_max_rad_s - d) / xs[7]
     return lo, hi
 
 
-def n_block_out(with_comm: bool, m: OracleModel) -> int:
-    return N_X + (m.substeps - 1) * len(row_names(with_comm, False)) + len(row_names(with_comm, True))
+def n_block_out(m: OracleModel, cones: tuple[int, ...]) -> int:
+    return N_X + (m.substeps - 1) * len(row_names(m, cones, False)) + len(row_names(m, cones, True))
+
+
+def g_layout(n_steps: int, m: OracleModel, cones: tuple[int, ...]) -> tuple[NDArray[np.str_], NDArray[np.int64]]:
+    """What each entry of the NLP's g is: (row name, '' for a shooting defect; the index i of the state it is
+    evaluated at, time t0 + dt i / substeps, -1 for a defect). Per step k: the defects, the rows at substeps
+    k S + 1 .. k S + S - 1, the rows at node k (i = k S); then the rows at node N."""
+    S = m.substeps
+    inner, node = row_names(m, cones, False), row_names(m, cones, True)
+    block_names = np.array([""] * N_X + list(inner) * (S - 1) + list(node))
+    block_index = np.concatenate([np.full(N_X, -1), np.repeat(np.arange(1, S), len(inner)), np.zeros(len(node))])
+    k = np.repeat(np.arange(n_steps), len(block_names))
+    index = np.tile(block_index, n_steps) + np.where(np.tile(block_index, n_steps) >= 0, S * k, 0)
+    names = np.concatenate([np.tile(block_names, n_steps), np.array(node)])
+    return names, np.concatenate([index, np.full(len(node), S * n_steps)]).astype(np.int64)
+
+
+def g_bounds(n_steps: int, m: OracleModel, cones: tuple[int, ...], enforce: tuple[str, ...], margin: float,
+             t0_s: float = 0.0) -> tuple[Array, Array]:
+    """(lbg, ubg) of the NLP's g (`g_layout`): the defects = 0; the rows by `row_bounds`, free at node 0 (the
+    start state is fixed) and, for a cone with windows, at every state whose time is outside its windows."""
+    S = m.substeps
+    lo_s, hi_s = row_bounds(row_names(m, cones, False), enforce, margin, m)
+    lo_n, hi_n = row_bounds(row_names(m, cones, True), enforce, margin, m)
+    zero = np.zeros(N_X)
+    blk_lo = np.concatenate([zero, np.tile(lo_s, S - 1), lo_n])
+    blk_hi = np.concatenate([zero, np.tile(hi_s, S - 1), hi_n])
+    first_lo, first_hi = blk_lo.copy(), blk_hi.copy()
+    first_lo[len(blk_lo) - len(lo_n):], first_hi[len(blk_hi) - len(hi_n):] = -np.inf, np.inf  # x_0: constants
+    lbg = np.concatenate([first_lo, np.tile(blk_lo, n_steps - 1), lo_n])
+    ubg = np.concatenate([first_hi, np.tile(blk_hi, n_steps - 1), hi_n])
+    windowed = [m.cones[j] for j in cones if m.cones[j].windows_s]
+    if windowed:
+        names, index = g_layout(n_steps, m, cones)
+        for cone in windowed:
+            rows = np.flatnonzero(names == cone.name)
+            off = rows[~cone.applies(t0_s + m.dt_s * (index[rows] / S))]
+            lbg[off], ubg[off] = -np.inf, np.inf
+    return lbg, ubg
 
 
 @lru_cache(maxsize=8)
-def block_functions(m: OracleModel, with_comm: bool) -> tuple[ca.Function, ca.Function, ca.Function]:
+def block_functions(m: OracleModel, cones: tuple[int, ...]) -> tuple[ca.Function, ca.Function, ca.Function]:
     """G(z_x, z_u) = [F / x_scale; rows at substeps 1 .. S-1; rows at x], JG (Jacobian, 16 columns),
-    HG(z_x, z_u, lam) = triu(Hessian of lam^T G), all in scaled variables (casadi VM functions)."""
+    HG(z_x, z_u, lam) = triu(Hessian of lam^T G), all in scaled variables (casadi VM functions); `cones`: the
+    pointing constraints with rows (indices into m.cones)."""
     zx = ca.SX.sym("zx", N_X)
     zu = ca.SX.sym("zu", 3)
     x = zx * ca.DM(m.x_scale)
     u = zu * ca.DM(m.u_max)
     subs = rk4_chain(ca_dynamics(m, exact=False), x, u, m)
-    inner = row_names(with_comm, False)
+    inner = row_names(m, cones, False)
     rows = [ca_rows(s, inner, m) for s in subs[:-1]]
-    out = ca.vertcat(subs[-1] / ca.DM(m.x_scale), *rows, ca_rows(x, row_names(with_comm, True), m))
+    out = ca.vertcat(subs[-1] / ca.DM(m.x_scale), *rows, ca_rows(x, row_names(m, cones, True), m))
     zz = ca.vertcat(zx, zu)
     lam = ca.SX.sym("lam", out.shape[0])
     hess, _ = ca.hessian(ca.dot(lam, out), zz)
-    tag = m.name + ("_comm" if with_comm else "")
+    tag = m.name + "".join(f"_c{j}" for j in cones)
     return (ca.Function(f"G_{tag}", [zx, zu], [out]),
             ca.Function(f"JG_{tag}", [zx, zu], [ca.jacobian(out, zz)]),
             ca.Function(f"HG_{tag}", [zx, zu, lam], [ca.triu(hess)]))
 
 
 @lru_cache(maxsize=8)
-def compiled_blocks(m: OracleModel, with_comm: bool, compiled: bool = True) -> tuple[ca.Function, ...]:
+def compiled_blocks(m: OracleModel, cones: tuple[int, ...], compiled: bool = True) -> tuple[ca.Function, ...]:
     """`block_functions`, compiled to C and loaded from `cache_dir()` (built on first use, keyed by a
     hash of the generated source and the flags, written atomically). The VM functions without a C
     compiler or with compiled=False."""
-    funcs = block_functions(m, with_comm)
+    funcs = block_functions(m, cones)
     cc = shutil.which("gcc") or shutil.which("cc")
     if not compiled or cc is None:
         return funcs
@@ -163,18 +255,31 @@ class Nlp:
     n_z: int
 
 
-def _terminal_cost(zx: ca.SX, m: OracleModel) -> ca.SX:
-    """Parking cost at the last node: (1 - k_B . r_S) + (i_B . r_S)^2 + |w / w_max|^2."""
-    s_b, _ = ca_directions(zx * ca.DM(m.x_scale), m)
-    return (1.0 - s_b[2]) + s_b[0] ** 2 + ca.sumsqr(zx[4:7])
+def _terminal_cost(zx: ca.SX, m: OracleModel, cones: tuple[int, ...]) -> ca.SX:
+    """Parking cost at the last node: (1 - p . r_S) + sum over the enforced keep_out cones about the sun of
+    (e_perp . r_S)^2 + |w / w_max|^2 (p the panel's normal, e_perp the part of a cone's boresight perpendicular
+    to p: zero with the panel on the sun; module docstring)."""
+    x = zx * ca.DM(m.x_scale)
+    s_b = ca_attitude(x[0:4]) @ ca_sun_hill(x[12], m)
+    p = np.array(m.panel_normal_body)
+    cost = 1.0 - ca_along(m.panel_normal_body, s_b)
+    for j in cones:
+        cone = m.cones[j]
+        if cone.kind == KEEP_OUT and cone.target_kind == SUN:
+            e = np.array(cone.boresight_body)
+            e_perp = e - (e @ p) * p
+            if np.linalg.norm(e_perp) > 1e-9:
+                cost = cost + ca_along(tuple(float(v) for v in e_perp), s_b) ** 2
+    return cost + ca.sumsqr(zx[4:7])
 
 
 @lru_cache(maxsize=16)
-def build_nlp(n_steps: int, m: OracleModel, terminal: bool, with_comm: bool, compiled: bool = True) -> Nlp:
-    """The multiple-shooting NLP over n_steps holds (module docstring); bounds are given per solve."""
-    g_f, jg_f, hg_f = compiled_blocks(m, with_comm, compiled)
-    n_out = n_block_out(with_comm, m)
-    node_names = row_names(with_comm, True)
+def build_nlp(n_steps: int, m: OracleModel, terminal: bool, cones: tuple[int, ...], compiled: bool = True) -> Nlp:
+    """The multiple-shooting NLP over n_steps holds (module docstring), with rows for the pointing constraints
+    `cones` (indices into m.cones, `enforced_cones`); bounds are given per solve (`g_bounds`)."""
+    g_f, jg_f, hg_f = compiled_blocks(m, cones, compiled)
+    n_out = n_block_out(m, cones)
+    node_names = row_names(m, cones, True)
     n = n_steps
     nxv = N_X * (n + 1)
     n_z = nxv + 3 * n
@@ -187,7 +292,7 @@ def build_nlp(n_steps: int, m: OracleModel, terminal: bool, with_comm: bool, com
     lam_t = ca.SX.sym("lam_t", len(node_names))
     sig = ca.SX.sym("sig")
     rows_t = ca_rows(zt * ca.DM(m.x_scale), node_names, m)
-    cost_t = _terminal_cost(zt, m) if terminal else ca.SX(0.0)
+    cost_t = _terminal_cost(zt, m, cones) if terminal else ca.SX(0.0)
     fn_rows_t = ca.Function("rows_t", [zt], [rows_t])
     fn_jac_t = ca.Function("jac_t", [zt], [ca.jacobian(rows_t, zt)])
     h_t, _ = ca.hessian(ca.dot(lam_t, rows_t) + sig * cost_t, zt)
@@ -200,7 +305,7 @@ def build_nlp(n_steps: int, m: OracleModel, terminal: bool, with_comm: bool, com
 
     # the problem's g uses the differentiable VM block (casadi's IPOPT interface wants one); IPOPT's
     # own calls go through jac_g / hess_lag below
-    g = constraints(block_functions(m, with_comm)[0])
+    g = constraints(block_functions(m, cones)[0])
     obj = 1e-2 * ca.sumsqr(zu) / n + ca.sumsqr(zx[4:7, 1:]) / n + fn_cost_t(zx[:, n])
 
     def col_of(k: NDArray[np.int64], c: NDArray[np.int64]) -> NDArray[np.int64]:
@@ -256,10 +361,11 @@ IPOPT_OPTIONS: dict[str, Any] = {
 
 def solve_window(x0: Array, n_steps: int, m: OracleModel, enforce: tuple[str, ...], margin: float,
                  u_guess: Array, x_guess: Array, max_iter: int, wall_s: float, terminal: bool,
-                 compiled: bool = True) -> tuple[Array, str, int]:
-    """One multiple-shooting solve from x0; returns (u (N, 3) clipped to U, IPOPT status, iterations)."""
-    with_comm = "communication" in enforce
-    nlp = build_nlp(n_steps, m, terminal, with_comm, compiled)
+                 compiled: bool = True, t0_s: float = 0.0) -> tuple[Array, str, int]:
+    """One multiple-shooting solve from x0 at time t0_s (s; windowed cones apply by it); returns (u (N, 3)
+    clipped to U, IPOPT status, iterations)."""
+    cones = enforced_cones(m, enforce)
+    nlp = build_nlp(n_steps, m, terminal, cones, compiled)
     opts = {**nlp.opts, **IPOPT_OPTIONS, "ipopt.max_iter": int(max_iter),
             "ipopt.max_wall_time": max(1.0, float(wall_s))}
     solver = ca.nlpsol("viability", "ipopt", nlp.problem, opts)
@@ -272,15 +378,7 @@ def solve_window(x0: Array, n_steps: int, m: OracleModel, enforce: tuple[str, ..
     q_idx = (N_X * np.arange(1, n + 1)[:, None] + np.arange(4)[None, :]).ravel()
     lbx[q_idx], ubx[q_idx] = -1.0, 1.0
     lbx[nxv:], ubx[nxv:] = -1.0, 1.0
-    lo_s, hi_s = row_bounds(row_names(with_comm, False), enforce, margin, m)
-    lo_n, hi_n = row_bounds(row_names(with_comm, True), enforce, margin, m)
-    zero = np.zeros(N_X)
-    blk_lo = np.concatenate([zero, np.tile(lo_s, m.substeps - 1), lo_n])
-    blk_hi = np.concatenate([zero, np.tile(hi_s, m.substeps - 1), hi_n])
-    first_lo, first_hi = blk_lo.copy(), blk_hi.copy()
-    first_lo[-len(lo_n):], first_hi[-len(hi_n):] = -np.inf, np.inf  # node rows at x_0 are constants
-    lbg = np.concatenate([first_lo, np.tile(blk_lo, n - 1), lo_n])
-    ubg = np.concatenate([first_hi, np.tile(blk_hi, n - 1), hi_n])
+    lbg, ubg = g_bounds(n, m, cones, enforce, margin, t0_s)
     z_init = np.concatenate([(x_guess / xsc).ravel(), (np.clip(u_guess, -umax, umax) / umax).ravel()])
     sol = solver(x0=z_init, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg, p=np.zeros(0))
     st = solver.stats()
@@ -289,4 +387,5 @@ def solve_window(x0: Array, n_steps: int, m: OracleModel, enforce: tuple[str, ..
 
 
 __all__ = ["CACHE_ENV", "COMPILE_FLAGS", "IPOPT_OPTIONS", "Nlp", "block_functions", "build_nlp", "ca_rows",
-           "cache_dir", "compiled_blocks", "row_bounds", "row_names", "solve_window"]
+           "cache_dir", "compiled_blocks", "enforced_cones", "g_bounds", "g_layout", "n_block_out", "row_bounds",
+           "row_names", "solve_window"]

@@ -4,15 +4,16 @@ Batch-first: every function takes states (..., 19) and returns (..., k). u = psi
 
 - attitude: q_dot = 1/2 Xi(q) omega; J omega_dot + omega x J omega = tau, tau = sign D u;
 - wheels: psi_dot = u;
-- sun: theta_S_dot = -n, r_S = [cos theta_S, sin theta_S, 0] (Hill); Earth: r_E = [-1, 0, 0];
-- thermal node on the -j_B face: T_dot = (q_solar + q_albedo + q_IR - q_rejected) / (m c_p);
-- battery: E_dot = P_I I_d A_panel max(0, cos theta_SI) - P_out, panel on +k_B;
+- sun: theta_S_dot = -n, r_S = [cos b cos theta_S, cos b sin theta_S, sin b] (Hill, b the beta angle);
+  Earth: r_E = [-1, 0, 0];
+- thermal node on the configured face (the paper's -j_B): T_dot = (q_solar + q_albedo + q_IR - q_rejected) / (m c_p);
+- battery: E_dot = P_I I_d A_panel max(0, cos theta_SI) - P_out, the configured panel (the paper's +k_B);
 - translation: unforced Clohessy-Wiltshire (carried, not constrained).
 """
 
 from __future__ import annotations
 
-import math
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -26,28 +27,30 @@ Array = NDArray[np.float64]
 EARTH_DIRECTION_HILL = np.array([-1.0, 0.0, 0.0])
 """Unit vector from the spacecraft to the Earth (and the ground station), Hill frame."""
 
-SENSOR_AXIS_BODY = np.array([1.0, 0.0, 0.0])
-"""Sensor boresight +i_B (exclusion zone)."""
-ANTENNA_AXIS_BODY = np.array([0.0, 1.0, 0.0])
-"""Antenna boresight +j_B (communication)."""
-THERMAL_FACE_NORMAL_BODY = np.array([0.0, -1.0, 0.0])
-"""Outward normal of the thermal node's face, -j_B."""
-PANEL_NORMAL_BODY = np.array([0.0, 0.0, 1.0])
-"""Solar panel normal +k_B."""
+def face_normal(cfg: Config) -> Array:
+    """The thermal node's face, outward normal in body axes (3,) (the paper's -j_B)."""
+    return np.array(cfg.thermal.face_normal_body, dtype=float)
 
 
-def sun_direction(theta_S_rad: Array) -> Array:
-    """r_S (..., 3): unit vector to the sun in Hill, from theta_S (...)."""
+def panel_normal(cfg: Config) -> Array:
+    """The solar panel's normal in body axes (3,) (the paper's +k_B)."""
+    return np.array(cfg.power.panel_normal_body, dtype=float)
+
+
+def sun_direction(theta_S_rad: Array, beta_rad: float = 0.0) -> Array:
+    """r_S (..., 3): unit vector to the sun in Hill, from theta_S (...) and the beta angle."""
     th = np.asarray(theta_S_rad, dtype=float)
-    return np.stack([np.cos(th), np.sin(th), np.zeros_like(th)], axis=-1)
+    cb = np.cos(beta_rad)
+    return np.stack([cb * np.cos(th), cb * np.sin(th), np.full_like(th, np.sin(beta_rad))], axis=-1)
 
 
-def sun_direction_rates(theta_S_rad: Array, n_rad_s: float) -> tuple[Array, Array]:
+def sun_direction_rates(theta_S_rad: Array, n_rad_s: float, beta_rad: float = 0.0) -> tuple[Array, Array]:
     """(r_S_dot, r_S_ddot) (..., 3) with theta_S_dot = -n; 1/s and 1/s^2."""
     th = np.asarray(theta_S_rad, dtype=float)
     zero = np.zeros_like(th)
-    dot = -n_rad_s * np.stack([-np.sin(th), np.cos(th), zero], axis=-1)
-    ddot = -(n_rad_s**2) * np.stack([np.cos(th), np.sin(th), zero], axis=-1)
+    cb = np.cos(beta_rad)
+    dot = -n_rad_s * cb * np.stack([-np.sin(th), np.cos(th), zero], axis=-1)
+    ddot = -(n_rad_s**2) * cb * np.stack([np.cos(th), np.sin(th), zero], axis=-1)
     return dot, ddot
 
 
@@ -99,8 +102,8 @@ def thermal_fluxes(cos_sun: Array, cos_earth: Array, T_K: Array, cfg: Config) ->
 def temperature_rate(x: Array, cfg: Config) -> Array:
     """T_dot (...), K/s."""
     A = quat.attitude_matrix(x[..., Q])
-    cos_sun = face_cosine(A, THERMAL_FACE_NORMAL_BODY, sun_direction(x[..., THETA_S]))
-    cos_earth = face_cosine(A, THERMAL_FACE_NORMAL_BODY, EARTH_DIRECTION_HILL)
+    cos_sun = face_cosine(A, face_normal(cfg), sun_direction(x[..., THETA_S], cfg.environment.sun_beta_rad))
+    cos_earth = face_cosine(A, face_normal(cfg), EARTH_DIRECTION_HILL)
     heat_capacity = cfg.thermal.mass_kg * cfg.thermal.specific_heat_J_kgK
     return thermal_fluxes(cos_sun, cos_earth, x[..., TEMP], cfg) / heat_capacity
 
@@ -125,15 +128,10 @@ def drift(x: Array, cfg: Config) -> Array:
     f[..., OMEGA.start + 1] = (J3 - J1) * w3 * w1 / J2
     f[..., OMEGA.start + 2] = (J1 - J2) * w1 * w2 / J3
     f[..., OMEGA] += wheel_rate(w, x[..., PSI], cfg, cfg.spacecraft.model)
-    # Rows 1 (j_B) and 2 (k_B) of A(q) are those body axes in Hill; r_S = [cos, sin, 0], r_E = -x.
-    cs, sn = np.cos(x[..., THETA_S]), np.sin(x[..., THETA_S])
-    a10, a11 = 2.0 * (q1 * q2 - q3 * q4), -q1 * q1 + q2 * q2 - q3 * q3 + q4 * q4
-    a20, a21 = 2.0 * (q1 * q3 + q2 * q4), 2.0 * (q2 * q3 - q1 * q4)
-    cos_sun = -(a10 * cs + a11 * sn)  # thermal face is -j_B
-    cos_earth = a10
+    cos_sun, cos_earth, cos_panel = _incidences(q1, q2, q3, q4, x[..., THETA_S], cfg)
     heat_capacity = cfg.thermal.mass_kg * cfg.thermal.specific_heat_J_kgK
     f[..., TEMP] = thermal_fluxes(cos_sun, cos_earth, x[..., TEMP], cfg) / heat_capacity
-    f[..., ENERGY] = net_power(a20 * cs + a21 * sn, cfg)
+    f[..., ENERGY] = net_power(cos_panel, cfg)
     n = cfg.environment.mean_motion_rad_s
     f[..., THETA_S] = -n
     cw = x[..., CW]
@@ -144,18 +142,31 @@ def drift(x: Array, cfg: Config) -> Array:
     return f
 
 
+def _incidences(q1: Any, q2: Any, q3: Any, q4: Any, theta_S: Any, cfg: Config) -> tuple[Any, Any, Any]:
+    """(cos face-sun, cos face-Earth, cos panel-sun) from the quaternion's entries and theta_S (floats or
+    arrays: the same operations either way). A body axis e in Hill is A^T e, A(q) of Markley & Crassidis."""
+    a = ((q1 * q1 - q2 * q2 - q3 * q3 + q4 * q4, 2.0 * (q1 * q2 + q3 * q4), 2.0 * (q1 * q3 - q2 * q4)),
+         (2.0 * (q1 * q2 - q3 * q4), -q1 * q1 + q2 * q2 - q3 * q3 + q4 * q4, 2.0 * (q2 * q3 + q1 * q4)),
+         (2.0 * (q1 * q3 + q2 * q4), 2.0 * (q2 * q3 - q1 * q4), -q1 * q1 - q2 * q2 + q3 * q3 + q4 * q4))
+    beta = cfg.environment.sun_beta_rad
+    sun = (np.cos(beta) * np.cos(theta_S), np.cos(beta) * np.sin(theta_S), np.sin(beta))
+
+    def along(e: tuple[float, ...], d: tuple[Any, ...]) -> Any:
+        return sum(e[i] * a[i][j] * d[j] for i in range(3) for j in range(3) if e[i] != 0.0)
+
+    face, panel = cfg.thermal.face_normal_body, cfg.power.panel_normal_body
+    return along(face, sun), along(face, tuple(EARTH_DIRECTION_HILL)), along(panel, sun)
+
+
 def _drift_one(x: Array, cfg: Config) -> Array:
     """`drift` of one state (19,) on Python floats: the same operations in the same order as the
     batch version (bit-identical results; `test_batch_equals_single`), ~6x faster for one state,
     which is what the plant integrates 40 times per step."""
     q1, q2, q3, q4, w1, w2, w3 = (float(v) for v in x[0:7])
     J1, J2, J3 = cfg.spacecraft.inertia_kgm2
-    th = float(x[THETA_S])
-    cs, sn = math.cos(th), math.sin(th)
-    a10, a11 = 2.0 * (q1 * q2 - q3 * q4), -q1 * q1 + q2 * q2 - q3 * q3 + q4 * q4
-    a20, a21 = 2.0 * (q1 * q3 + q2 * q4), 2.0 * (q2 * q3 - q1 * q4)
+    cos_sun, cos_earth, cos_panel = _incidences(q1, q2, q3, q4, float(x[THETA_S]), cfg)
     heat_capacity = cfg.thermal.mass_kg * cfg.thermal.specific_heat_J_kgK
-    T_dot = float(thermal_fluxes(-(a10 * cs + a11 * sn), a10, float(x[TEMP]), cfg)) / heat_capacity
+    T_dot = float(thermal_fluxes(cos_sun, cos_earth, float(x[TEMP]), cfg)) / heat_capacity
     n = cfg.environment.mean_motion_rad_s
     px, _py, pz, vx, vy, vz = (float(v) for v in x[CW])
     wr = wheel_rate(x[OMEGA], x[PSI], cfg, cfg.spacecraft.model)
@@ -164,7 +175,7 @@ def _drift_one(x: Array, cfg: Config) -> Array:
         0.5 * (-q2 * w1 + q1 * w2 + q4 * w3), -0.5 * (q1 * w1 + q2 * w2 + q3 * w3),
         (J2 - J3) * w2 * w3 / J1 + wr[0], (J3 - J1) * w3 * w1 / J2 + wr[1], (J1 - J2) * w1 * w2 / J3 + wr[2],
         0.0, 0.0, 0.0,
-        T_dot, float(net_power(a20 * cs + a21 * sn, cfg)), -n,
+        T_dot, float(net_power(cos_panel, cfg)), -n,
         vx, vy, vz, 3 * n**2 * px + 2 * n * vy, -2 * n * vx, -(n**2) * pz,
     ])  # fmt: skip
 
@@ -208,8 +219,7 @@ def through_torque_interface(u_rad_s2: Array, cfg: Config) -> Array:
 
 
 __all__ = [
-    "ANTENNA_AXIS_BODY", "EARTH_DIRECTION_HILL", "PANEL_NORMAL_BODY", "SENSOR_AXIS_BODY",
-    "THERMAL_FACE_NORMAL_BODY", "control_matrix", "drift", "face_cosine", "gyroscopic_rate", "net_power",
-    "omega_dot", "state_derivative", "sun_direction", "sun_direction_rates", "temperature_rate",
+    "EARTH_DIRECTION_HILL", "control_matrix", "drift", "face_cosine", "face_normal", "gyroscopic_rate", "net_power",
+    "omega_dot", "panel_normal", "state_derivative", "sun_direction", "sun_direction_rates", "temperature_rate",
     "thermal_fluxes", "through_torque_interface", "torque_to_wheel_accel", "wheel_accel_to_torque",
 ]  # fmt: skip

@@ -1,21 +1,20 @@
 """Oracle (tests only): the first, numpy implementation of the safety constraints, one module each,
 gathered into an ordered, named set.
 
-| name            | h (safe >= 0)                 | enforced through                          | module            |
-|-----------------|-------------------------------|-------------------------------------------|-------------------|
-| exclusion_zone  | theta_EZ - FOV/2 - beta       | HOCBF                                     | exclusion_zone.py |
-| communication   | FOV/2 - theta_GS              | HOCBF (+ slack in the paper)              | communication.py  |
-| temperature     | T_max - T                     | HOCBF on the angle-augmented Psi_temp     | temperature.py    |
-| battery         | E - E_min                     | HOCBF on Psi_batt = h - delta2 theta_SI   | battery.py        |
-| omega_x/y/z     | omega_max^2 - omega_i^2       | CBF (+ ZOH bound in the robust preset)    | angular_rate.py   |
-| psi_x/y/z       | psi_max^2 - psi_i^2           | CBF (+ ZOH bound in the robust preset)    | wheel_speed.py    |
+| kind            | h (safe >= 0)                 | enforced through                          | module          |
+|-----------------|-------------------------------|-------------------------------------------|-----------------|
+| keep_out cone   | theta - alpha                 | HOCBF                                     | cone.py         |
+| keep_in cone    | alpha - theta                 | HOCBF (+ slack where configured)          | cone.py         |
+| temperature     | T_max - T                     | HOCBF on the angle-augmented Psi_temp     | temperature.py  |
+| battery         | E - E_min                     | HOCBF on Psi_batt = h - delta2 theta_SI   | battery.py      |
+| omega_x/y/z     | omega_max^2 - omega_i^2       | CBF (+ ZOH bound in the robust preset)    | angular_rate.py |
+| psi_x/y/z       | psi_max^2 - psi_i^2           | CBF (+ ZOH bound in the robust preset)    | wheel_speed.py  |
 
 Actuator and angular-acceleration limits are the box U of the filter (Config.u_max_rad_s2).
 
-These modules are the definition (vectorised over state batches, checked against finite
-differences). The filter evaluates their compiled one-state port, `rta_attitude/barrier_rows.py`
-(same formulas, tested equal to 1e-13 at random states and at the poles): a change to a barrier
-here must be made there too.
+These modules are the definition (vectorised over state batches, checked against finite differences); the
+filter evaluates its own compiled one-state code (rta_attitude/constraints), tested equal to these to
+rounding at random states and at the poles.
 """
 
 from __future__ import annotations
@@ -27,11 +26,10 @@ import numpy as np
 from oracles.constraints.angular_rate import AngularRate
 from oracles.constraints.base import Array, BarrierValues, Constraint, Context
 from oracles.constraints.battery import Battery
-from oracles.constraints.communication import Communication
-from oracles.constraints.exclusion_zone import ExclusionZone
+from oracles.constraints.cone import Cone
 from oracles.constraints.temperature import Temperature
 from oracles.constraints.wheel_speed import WheelSpeed
-from rta_attitude.config.schema import CONSTRAINT_NAMES, Config
+from rta_attitude.config.schema import Config
 
 
 @dataclass(frozen=True)
@@ -58,14 +56,12 @@ class ConstraintSet:
 
     @classmethod
     def from_config(cls, cfg: Config) -> ConstraintSet:
-        """All ten constraints of the paper, in CONSTRAINT_NAMES order (disabled ones included)."""
-        items: list[Constraint] = [
-            ExclusionZone.from_config(cfg), Communication.from_config(cfg),
-            Temperature.from_config(cfg), Battery.from_config(cfg),
-        ]  # fmt: skip
+        """Every constraint of the configuration, in its row order (disabled ones included)."""
+        items: list[Constraint] = [Cone.from_config(cfg, c) for c in cfg.pointing]
+        items += [Temperature.from_config(cfg), Battery.from_config(cfg)]
         items += [AngularRate.from_config(cfg, i) for i in range(3)]
         items += [WheelSpeed.from_config(cfg, i) for i in range(3)]
-        assert tuple(c.name for c in items) == CONSTRAINT_NAMES  # a programming error, not input
+        assert tuple(c.name for c in items) == cfg.constraint_names  # a programming error, not input
         return cls(tuple(items), cfg)
 
     @property
@@ -82,17 +78,17 @@ class ConstraintSet:
         """(m,) slack weight p_i; 0 for hard constraints."""
         return np.array([c.gains.slack_weight for c in self.constraints], dtype=float)
 
-    def context(self, x: Array) -> Context:
-        return Context.from_state(x, self.cfg)
+    def context(self, x: Array, t_s: float | Array = 0.0) -> Context:
+        return Context.from_state(x, self.cfg, t_s)
 
-    def safety_values(self, x: Array) -> Array:
-        """Physical h of every constraint (..., m); negative = violated."""
-        ctx = self.context(x)
+    def safety_values(self, x: Array, t_s: float | Array = 0.0) -> Array:
+        """Physical h of every constraint (..., m) at times t_s; negative = violated."""
+        ctx = self.context(x, t_s)
         return np.stack([c.safety_value(ctx) for c in self.constraints], axis=-1)
 
-    def evaluate(self, x: Array, ctx: Context | None = None) -> BarrierTable:
-        """h, Psi levels and the affine barrier conditions of every constraint."""
-        ctx = ctx if ctx is not None else self.context(x)
+    def evaluate(self, x: Array, ctx: Context | None = None, t_s: float | Array = 0.0) -> BarrierTable:
+        """h, Psi levels and the affine barrier conditions of every constraint at times t_s."""
+        ctx = ctx if ctx is not None else self.context(x, t_s)
         vals: list[BarrierValues] = [c.evaluate(ctx) for c in self.constraints]
         return BarrierTable(
             h=np.stack([v.h for v in vals], axis=-1),
@@ -119,6 +115,6 @@ class ConstraintSet:
 
 
 __all__ = [
-    "AngularRate", "BarrierTable", "BarrierValues", "Battery", "Communication", "Constraint",
-    "ConstraintSet", "Context", "ExclusionZone", "Temperature", "WheelSpeed",
+    "AngularRate", "BarrierTable", "BarrierValues", "Battery", "Cone", "Constraint",
+    "ConstraintSet", "Context", "Temperature", "WheelSpeed",
 ]  # fmt: skip

@@ -43,19 +43,23 @@ class Context:
     sun_dot: Array
     sun_ddot: Array
     """r_S and its first two time derivatives (..., 3) in Hill."""
+    t_s: Array = 0.0  # type: ignore[assignment]
+    """The time of the states (...), s from the run's start (the cones' windows)."""
     cache: dict[str, Any] = field(default_factory=dict, repr=False, compare=False)
     """Results shared by several constraints (e.g. the pointing table), filled on first use."""
 
     @classmethod
-    def from_state(cls, x: Array, cfg: Config) -> Context:
-        """Build the context of states x (..., 19)."""
+    def from_state(cls, x: Array, cfg: Config, t_s: float | Array = 0.0) -> Context:
+        """Build the context of states x (..., 19) at times t_s (s)."""
         x = np.asarray(x, dtype=float)
-        sun_dot, sun_ddot = model.sun_direction_rates(x[..., THETA_S], cfg.environment.mean_motion_rad_s)
+        beta = cfg.environment.sun_beta_rad
+        sun_dot, sun_ddot = model.sun_direction_rates(x[..., THETA_S], cfg.environment.mean_motion_rad_s, beta)
         return cls(
             x=x, cfg=cfg, A=quat.attitude_matrix(x[..., Q]), omega=x[..., OMEGA],
             omega_drift=(model.gyroscopic_rate(x[..., OMEGA], cfg.spacecraft.J)
                          + model.wheel_rate(x[..., OMEGA], x[..., PSI], cfg, cfg.filter.model)),
-            sun=model.sun_direction(x[..., THETA_S]), sun_dot=sun_dot, sun_ddot=sun_ddot,
+            sun=model.sun_direction(x[..., THETA_S], beta), sun_dot=sun_dot, sun_ddot=sun_ddot,
+            t_s=np.broadcast_to(np.asarray(t_s, dtype=float), x.shape[:-1]),
         )  # fmt: skip
 
     @property
@@ -101,7 +105,7 @@ class Constraint(Protocol):
 def sampled_data_margin(cfg: Config, group: str) -> float:
     """The margin a relative-degree-2 constraint keeps in the `robust` preset (0 in `paper`): `margin` for
     the filter's model `paper`, `margin_gyrostat` for the gyrostat."""
-    return cfg.barriers[group].sampled_data_margin(cfg.filter.model) if cfg.filter.preset == "robust" else 0.0
+    return cfg.gains(group).sampled_data_margin(cfg.filter.model) if cfg.filter.preset == "robust" else 0.0
 
 
 def second_order_condition(

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 from oracles.constraints.base import Array, BarrierValues, Context, sampled_data_margin, second_order_condition
 from oracles.constraints.pointing import sun_pointing
-from oracles.model import PANEL_NORMAL_BODY, net_power
+from oracles.model import net_power, panel_normal
 from rta_attitude.config.schema import BarrierGains, Config
 from rta_attitude.dynamics.state import ENERGY
 
@@ -45,7 +45,7 @@ class Battery:
         return ctx.x[..., ENERGY] - self.E_min_J
 
     def evaluate(self, ctx: Context) -> BarrierValues:
-        p = sun_pointing(ctx, PANEL_NORMAL_BODY)
+        p = sun_pointing(ctx, panel_normal(ctx.cfg))
         h = ctx.x[..., ENERGY] - self.E_min_J
         E_dot = net_power(p.cos, ctx.cfg)
         E_ddot = ctx.cfg.power.peak_W * (p.cos > 0) * p.cos_dot

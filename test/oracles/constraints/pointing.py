@@ -98,44 +98,44 @@ def pointing(ctx: Context, axis_body: Array, target: Array, target_dot: Array, t
     return Pointing(c, c_dot, c_dd_drift, c_dd_gain, theta, theta_dot, th_dd_drift, th_dd_gain)
 
 
-PAIRS: tuple[tuple[tuple[float, float, float], str], ...] = (
-    ((1.0, 0.0, 0.0), "sun"),     # sensor +i_B (exclusion zone)
-    ((0.0, 1.0, 0.0), "earth"),   # antenna +j_B (communication)
-    ((0.0, -1.0, 0.0), "sun"),    # thermal face -j_B (temperature)
-    ((0.0, -1.0, 0.0), "earth"),  # thermal face -j_B (temperature)
-    ((0.0, 0.0, 1.0), "sun"),     # panel +k_B (battery)
-)
-"""The axis-target pairs the constraints use; evaluated together, once per context."""
-
-
-def _all_pairs(ctx: Context) -> Pointing:
+def target_in_hill(kind: str, vector: Array | None, ctx: Context) -> tuple[Array, Array, Array]:
+    """A target's unit vector in Hill and its first two time derivatives (batch (..., 3)), the Hill frame
+    inertial (the oracle's model): the sun r_S(theta_S, beta); a vector fixed in the inertial frame I
+    (x toward the sun's direction in the orbit plane at theta_S = 0, z the orbit normal) reads
+    R_z(theta_S) v in Hill, with theta_S_dot = -n; the Earth, the orbit normal, the velocity and a vector
+    fixed in Hill do not move."""
     from oracles.model import EARTH_DIRECTION_HILL
 
-    if "pointing" not in ctx.cache:
-        shape = (*ctx.batch_shape, len(PAIRS), 3)
-        r, rd, rdd = np.empty(shape), np.empty(shape), np.empty(shape)
-        for k, (_axis, target) in enumerate(PAIRS):
-            if target == "sun":
-                r[..., k, :], rd[..., k, :], rdd[..., k, :] = ctx.sun, ctx.sun_dot, ctx.sun_ddot
-            else:
-                r[..., k, :], rd[..., k, :], rdd[..., k, :] = EARTH_DIRECTION_HILL, 0.0, 0.0
-        ctx.cache["pointing"] = pointing(ctx, np.array([a for a, _ in PAIRS]), r, rd, rdd)
-    return ctx.cache["pointing"]
+    shape = (*ctx.batch_shape, 3)
+    if kind == "sun":
+        return ctx.sun, ctx.sun_dot, ctx.sun_ddot
+    if kind == "inertial":
+        th = ctx.x[..., 12]
+        n = ctx.cfg.environment.mean_motion_rad_s
+        v = np.asarray(vector, dtype=float)
+        c, s = np.cos(th), np.sin(th)
+        r = np.stack([c * v[0] - s * v[1], s * v[0] + c * v[1], np.full_like(th, v[2])], axis=-1)
+        # d/dt with theta_S_dot = -n: R_z'(theta) v times -n
+        rd = -n * np.stack([-s * v[0] - c * v[1], c * v[0] - s * v[1], np.zeros_like(th)], axis=-1)
+        rdd = -(n**2) * np.stack([c * v[0] - s * v[1], s * v[0] + c * v[1], np.zeros_like(th)], axis=-1)
+        return r, rd, rdd
+    fixed = {"earth": EARTH_DIRECTION_HILL, "orbit_normal": np.array([0.0, 0.0, 1.0]),
+             "velocity": np.array([0.0, 1.0, 0.0])}
+    v = fixed[kind] if kind in fixed else np.asarray(vector, dtype=float)
+    return np.broadcast_to(v, shape), np.zeros(shape), np.zeros(shape)
 
 
-def _pair(ctx: Context, axis_body: Array, target: str) -> Pointing:
-    key = (tuple(float(v) for v in axis_body), target)
-    k = [p for p in PAIRS].index(key)
-    t = _all_pairs(ctx)
-    return Pointing(t.cos[..., k], t.cos_dot[..., k], t.cos_ddot_drift[..., k], t.cos_ddot_gain[..., k, :],
-                    t.theta[..., k], t.theta_dot[..., k], t.theta_ddot_drift[..., k], t.theta_ddot_gain[..., k, :])
+def axis_pointing(ctx: Context, axis_body: Array, kind: str, vector: Array | None = None) -> Pointing:
+    """Angle kinematics of one body axis to one target (`target_in_hill`), batch-first."""
+    r, rd, rdd = target_in_hill(kind, vector, ctx)
+    return pointing(ctx, np.asarray(axis_body, dtype=float), r, rd, rdd)
 
 
 def sun_pointing(ctx: Context, axis_body: Array) -> Pointing:
-    """Angle of a body axis (one of PAIRS) to the (moving) sun direction."""
-    return _pair(ctx, axis_body, "sun")
+    """Angle of a body axis to the (moving) sun direction."""
+    return axis_pointing(ctx, axis_body, "sun")
 
 
 def earth_pointing(ctx: Context, axis_body: Array) -> Pointing:
-    """Angle of a body axis (one of PAIRS) to the (fixed) Earth direction -x_Hill."""
-    return _pair(ctx, axis_body, "earth")
+    """Angle of a body axis to the (fixed) Earth direction -x_Hill."""
+    return axis_pointing(ctx, axis_body, "earth")

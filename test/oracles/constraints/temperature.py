@@ -21,7 +21,7 @@ import numpy as np
 
 from oracles.constraints.base import Array, BarrierValues, Context, sampled_data_margin, second_order_condition
 from oracles.constraints.pointing import earth_pointing, sun_pointing
-from oracles.model import THERMAL_FACE_NORMAL_BODY, thermal_fluxes
+from oracles.model import face_normal, thermal_fluxes
 from rta_attitude.config.schema import Augmentation, BarrierGains, Config
 from rta_attitude.dynamics.state import TEMP
 
@@ -49,8 +49,8 @@ class Temperature:
     def evaluate(self, ctx: Context) -> BarrierValues:
         cfg = ctx.cfg
         th, env = cfg.thermal, cfg.environment
-        sun = sun_pointing(ctx, THERMAL_FACE_NORMAL_BODY)
-        earth = earth_pointing(ctx, THERMAL_FACE_NORMAL_BODY)
+        sun = sun_pointing(ctx, face_normal(cfg))
+        earth = earth_pointing(ctx, face_normal(cfg))
         T = ctx.x[..., TEMP]
         heat_capacity = th.mass_kg * th.specific_heat_J_kgK
         T_dot = thermal_fluxes(sun.cos, earth.cos, T, cfg) / heat_capacity

@@ -1,0 +1,258 @@
+"""The Foxglove/Lichtblick layout of a configuration (`config/foxglove_layout.json` is this module's output for
+the default configuration; a test holds them equal). ROS-free: JSON only.
+
+Write one for your own constraints with
+
+    python -m rta_attitude.recording.layout --config my.yaml my_layout.json
+
+The margins are drawn in an engineer's units, one unit to a plot (a plot panel has one y axis):
+
+- pointing: every cone's h = theta - alpha (keep_out) or alpha - theta (keep_in), in deg (the message path
+  modifier `.@rad2deg` on filter_status's h), on one plot with a zero line: all in deg, each cone a series.
+  Outside a windowed cone's windows h is +inf, written `inf`, which the apps read as no number: the series
+  has a gap there;
+- temperature: h = T_max - T [K]; battery: h = E - E_min [J]; each on a plot of its own with a zero line;
+- body rates and wheel speeds: filter_status's h = v_max^2 - v^2 (rad^2/s^2) reads poorly, and the margin
+  v_max - |v| needs arithmetic a message path has not (one unary modifier: abs, sqrt, rad2deg, ...). The bag
+  has v itself (`state`, JointState positions), so the plots show each axis's v, in deg/s for the body
+  rates (`.@rad2deg`) and rad/s for the wheels, between reference lines at -v_max and +v_max: the margin
+  v_max - |v| is the gap to the nearer line, in the unit of the plot. These plots also work without RTA
+  (no filter_status).
+
+Paths use the receive time (a bag's log time, which the recorder sets to the header stamp). Panel titles are
+written under both apps' keys (`foxglovePanelTitle`, `lichtblickPanelTitle`).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from rta_attitude import topics
+from rta_attitude.config.schema import AXIS_NAMES, Config
+from rta_attitude.dynamics.state import OMEGA, PSI
+from rta_attitude.errors import RtaError
+from rta_attitude.files import write_text
+from rta_attitude.recording.plots import target_label
+
+TITLE_KEYS = ("foxglovePanelTitle", "lichtblickPanelTitle")
+SERIES_COLORS = ("#4e98e2", "#f5774d", "#f7df71", "#5cd6a9", "#b077e0", "#e05c8a", "#8cd1ff", "#c9a26b")
+LIMIT_COLOR = "#ff3333"
+TIMESTAMP_METHOD = "receiveTime"
+PLOT_OPTIONS: dict[str, Any] = {
+    "showXAxisLabels": True, "showYAxisLabels": True, "showLegend": True, "legendDisplay": "floating",
+    "showPlotValuesInLegend": True, "isSynced": True, "xAxisVal": "timestamp", "followingViewWidth": 30,
+    "sidebarDimension": 240,
+}  # fmt: skip
+"""The settings every plot panel shares."""
+POINTING_PLOT = "Plot!margins_pointing"
+TEMPERATURE_PLOT = "Plot!margin_temperature"
+BATTERY_PLOT = "Plot!margin_battery"
+RATES_PLOT = "Plot!body_rates"
+WHEELS_PLOT = "Plot!wheel_speeds"
+MARGIN_PLOTS = (POINTING_PLOT, TEMPERATURE_PLOT, BATTERY_PLOT, RATES_PLOT, WHEELS_PLOT)
+"""The margin plots, by panel id."""
+RAD_TO_DEG = ".@rad2deg"
+"""The message path modifier that turns radians into degrees (both apps)."""
+
+
+def _titled(title: str, config: dict[str, Any]) -> dict[str, Any]:
+    """A panel config with its title under both apps' keys."""
+    return {**{k: title for k in TITLE_KEYS}, **config}
+
+
+def number_text(value: float) -> str:
+    """A reference line's value as the apps parse it: decimal, no exponent, at most 4 decimals ('-1', '575.9587')."""
+    text = f"{value:.4f}".rstrip("0").rstrip(".")
+    return "0" if text in ("-0", "") else text
+
+
+def _series(value: str, label: str, k: int) -> dict[str, Any]:
+    return {"value": value, "enabled": True, "timestampMethod": TIMESTAMP_METHOD, "label": label,
+            "color": SERIES_COLORS[k % len(SERIES_COLORS)]}
+
+
+def _line(value: float, label: str) -> dict[str, Any]:
+    """A reference line (a number as the path)."""
+    return {"value": number_text(value), "enabled": True, "timestampMethod": TIMESTAMP_METHOD, "label": label,
+            "color": LIMIT_COLOR}
+
+
+def _plot(title: str, paths: list[dict[str, Any]]) -> dict[str, Any]:
+    return _titled(title, {"paths": paths, **PLOT_OPTIONS})
+
+
+def status_path(namespace: str, entry: str, key: str | None = None) -> str:
+    """The message path of a filter_status entry's message, or of one of its keys' value."""
+    base = f'{namespace}/{topics.FILTER_STATUS}.status[:]{{name=="{entry}"}}'
+    return f"{base}.message" if key is None else f'{base}.values[:]{{key=="{key}"}}.value'
+
+
+def state_path(namespace: str, index: int) -> str:
+    """The message path of one state component (`state`'s JointState position, STATE_NAMES order)."""
+    return f"{namespace}/{topics.STATE}.position[{index}]"
+
+
+def pointing_plot(cfg: Config, namespace: str) -> dict[str, Any]:
+    """Every cone's margin h, in deg, with the zero line."""
+    paths = [_series(status_path(namespace, topics.CONSTRAINT_STATUS_PREFIX + c.name, "h") + RAD_TO_DEG,
+                     f"{c.name} ({c.kind.replace('_', ' ')} {math.degrees(c.half_angle_rad):g} deg, "
+                     f"{target_label(c.target, c.target_vector)})", k)
+             for k, c in enumerate(cfg.pointing)]
+    return _plot("Pointing margins h [deg]: each cone's angle beyond its limit (> 0 safe)",
+                 [*paths, _line(0.0, "h = 0 (limit)")])
+
+
+def fixed_margin_plot(namespace: str, name: str, title: str) -> dict[str, Any]:
+    """One constraint's h in model units (temperature [K], battery [J]) with the zero line."""
+    return _plot(title, [_series(status_path(namespace, topics.CONSTRAINT_STATUS_PREFIX + name, "h"), name, 0),
+                         _line(0.0, "h = 0 (limit)")])
+
+
+def speed_plot(namespace: str, title: str, prefix: str, first: int, limit: float, unit: str,
+               modifier: str) -> dict[str, Any]:
+    """Each axis's speed (state components first..first+2, `modifier` applied) between -limit and +limit."""
+    paths = [_series(state_path(namespace, first + i) + modifier, f"{prefix}_{a}", i) for i, a in enumerate(AXIS_NAMES)]
+    bound = f"{number_text(limit)} {unit}"
+    return _plot(title, [*paths, _line(limit, f"+{prefix}_max ({bound})"), _line(-limit, f"-{prefix}_max")])
+
+
+def state_transitions(cfg: Config, namespace: str) -> dict[str, Any]:
+    """The filter's status and fallback, and ok / intervening / violated of each cone, temperature, battery."""
+    entries = [*(c.name for c in cfg.pointing), "temperature", "battery"]
+    paths = [{"value": status_path(namespace, topics.QP_STATUS_NAME), "enabled": True,
+              "timestampMethod": TIMESTAMP_METHOD, "label": "filter"},
+             {"value": status_path(namespace, topics.QP_STATUS_NAME, topics.KEY_FALLBACK), "enabled": True,
+              "timestampMethod": TIMESTAMP_METHOD, "label": "fallback"}]
+    paths += [{"value": status_path(namespace, topics.CONSTRAINT_STATUS_PREFIX + n), "enabled": True,
+               "timestampMethod": TIMESTAMP_METHOD, "label": n} for n in entries]
+    return _titled("Filter status (pass / solved / fallback; per constraint ok / intervening / violated)",
+                   {"isSynced": True, "showPoints": True, "xAxisRange": 30, "paths": paths})
+
+
+def torque_plot(namespace: str, axis: str) -> dict[str, Any]:
+    return _plot(f"Torque {axis}: u_des (torque_des) vs filtered (torque_cmd) [N m]",
+                 [_series(f"{namespace}/{topics.TORQUE_DES}.vector.{axis}", f"u_des.{axis}", 0),
+                  _series(f"{namespace}/{topics.TORQUE_CMD}.vector.{axis}", f"u.{axis}", 1)])
+
+
+def diagnostics_summary(title: str, topic: str) -> dict[str, Any]:
+    return _titled(title, {"topicToRender": topic, "minLevel": 0, "pinnedIds": [], "hardwareIdFilter": "",
+                           "sortByLevel": True})
+
+
+def attitude_panel(namespace: str) -> dict[str, Any]:
+    """The 3D panel: the scene's markers and transform in the hill frame, with a grid."""
+    return _titled("Attitude scene (hill frame): body, boresights, pointing cones about their targets", {
+        "followTf": topics.HILL_FRAME, "followMode": "follow-none",
+        "cameraState": {"distance": 7, "perspective": True, "phi": 60, "thetaOffset": 45, "target": [0, 0, 0],
+                        "targetOffset": [0, 0, 0], "targetOrientation": [0, 0, 0, 1], "fovy": 45, "near": 0.01,
+                        "far": 5000},
+        "scene": {"enableStats": False}, "transforms": {},
+        "topics": {f"{namespace}/{topics.SCENE_MARKERS}": {"visible": True},
+                   f"{namespace}/{topics.SCENE_TRANSFORM}": {"visible": True},
+                   f"{namespace}/{topics.ODOMETRY}": {"visible": False}},
+        "layers": {"grid-hill": {"instanceId": "grid-hill", "layerId": "foxglove.Grid", "label": "Grid (hill)",
+                                 "visible": True, "frameLocked": True, "frameId": topics.HILL_FRAME, "size": 20,
+                                 "divisions": 20, "lineWidth": 1, "color": "#248eff66", "position": [0, 0, 0],
+                                 "rotation": [0, 0, 0], "order": 1}},
+        "publish": {"type": "point", "poseTopic": "/move_base_simple/goal", "pointTopic": "/clicked_point",
+                    "poseEstimateTopic": "/initialpose", "poseEstimateXDeviation": 0.5,
+                    "poseEstimateYDeviation": 0.5, "poseEstimateThetaDeviation": 0.26179939},
+        "imageMode": {},
+    })  # fmt: skip
+
+
+def _split(direction: str, first: Any, second: Any, percent: float = 50) -> dict[str, Any]:
+    return {"direction": direction, "first": first, "second": second, "splitPercentage": percent}
+
+
+def tabs() -> dict[str, Any]:
+    """The tabbed panel: torques, the filter status and /diagnostics, the raw status."""
+    return {"activeTabIdx": 0, "tabs": [
+        {"title": "u_des vs filtered",
+         "layout": _split("column", "Plot!torque_x", _split("column", "Plot!torque_y", "Plot!torque_z"), 33.3)},
+        {"title": "filter status, /diagnostics",
+         "layout": _split("column", _split("row", "DiagnosticSummary!filter_status",
+                                           "DiagnosticStatusPanel!filter_detail"),
+                          "DiagnosticSummary!diagnostics", 65)},
+        {"title": "raw", "layout": _split("row", "RawMessages!filter_status", "DiagnosticSummary!run_status")},
+    ]}  # fmt: skip
+
+
+def layout(cfg: Config, namespace: str = topics.DEFAULT_NAMESPACE) -> dict[str, Any]:
+    """The layout (Foxglove's and Lichtblick's `LayoutData`) of a configuration's run under `namespace`."""
+    ns = namespace.rstrip("/")
+    L = cfg.limits
+    status = f"{ns}/{topics.FILTER_STATUS}"
+    config_by_id: dict[str, Any] = {
+        POINTING_PLOT: pointing_plot(cfg, ns),
+        TEMPERATURE_PLOT: fixed_margin_plot(ns, "temperature", "Temperature margin h = T_max - T [K] (> 0 safe)"),
+        BATTERY_PLOT: fixed_margin_plot(ns, "battery", "Battery margin h = E - E_min [J] (> 0 safe)"),
+        RATES_PLOT: speed_plot(ns, "Body rates omega [deg/s] within +-omega_max: the margin is the gap to the "
+                               "nearer limit", "omega", OMEGA.start, math.degrees(L.omega_max_rad_s), "deg/s",
+                               RAD_TO_DEG),
+        WHEELS_PLOT: speed_plot(ns, "Wheel speeds psi [rad/s] within +-psi_max: the margin is the gap to the "
+                                "nearer limit", "psi", PSI.start, L.psi_max_rad_s, "rad/s", ""),
+        **{f"Plot!torque_{a}": torque_plot(ns, a) for a in AXIS_NAMES},
+        "StateTransitions!filter_status": state_transitions(cfg, ns),
+        "DiagnosticSummary!filter_status": diagnostics_summary("Filter status per constraint", status),
+        "DiagnosticStatusPanel!filter_detail": _titled("Filter status detail",
+                                                       {"topicToRender": status, "numericPrecision": 6}),
+        "DiagnosticSummary!run_status": diagnostics_summary("Run status", f"{ns}/{topics.RUN_STATUS}"),
+        "RawMessages!filter_status": {"topicPath": status, "diffEnabled": False, "diffMethod": "custom",
+                                      "diffTopicPath": "", "showFullMessageForDiff": False, "expansion": "none"},
+        "3D!attitude": attitude_panel(ns),
+        "Tab!views": tabs(),
+        "DiagnosticSummary!diagnostics": diagnostics_summary("/diagnostics (every node's summary)",
+                                                             topics.DIAGNOSTICS),
+    }  # fmt: skip
+    margins = _split("column", POINTING_PLOT, _split("column", _split("row", TEMPERATURE_PLOT, BATTERY_PLOT),
+                                                     _split("row", RATES_PLOT, WHEELS_PLOT)), 40)
+    views = _split("column", "3D!attitude", _split("column", "Tab!views", "StateTransitions!filter_status", 65))
+    return {"configById": config_by_id, "globalVariables": {}, "userNodes": {}, "playbackConfig": {"speed": 1},
+            "layout": _split("row", margins, views, 55)}
+
+
+def layout_json(cfg: Config, namespace: str = topics.DEFAULT_NAMESPACE) -> str:
+    """`layout` as the JSON text the shipped file holds (2-space indent, a final newline)."""
+    return json.dumps(layout(cfg, namespace), indent=2) + "\n"
+
+
+def write_layout(cfg: Config, path: str | Path, namespace: str = topics.DEFAULT_NAMESPACE) -> Path:
+    """Write `layout_json` to path (atomically: never a half-written file).
+
+    Raises:
+        OutputError: it could not be written.
+    """
+    return write_text(Path(path), layout_json(cfg, namespace))
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """`python -m rta_attitude.recording.layout [--config YAML] [--namespace NS] OUT`."""
+    from rta_attitude import config
+
+    parser = argparse.ArgumentParser(prog="python -m rta_attitude.recording.layout",
+                                     description="write the Foxglove/Lichtblick layout of a configuration")
+    parser.add_argument("out", type=Path, help="the layout JSON to write")
+    parser.add_argument("--config", type=Path, default=None, help="parameter file (default: the package's)")
+    parser.add_argument("--namespace", default=topics.DEFAULT_NAMESPACE, help="the run's namespace (default /rta)")
+    args = parser.parse_args(argv)
+    try:
+        print(f"layout: {write_layout(config.load(args.config), args.out, args.namespace)}")
+    except RtaError as exc:
+        print(f"ERROR: {exc}", file=sys.stderr)
+        return 1
+    return 0
+
+
+__all__ = ["MARGIN_PLOTS", "TITLE_KEYS", "layout", "layout_json", "main", "number_text", "state_path", "status_path",
+           "write_layout"]
+
+if __name__ == "__main__":
+    raise SystemExit(main())
