@@ -31,7 +31,8 @@ from floors import StraightforwardFilter
 from rta_attitude import config
 from rta_attitude.dynamics.sensors import Instruments
 from rta_attitude.filter.asif import AsifFilter
-from rta_attitude.filter.pipeline import RESULT_DTYPE, filter_many
+from rta_attitude.filter.pipeline import filter_many
+from rta_attitude.filter.records import RESULT_DTYPE
 from rta_attitude.montecarlo.runner import run_runs
 from rta_attitude.montecarlo.sampling import sample_initial_states
 from rta_attitude.simulation.closed_loop import ClosedLoop

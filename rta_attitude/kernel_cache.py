@@ -2,7 +2,7 @@
 
 numba invalidates a cached function when its own source file changes, but not when a function it
 calls from another file changes: after an edit of `filter/active_set.py` (or a `git pull` that
-brings one), `filter/pipeline.py`'s cache would still hold the old solver, linked in, and run it (or
+brings one), `filter/qp.py`'s cache would still hold the old solver, linked in, and run it (or
 crash when Python calls the new one: "NRT_adapt_ndarray_to_python: 'descr' is NULL", seen here).
 `drop_stale_caches` hashes the sources of every module with kernels and, when the hash differs from
 the one recorded next to the caches, deletes those modules' cache files so everything recompiles
@@ -12,7 +12,7 @@ Nothing runs at import: the entry points that compile or load kernels call it fi
 the plant node, every `rta-attitude` command (cli.main), the Monte Carlo's `run_runs` and
 `sample_initial_states`, the test session). A fresh installation has no cache, so only a developer who
 edits kernel sources and then calls a kernel without one of those entry points can meet a stale cache
-(a script calling `run_runs` after an edit of `filter/backup.py` did, before it was an entry point).
+(a script calling `run_runs` after an edit of the backup law, not through an entry point, would).
 """
 
 from __future__ import annotations

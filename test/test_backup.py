@@ -1,4 +1,4 @@
-"""The gatekeeper (`filter.backup`): the backup law against independent computations, the gate's rule
+"""The gatekeeper (`filter.gatekeeper`): the backup law against independent computations, the gate's rule
 (never an unverified candidate while a plan exists), recursive feasibility on Monte Carlo runs, and
 the default (no backup law) unchanged."""
 
@@ -17,24 +17,24 @@ from rta_attitude.constraints import ConstraintSet
 from rta_attitude.dynamics.sensors import Instruments, interface_energy_error
 from rta_attitude.dynamics.spacecraft import integrate, torque_to_wheel_accel, wheel_accel_to_torque
 from rta_attitude.errors import ConfigError
-from rta_attitude.filter.backup import (
+from rta_attitude.filter.gatekeeper.gate import gate, reset, verify
+from rta_attitude.filter.gatekeeper.gate import predicted as backup_predicted
+from rta_attitude.filter.gatekeeper.law import (
     CORRIDOR_HALF_WIDTH_RAD,
-    GATE_DTYPE,
     RATE_LIMIT_FRACTION,
     SETTLED_RATE_FRACTION,
     TILT_WHEEL_MARGIN,
     VARIANTS,
+    sun_safe_error,
+)
+from rta_attitude.filter.gatekeeper.records import GATE_DTYPE
+from rta_attitude.filter.gatekeeper.rollout import (
     backup_command,
     backup_rollout,
     check_margins,
     energy_reserve,
-    gate,
     is_settled,
-    reset,
-    sun_safe_error,
-    verify,
 )
-from rta_attitude.filter.backup import predicted as backup_predicted
 from rta_attitude.filter.outcome import (
     GATE_BACKUP,
     GATE_NAMES,
@@ -43,7 +43,7 @@ from rta_attitude.filter.outcome import (
     GATE_UNVERIFIED,
     GATE_VERIFIED,
 )
-from rta_attitude.filter.pipeline import filter_record
+from rta_attitude.filter.records import filter_record
 from rta_attitude.montecarlo.runner import run_runs
 from rta_attitude.montecarlo.sampling import sample_initial_states
 from rta_attitude.viability.laws import law_command
@@ -307,7 +307,7 @@ def test_where_nothing_verifies_call_after_call_the_filtered_search_backs_off(cf
     is one that found nothing). A call at which the gate's check verifies a way out ends the back-off: the next
     call at that state tries the search at once."""
     from rta_attitude.filter.asif import AsifFilter
-    from rta_attitude.filter.pipeline import FILTERED_BACKOFF_MAX
+    from rta_attitude.filter.gatekeeper.plans import FILTERED_BACKOFF_MAX
 
     c = config.load()
     x0, _ = sample_initial_states(5000, 1, c)

@@ -27,7 +27,8 @@ from rta_attitude.dynamics.sensors import (
 )
 from rta_attitude.dynamics.state import make_state
 from rta_attitude.filter.asif import AsifFilter
-from rta_attitude.filter.pipeline import drive_box, filter_record, new_workspace
+from rta_attitude.filter.drive import drive_box
+from rta_attitude.filter.records import filter_record, new_workspace
 from rta_attitude.montecarlo.runner import run_runs, run_runs_stepped
 from rta_attitude.simulation.closed_loop import run_stepped, simulate
 

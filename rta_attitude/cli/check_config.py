@@ -53,9 +53,25 @@ def run(args: argparse.Namespace) -> int:
             if h[i] < 0:
                 print(f"WARNING: scenario {name}: the initial state violates {c.name} (h = {h[i]:.4g} {c.unit})",
                       file=sys.stderr)
+    if cfg.filter.backup_law != "none":
+        from rta_attitude.filter.gatekeeper.law import backup_attitude_conflicts
+
+        o = cfg.filter
+        for name, worst_deg, ranges in backup_attitude_conflicts(cfg):
+            where = ", ".join(f"[{a:.0f}, {b:.0f}]" for a, b in ranges)
+            print(f"WARNING: the backup attitude ({_axis(o.backup_sun_axis_body)} on the sun, "
+                  f"{_axis(o.backup_secondary_axis_body)} toward {o.backup_secondary_target}) puts {name} inside "
+                  f"its cone (h down to {worst_deg:.1f} deg) for theta_S in {where} deg: there the backup law "
+                  f"turns the panel off the sun to keep it clear (docs/backup.md)", file=sys.stderr)
     for message in cfg.scenario_errors.values():
         print(f"ERROR: {message}", file=sys.stderr)
     return 1 if cfg.scenario_errors else 0
+
+
+def _axis(v: tuple[float, float, float]) -> str:
+    """A signed body axis as +x, -y, ..."""
+    i = max(range(3), key=lambda a: abs(v[a]))
+    return f"{'+' if v[i] > 0 else '-'}{'xyz'[i]}"
 
 
 __all__ = ["add_arguments", "run"]

@@ -408,7 +408,13 @@ def from_parameters(params: Mapping[str, Any], source: str = "<memory>") -> Conf
         backup_energy_lookahead_s=fi.number("backup_energy_lookahead_s", 6000.0),
         actuator_lag=fi.text("actuator_lag", "compensate"),
         window_slew_fraction=fi.number("window_slew_fraction", 0.5),
+        backup_sun_axis_body=fi.vector("backup_sun_axis_body", 3) if "backup_sun_axis_body" in fi.data
+        else (0.0, 0.0, 1.0),  # type: ignore[arg-type]
+        backup_secondary_axis_body=fi.vector("backup_secondary_axis_body", 3) if "backup_secondary_axis_body" in fi.data
+        else (0.0, 1.0, 0.0),  # type: ignore[arg-type]
+        backup_secondary_target=fi.text("backup_secondary_target", "earth"),
         priorities=fi.levels("priorities", ()))
+    fi.used.update({"backup_sun_axis_body", "backup_secondary_axis_body"})
     fi.done()
     ct = root.section("controller")
     controller = ControllerGains(ct.number("kp"), ct.number("kd"))

@@ -46,12 +46,12 @@ CONTROLLERS: tuple[str, ...] = ("pd", "none")
 ACTUATOR_LAGS: tuple[str, ...] = ("compensate", "bound")
 """How the robust filter treats the wheel drive's first-order lag (`filter.actuator_lag`, with sensor errors on):
 compensate (the filter tracks the drive's state from its own commands and sends the command whose held mean
-is its answer: `filter.pipeline.drive_command`); bound (the answer is sent as it is and every row keeps the
+is its answer: `filter.drive.drive_command`); bound (the answer is sent as it is and every row keeps the
 lag's largest departure from it, a full reversal inside U, as a margin: docs/noise.md)."""
 BACKUP_LAWS: tuple[str, ...] = ("none", "sun_safe")
 """Backup laws of the gatekeeper (`filter.backup_law`): none (no gatekeeper: the ASIF's answer is
 applied); sun_safe (the filter applies its answer only if the answer then the sun-safe law are safe
-over `filter.backup_horizon_s`, else the sun-safe law of its committed plan: `filter.backup`)."""
+over `filter.backup_horizon_s`, else the sun-safe law of its committed plan: `filter.gatekeeper`)."""
 MAX_BACKUP_SUBSTEPS = 64
 """integrator.substeps at most this with a backup law (the gatekeeper's scratch rows)."""
 MAX_NOMINAL_STEPS = 120
@@ -332,6 +332,23 @@ class BarrierGains:
             raise ConfigError(f"{where}.bias must be finite, got {self.bias!r}")
 
 
+BACKUP_SECONDARY_TARGETS: tuple[str, ...] = ("earth", "orbit_normal", "velocity")
+"""What the backup attitude's secondary axis turns toward: directions fixed in Hill (`dynamics.environment`)."""
+
+
+def body_axis(where: str, v: tuple[float, ...]) -> tuple[float, float, float]:
+    """v (3,) as a signed body axis (+-x, +-y or +-z).
+
+    Raises:
+        ConfigError: anything else.
+    """
+    axes = [(1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0)]
+    out = tuple(float(a) for a in v)
+    if len(out) != 3 or not any(out in (e, tuple(-a for a in e)) for e in axes):
+        raise ConfigError(f"{where} must be a body axis ([1, 0, 0], [0, -1, 0], ...), got {list(v)}")
+    return out[0] + 0.0, out[1] + 0.0, out[2] + 0.0  # (no -0.0)
+
+
 def unit_vector(where: str, v: tuple[float, ...]) -> tuple[float, float, float]:
     """v (3,) as a unit vector: its norm must be within UNIT_TOLERANCE of 1 (the rounding of typed decimals);
     it is normalised (a configured unit vector is stored normalised).
@@ -462,10 +479,18 @@ class FilterOptions:
     backup_energy_lookahead_s: float = 6000.0
     """With a momentum too large for the sun-safe attitude (its plans hold for the horizon only), a plan is
     accepted only if at its end the battery could stay above E_min for this long more with the panel
-    held where the wheels allow it nearest the sun (`filter.backup.energy_reserve`); 0: off. About one
+    held where the wheels allow it nearest the sun (`filter.gatekeeper.rollout.energy_reserve`); 0: off. About one
     orbit (2 pi / n = 6,118 s): the sun's direction to the momentum repeats each orbit."""
     actuator_lag: str = "compensate"
     """Robust preset with sensor errors on: how the filter treats the wheel drive's lag (ACTUATOR_LAGS)."""
+    backup_sun_axis_body: tuple[float, float, float] = (0.0, 0.0, 1.0)
+    """The body axis the backup attitude points at the sun (the panel, the paper's +k_B); a body axis (+-x, +-y,
+    +-z): the backup law shares the wheels' momentum between the axes, where the wheels are."""
+    backup_secondary_axis_body: tuple[float, float, float] = (0.0, 1.0, 0.0)
+    """The body axis the backup attitude turns toward `backup_secondary_target` about the sun line (the paper's
+    antenna +j_B); a body axis perpendicular to the sun axis."""
+    backup_secondary_target: str = "earth"
+    """BACKUP_SECONDARY_TARGETS: the direction the secondary axis turns toward (its part across the sun line)."""
     window_slew_fraction: float = 0.5
     """A scheduled window's barrier tightens at this fraction of the rate the vehicle can turn a boresight at
     ((1 - zoh_margin) omega_max less the target's motion), leaving the rest to the approach and the other
@@ -473,7 +498,7 @@ class FilterOptions:
     priorities: tuple[tuple[str, ...], ...] = ()
     """Levels of constraint groups (`Config.groups`: the pointing constraints by name, temperature, battery,
     omega, psi), most important first: with `fallback: prioritize`, an infeasible QP is answered by letting the
-    least important level give way first, by as little as possible (`filter.pipeline.prioritize`). Checked
+    least important level give way first, by as little as possible (`filter.qp.prioritize`). Checked
     against the groups by `Config`; `Config.priority_levels` places the pointing constraints it leaves out."""
 
     def __post_init__(self) -> None:
@@ -484,6 +509,12 @@ class FilterOptions:
         _choice("filter.fallback", self.fallback, FALLBACKS)
         _choice("filter.backup_law", self.backup_law, BACKUP_LAWS)
         _choice("filter.actuator_lag", self.actuator_lag, ACTUATOR_LAGS)
+        sun = body_axis("filter.backup_sun_axis_body", self.backup_sun_axis_body)
+        second = body_axis("filter.backup_secondary_axis_body", self.backup_secondary_axis_body)
+        if sum(a * b for a, b in zip(sun, second)) != 0.0:  # (signed axes: 0 or +-1)
+            raise ConfigError(f"filter.backup_secondary_axis_body must be perpendicular to backup_sun_axis_body "
+                              f"{list(sun)}, got {list(second)}")
+        _choice("filter.backup_secondary_target", self.backup_secondary_target, BACKUP_SECONDARY_TARGETS)
         if not (math.isfinite(self.window_slew_fraction) and 0.0 < self.window_slew_fraction <= 1.0):
             raise ConfigError(f"filter.window_slew_fraction must be in (0, 1], got {self.window_slew_fraction!r}")
         _positive("filter.backup_horizon_s", self.backup_horizon_s)

@@ -159,7 +159,7 @@ def constraint_record(cfg: Config) -> NDArray[np.void]:
     c["dt_s"], c["zoh_margin"] = cfg.filter.sample_time_s, cfg.filter.zoh_margin
     c["u_max_rad_s2"] = cfg.u_max_rad_s2
     # with the drive's lag compensated, what a rollout plans keeps to the part of U every drive state can
-    # deliver (the filter's answer now: the part its drive's state can, `pipeline.drive_box`)
+    # deliver (the filter's answer now: the part its drive's state can, `filter.drive.drive_box`)
     c["u_reach_rad_s2"] = (1.0 - 2.0 * drive_lag(cfg)[0]) * cfg.u_max_rad_s2
     if robust and cfg.sensors.enabled:
         for key, value in measurement_errors(cfg).items():

@@ -40,7 +40,7 @@ def rows(x: Array, t_s: float, p: np.void, c: np.void, ctx: np.void, t: np.void,
         ctx: scratch CONTEXT_DTYPE record (filled here).
         t: the output table.
         lo0, hi0: the wheel accelerations the drive can hold this sample (3,): +-U, or where the filter
-            compensates its drive's lag, the part of U its state reaches (`filter.pipeline.drive_box`).
+            compensates its drive's lag, the part of U its state reaches (`filter.drive.drive_box`).
     """
     context(x, p, True, ctx)
     cones.rows(x, t_s, p, c, ctx, t)

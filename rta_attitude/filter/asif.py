@@ -30,13 +30,9 @@ from rta_attitude.constraints import ConstraintSet
 from rta_attitude.dynamics.state import STATE_SIZE
 from rta_attitude.errors import SolverError
 from rta_attitude.filter import outcome
-from rta_attitude.filter.backup import reset
-from rta_attitude.filter.pipeline import (
-    RESULT_DTYPE,
-    filter_many,
-    filter_record,
-    new_workspace,
-)
+from rta_attitude.filter.gatekeeper.gate import reset
+from rta_attitude.filter.pipeline import filter_many
+from rta_attitude.filter.records import RESULT_DTYPE, filter_record, new_workspace
 from rta_attitude.jit import LEAF
 from rta_attitude.kernel_cache import drop_stale_caches
 
@@ -55,7 +51,7 @@ class FilterResult:
     Array fields follow `names` (the configuration's constraints, `Config.constraint_names`) on their last axis
     (m) or are per axis of u (3): u (the command sent),
     u_held (the filter's answer: what the wheels hold over the sample; u but where the drive's lag is
-    compensated, `filter.pipeline.drive_command`), u_des, h, psi0,
+    compensated, `filter.drive.drive_command`), u_des, h, psi0,
     psi1, bc (barrier conditions at u, slack not included), slack, intervening (rows active at the
     solution), uncontrollable, box_active, lo, hi. Text fields: status ('pass', 'solved', 'fallback'),
     fallback (the policy applied, 'non_finite_u_des', 'invalid_state' or ''), solver_status, gate
@@ -204,7 +200,7 @@ class FilterCounters:
 
 @numba.njit(**LEAF)
 def _reset_gate(ws: NDArray[np.void]) -> None:
-    reset(ws[0].gate)  # the gatekeeper's one reset (backup.reset)
+    reset(ws[0].gate)  # the gatekeeper's one reset (gatekeeper.gate.reset)
 
 
 class AsifFilter:

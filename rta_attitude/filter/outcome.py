@@ -33,7 +33,7 @@ QUADPROG, NO_BACKUP = (BACKUP_SOLVERS.index(n) for n in ("quadprog", "none"))
 """Codes of the re-solvers of a QP proxsuite missed (`filter.backup_solver`)."""
 
 GATE_NAMES: tuple[str, ...] = ("off", "verified", "backup", "unverified", "toward_backup", "filtered_backup")
-"""What the gatekeeper did (`filter.backup`): no backup law configured; the filter's answer passed the
+"""What the gatekeeper did (`filter.gatekeeper`): no backup law configured; the filter's answer passed the
 check (a hold of it, then the backup law, safe over the horizon) and was applied; the backup law was
 applied (the answer failed the check; the plan verified earlier, or the backup law's own command
 just checked, goes on); neither the answer nor the backup law passed and no plan remained (the answer

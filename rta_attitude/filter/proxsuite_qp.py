@@ -1,6 +1,6 @@
 """proxsuite as the filter's QP solver (`filter.solver: proxsuite`), with quadprog as its backup.
 
-`solve` is the pipeline's solver step for proxsuite (`filter.pipeline.solve` enters it through
+`solve` is the pipeline's solver step for proxsuite (`filter.qp.solve` enters it through
 numba's object mode); proxsuite and quadprog are imported on the first call, so choosing the
 default active-set solver never imports them.
 
@@ -90,7 +90,7 @@ def solve(C: Array, lower: Array, upper: Array, z0: Array, f: Any, z_out: Array,
     """Solve with proxsuite, checked; re-solve with quadprog (`backup_solver`) where that fails.
 
     Args:
-        C, lower, upper, z0: the pipeline's QP (`pipeline.assemble`).
+        C, lower, upper, z0: the pipeline's QP (`filter.qp.assemble`).
         f: the FILTER_DTYPE record (settings, tolerance, backup solver).
         z_out, mult_out: receive the usable answer (quadprog's when proxsuite's failed and quadprog's
             holds), else proxsuite's.

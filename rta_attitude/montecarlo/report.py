@@ -38,6 +38,8 @@ PAPER_RESULTS: dict[str, Any] = {
 `PAPER_SENSOR_CONE` of a configuration, whatever its name there (`paper_names`)."""
 PAPER_SENSOR_CONE = ("keep_out", (1.0, 0.0, 0.0), "sun", 40.0)
 """The paper's exclusion zone: (kind, boresight, target, half-angle in deg)."""
+PAPER_ANTENNA_CONE = ("keep_in", (0.0, 1.0, 0.0), "earth", 90.0)
+"""The paper's communication cone."""
 PAPER_VEHICLE = {"inertia_kgm2": (0.022, 0.044, 0.056), "wheel_inertia_kgm2": 4.1e-5}
 PAPER_DURATION_S = 2000.0
 
@@ -57,11 +59,12 @@ def paper_protocol(cfg: Config, duration_s: float) -> bool:
 def paper_names(cfg: Config) -> dict[str, str]:
     """{the paper's row label: this configuration's constraint name} where the configuration has it."""
     out = {n: n for n in PAPER_RESULTS["by_constraint"] if n in cfg.constraint_names}
-    kind, axis, target, half_deg = PAPER_SENSOR_CONE
     for c in cfg.pointing:
-        if (c.kind, c.boresight_body, c.target) == (kind, axis, target) and abs(math.degrees(c.half_angle_rad)
-                                                                                 - half_deg) < 1e-9:
+        spec = (c.kind, c.boresight_body, c.target, round(math.degrees(c.half_angle_rad), 9))
+        if spec == PAPER_SENSOR_CONE:
             out["sensor keep-out"] = c.name
+        elif spec != PAPER_ANTENNA_CONE:
+            return {}  # another cone: not the paper's constraints
     return out if "sensor keep-out" in out else {}
 
 @dataclass

@@ -40,9 +40,9 @@ from rta_attitude.dynamics.sensors import INSTRUMENT_DTYPE, read, reset_instrume
 from rta_attitude.dynamics.spacecraft import RK4_WORK_ROWS
 from rta_attitude.dynamics.state import STATE_SIZE
 from rta_attitude.errors import RtaError
-from rta_attitude.filter.backup import reset
+from rta_attitude.filter.gatekeeper.gate import reset
 from rta_attitude.filter.outcome import FALLBACK, GATE_NAMES, PASS
-from rta_attitude.filter.pipeline import RESULT_DTYPE, WORKSPACE_DTYPE, WORKSPACES
+from rta_attitude.filter.records import RESULT_DTYPE, WORKSPACE_DTYPE, WORKSPACES
 from rta_attitude.jit import JIT, LEAF
 from rta_attitude.kernel_cache import drop_stale_caches
 from rta_attitude.montecarlo import DEFAULT_CHUNK_RUNS

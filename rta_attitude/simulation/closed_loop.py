@@ -54,14 +54,8 @@ from rta_attitude.dynamics.spacecraft import (
 )
 from rta_attitude.dynamics.state import STATE_SIZE
 from rta_attitude.filter.asif import AsifFilter, FilterResult
-from rta_attitude.filter.pipeline import (
-    FILTER_DTYPE,
-    RESULT_DTYPE,
-    WORKSPACE_DTYPE,
-    WORKSPACES,
-    filter_record,
-    filter_state,
-)
+from rta_attitude.filter.pipeline import filter_state
+from rta_attitude.filter.records import FILTER_DTYPE, RESULT_DTYPE, WORKSPACE_DTYPE, WORKSPACES, filter_record
 from rta_attitude.jit import JIT, LEAF
 from rta_attitude.simulation.trajectory import Trajectory, substep_minima
 
