@@ -26,7 +26,7 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "test"))
 
 from rta_attitude.config.schema import Config  # noqa: E402
-from rta_attitude.constraints.base import N_CONSTRAINTS  # noqa: E402
+from rta_attitude.constraints.base import MAX_ROWS  # noqa: E402
 from rta_attitude.constraints.geometry import CONTEXT_DTYPE  # noqa: E402
 from rta_attitude.constraints.rows import safety_values  # noqa: E402
 from rta_attitude.dynamics.spacecraft import RK4_WORK_ROWS, rk4_hold  # noqa: E402
@@ -45,14 +45,15 @@ def _plant_only(X0: Array, steps: int, loop: NDArray[np.void], min_h: Array) -> 
     u = np.zeros(3)
     subs = np.empty((S, STATE_SIZE))
     work = np.zeros((RK4_WORK_ROWS, STATE_SIZE))
-    h = np.empty(N_CONSTRAINTS)
+    h = np.empty(MAX_ROWS)
+    n = c.n_rows
     for k in range(X0.shape[0]):
         x = X0[k].copy()
-        for _step in range(steps):
+        for step in range(steps):
             rk4_hold(x, u, lp.dt_s, S, p, subs, work)
             for j in range(S):
-                safety_values(subs[j], p, c, ctx[0], h)
-                for i in range(N_CONSTRAINTS):
+                safety_values(subs[j], lp.dt_s * (step + (j + 1) / S), p, c, ctx[0], h)
+                for i in range(n):
                     if h[i] < min_h[k, i]:
                         min_h[k, i] = h[i]
             x[:] = subs[S - 1]
@@ -62,7 +63,7 @@ def plant_floor(cfg: Config, x0: Array, duration_s: float) -> Array:
     """Run the plant alone from x0 (N, 19) for duration_s (u = 0, safety values at every substep).
     Returns the smallest h of each run (N, m), so the work cannot be optimised away."""
     steps = round(duration_s / cfg.filter.sample_time_s)
-    min_h = np.full((len(x0), N_CONSTRAINTS), np.inf)
+    min_h = np.full((len(x0), len(cfg.constraint_names)), np.inf)
     _plant_only(np.ascontiguousarray(x0, dtype=float), steps, loop_record(cfg, rta=False, pd=False), min_h)
     return min_h
 

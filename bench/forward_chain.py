@@ -90,7 +90,7 @@ class Forwarder(Node):
             res = f.filter(x, np.zeros(3))
             self.msgs = {topics.TORQUE_CMD: convert.torque_msg(np.ones(3) * 1e-5, 0),
                          topics.FILTER_STATUS: convert.filter_status_msg(res, 0, f.counters, "robust",
-                                                                         ["communication"])}
+                                                                         list(cfg.slacked_constraints))}
             self.parts: dict[int, int] = {}
             self.states: set[int] = set()
             self.desired: set[int] = set()

@@ -24,6 +24,7 @@ def run(args: argparse.Namespace) -> int:
 
     from rta_attitude.cli.options import load
     from rta_attitude.constraints import ConstraintSet
+    from rta_attitude.constraints.margins import derived_margin, sampled_data_margin
     from rta_attitude.constraints.windows import ramp_start
 
     cfg = load(args)
@@ -38,6 +39,13 @@ def run(args: argparse.Namespace) -> int:
         target = c.target if c.target_vector is None else f"{c.target} [{', '.join(f'{v:g}' for v in c.target_vector)}]"
         slack = f", slack weight {c.gains.slack_weight:g}" if c.gains.slack_weight else ""
         print(f"    {c.name}: {c.kind} [{b}] from {target}, half-angle {math.degrees(c.half_angle_rad):g} deg{slack}")
+        bound = derived_margin(cfg, c, cfg.filter.model)
+        if c.gains.sampled_data_margin(cfg.filter.model) is None:
+            print(f"      sampled-data margin {sampled_data_margin(cfg, c.name):.3g} rad (derived from the vehicle, "
+                  f"{cfg.filter.model} model)")
+        else:
+            print(f"      sampled-data margin {sampled_data_margin(cfg, c.name):.3g} rad (configured; the derived "
+                  f"bound is {bound:.3g} rad)")
         for start, end in c.windows_s:
             t_on = ramp_start(cfg, c, start)
             print(f"      window [{start:g}, {end:g}] s: the barrier tightens from t = {t_on:.1f} s")
@@ -59,10 +67,12 @@ def run(args: argparse.Namespace) -> int:
         o = cfg.filter
         for name, worst_deg, ranges in backup_attitude_conflicts(cfg):
             where = ", ".join(f"[{a:.0f}, {b:.0f}]" for a, b in ranges)
+            side = "outside" if cfg.pointing_constraint(name).keep_in else "inside"
             print(f"WARNING: the backup attitude ({_axis(o.backup_sun_axis_body)} on the sun, "
-                  f"{_axis(o.backup_secondary_axis_body)} toward {o.backup_secondary_target}) puts {name} inside "
-                  f"its cone (h down to {worst_deg:.1f} deg) for theta_S in {where} deg: there the backup law "
-                  f"turns the panel off the sun to keep it clear (docs/backup.md)", file=sys.stderr)
+                  f"{_axis(o.backup_secondary_axis_body)} toward {o.backup_secondary_target}) puts {name} {side} "
+                  f"its cone (h down to {worst_deg:.1f} deg) for theta_S in {where} deg: there the backup law rolls "
+                  f"about the sun line or turns the panel off the sun to keep it clear (docs/backup.md)",
+                  file=sys.stderr)
     for message in cfg.scenario_errors.values():
         print(f"ERROR: {message}", file=sys.stderr)
     return 1 if cfg.scenario_errors else 0

@@ -256,8 +256,12 @@ class _Section:
 _REQUIRED = object()
 
 
-def _barrier(s: _Section, second_order: bool) -> BarrierGains:
-    margin = s.number("margin", 0.0) if second_order else 0.0
+def _barrier(s: _Section, second_order: bool, derive: bool = False) -> BarrierGains:
+    """A barrier's gains; with derive (a pointing constraint), a margin not given is derived from the vehicle
+    (None here: `constraints.margins`)."""
+    absent = None if derive else 0.0
+    margin = (s.number("margin") if "margin" in s.data else absent) if second_order else 0.0
+    s.used.add("margin")
     gains = BarrierGains(
         enabled=s.flag("enabled", True),
         k1=s.number("k1"),
@@ -265,7 +269,8 @@ def _barrier(s: _Section, second_order: bool) -> BarrierGains:
         bias=s.number("bias", 0.0),
         slack_weight=s.number("slack_weight", 0.0),
         margin=margin,
-        margin_gyrostat=s.number("margin_gyrostat", margin) if second_order else 0.0,  # default: the paper's
+        margin_gyrostat=(s.number("margin_gyrostat") if "margin_gyrostat" in s.data else margin)  # the paper's
+        if second_order else 0.0,
     )
     return gains
 
@@ -279,7 +284,7 @@ def _pointing(name: str, s: _Section) -> PointingConstraint:
         boresight_body=s.vector("boresight_body", 3),  # type: ignore[arg-type]
         target=target,
         half_angle_rad=math.radians(s.number("half_angle_deg")),
-        gains=_barrier(s, True),
+        gains=_barrier(s, True, derive=True),
         target_vector=s.vector("target_vector", 3) if "target_vector" in s.data else None,  # type: ignore[arg-type]
         windows_s=s.windows("windows_s"),
     )

@@ -309,16 +309,18 @@ class BarrierGains:
     """sigma, added to the final barrier condition."""
     slack_weight: float = 0.0
     """p > 0 makes the constraint soft, with cost p delta^2; 0 = hard."""
-    margin: float = 0.0
+    margin: float | None = 0.0
     """Sampled-data allowance (units of h), `robust` preset only: the HOCBF keeps h >= margin, so
     that the overshoot of a zero-order-hold step stays on the safe side of h = 0 (the filter's model
-    `paper`)."""
-    margin_gyrostat: float = 0.0
+    `paper`). None (a pointing constraint that sets none): derived from the vehicle
+    (`constraints.margins`)."""
+    margin_gyrostat: float | None = 0.0
     """The same allowance when the filter's model is the gyrostat (`filter.model: gyrostat`), whose
-    gyroscopic torque changes during the hold (docs/decisions.md 2b)."""
+    gyroscopic torque changes during the hold (docs/decisions.md 2b); None: derived."""
 
-    def sampled_data_margin(self, model: str) -> float:
-        """The allowance for the filter's model ('paper' or 'gyrostat')."""
+    def sampled_data_margin(self, model: str) -> float | None:
+        """The configured allowance for the filter's model ('paper' or 'gyrostat'); None: derive it
+        (`constraints.margins.sampled_data_margin`)."""
         return self.margin_gyrostat if model == "gyrostat" else self.margin
 
     def check(self, where: str) -> None:
@@ -326,8 +328,9 @@ class BarrierGains:
         _positive(f"{where}.k1", self.k1)
         _nonneg(f"{where}.k2", self.k2)
         _nonneg(f"{where}.slack_weight", self.slack_weight)
-        _nonneg(f"{where}.margin", self.margin)
-        _nonneg(f"{where}.margin_gyrostat", self.margin_gyrostat)
+        for name in ("margin", "margin_gyrostat"):
+            if getattr(self, name) is not None:
+                _nonneg(f"{where}.{name}", getattr(self, name))
         if not math.isfinite(self.bias):
             raise ConfigError(f"{where}.bias must be finite, got {self.bias!r}")
 

@@ -124,6 +124,7 @@ TABLE_DTYPE = np.dtype([
 
 def constraint_record(cfg: Config) -> NDArray[np.void]:
     """The CONSTRAINT_DTYPE record (shape (1,)) of a configuration (margins only in the robust preset)."""
+    from rta_attitude.constraints.margins import sampled_data_margin
     from rta_attitude.constraints.windows import ramp_rate, ramp_start
 
     robust = cfg.filter.preset == "robust"
@@ -136,7 +137,7 @@ def constraint_record(cfg: Config) -> NDArray[np.void]:
         gi = c["gains"][i]
         gi["enabled"], gi["k1"], gi["k2"], gi["bias"] = g.enabled, g.k1, g.k2, g.bias
         gi["slack_weight"] = g.slack_weight if g.enabled else 0.0
-        gi["margin"] = g.sampled_data_margin(cfg.filter.model) if robust else 0.0
+        gi["margin"] = sampled_data_margin(cfg, name)
     k = len(cfg.pointing)
     c["n_rows"], c["n_cones"] = len(names), k
     c["row_temperature"], c["row_battery"], c["row_omega"], c["row_psi"] = k, k + 1, k + 2, k + 5

@@ -62,11 +62,12 @@ def ramp_rate(cfg: Config, cone: PointingConstraint) -> float:
 def ramp_start(cfg: Config, cone: PointingConstraint, start_s: float) -> float:
     """t_on, s: when the barrier of the window starting at start_s switches on (module docstring)."""
     from rta_attitude.constraints.base import measurement_errors
+    from rta_attitude.constraints.margins import sampled_data_margin
 
     r = ramp_rate(cfg, cone)
     g = cone.gains
     theta_dot_max = math.sqrt(3.0) * cfg.limits.omega_max_rad_s + target_rate_bound(cfg)
-    margin = g.sampled_data_margin(cfg.filter.model) if cfg.filter.preset == "robust" else 0.0
+    margin = sampled_data_margin(cfg, cone.name)
     robust = 0.0
     if cfg.filter.preset == "robust" and cfg.sensors.enabled:  # the measurement-robust term's largest value
         e = measurement_errors(cfg)

@@ -596,8 +596,9 @@ def keep_cones(x: Array, p: np.void, b: np.void, g: np.void) -> None:
     """Where the law's target g.target puts a hard pointing constraint within CONE_CLEARANCE_RAD of its cone
     (a star tracker the sun-safe attitude turns toward the Earth), the nearest attitude that keeps them all
     clear: first the target rolled about the sun line (the panel stays on the sun), then tilted off it by
-    TILT_STEPS_RAD in TILT_AZIMUTHS directions, the smallest tilt that clears every cone (of those, the one with
-    the most margin); the one with the most margin where none clears. Unchanged where nothing is near."""
+    TILT_STEPS_RAD in TILT_AZIMUTHS directions, the smallest tilt that clears every cone (of those, the one
+    nearest the body's attitude now, g.A); the one with the most margin where none clears. Unchanged where
+    nothing is near."""
     if b.n_keep == 0:
         return
     T = g.target
@@ -612,9 +613,12 @@ def keep_cones(x: Array, p: np.void, b: np.void, g: np.void) -> None:
     n1 = math.sqrt(e1x * e1x + e1y * e1y + e1z * e1z)
     e1x, e1y, e1z = e1x / n1, e1y / n1, e1z / n1
     e2x, e2y, e2z = sy * e1z - sz * e1y, sz * e1x - sx * e1z, sx * e1y - sy * e1x
-    best_m = -math.inf
+    best_m = -math.inf  # the most margin of any candidate (where none clears)
+    best_near = -math.inf  # the nearest clear candidate's closeness to the body's attitude (trace of T A^T)
     found = False
     trial, best = g.trial, g.best
+    A = g.A  # the body's attitude now (the law's frame): among clear candidates, the nearest, so that the target
+    # does not jump where the nominal one does (its roll flips as the sun crosses the Earth line)
     for level in range(len(TILT_STEPS_RAD) + 1):
         for j in range(TILT_AZIMUTHS):
             phi = 2.0 * math.pi * j / TILT_AZIMUTHS
@@ -625,12 +629,21 @@ def keep_cones(x: Array, p: np.void, b: np.void, g: np.void) -> None:
                 _rotate_rows(T, c * e1x + s * e2x, c * e1y + s * e2y, c * e1z + s * e2z, TILT_STEPS_RAD[level - 1],
                              trial)
             m = _cone_margin(x, p, b, g, trial)
-            if m > best_m:
+            near = 0.0
+            for r in range(3):
+                near += trial[r, 0] * A[r, 0] + trial[r, 1] * A[r, 1] + trial[r, 2] * A[r, 2]
+            if m >= b.cone_clearance_rad:
+                if near > best_near:
+                    best_near = near
+                    found = True
+                    for r in range(3):
+                        for q in range(3):
+                            best[r, q] = trial[r, q]
+            elif not found and m > best_m:
                 best_m = m
                 for r in range(3):
                     for q in range(3):
                         best[r, q] = trial[r, q]
-                found = found or m >= b.cone_clearance_rad
         if found:
             break
     for r in range(3):

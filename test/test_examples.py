@@ -1,0 +1,55 @@
+"""The shipped example configurations (config/examples/): each is an overlay of the defaults that check-config
+accepts and `simulate` runs; the ground passes' antenna is on the station throughout each pass and free outside
+them."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from rta_attitude import config
+from rta_attitude.dynamics.quaternion import attitude_matrices
+from rta_attitude.simulation.closed_loop import simulate
+from rta_attitude.simulation.metrics import summarize_trajectory
+
+ROOT = Path(__file__).resolve().parents[1]
+EXAMPLES = sorted((ROOT / "config" / "examples").glob("*.yaml"))
+
+
+def test_there_are_the_four_examples() -> None:
+    assert [p.stem for p in EXAMPLES] == ["ground_passes", "payload_inertial", "star_tracker", "sun_beta_30"]
+
+
+@pytest.mark.parametrize("path", EXAMPLES, ids=lambda p: p.stem)
+def test_an_example_checks_and_runs(path: Path, tmp_path: Path) -> None:
+    r = subprocess.run([sys.executable, "-m", "rta_attitude.cli", "check-config", "--config", str(path)],
+                       capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    cfg = config.load(path)
+    scenario = [s for s in cfg.scenarios.values() if s.name not in config.load().scenarios]
+    name = scenario[0].name if scenario else "battery-vs-temperature"
+    tr = simulate(cfg, name, duration_s=5.0)
+    assert tr.names == cfg.constraint_names and tr.h.shape == (6, len(cfg.constraint_names))
+
+
+def test_the_antenna_is_on_the_station_throughout_each_pass() -> None:
+    cfg = config.load(ROOT / "config" / "examples" / "ground_passes.yaml")
+    antenna = cfg.pointing_constraint("communication")
+    assert antenna.windows_s == ((500.0, 800.0), (1200.0, 1600.0)) and antenna.gains.slack_weight == 0.0
+    tr = simulate(cfg, "ground-passes")
+    summary = summarize_trajectory(tr, cfg.for_scenario(cfg.scenario("ground-passes")))
+    assert summary["safe"], summary["violated"]
+    A = attitude_matrices(tr.x[:, 0:4])
+    angle = np.degrees(np.arccos(np.clip(-A[:, 1, 0], -1.0, 1.0)))  # +j_B (row 1 of A) to nadir (-x Hill)
+    t = tr.t_s
+    for start, end in antenna.windows_s:
+        inside = (t >= start) & (t <= end)
+        assert angle[inside].max() < 60.0  # on the station at the start and throughout
+    outside = (t < 500.0) | ((t > 800.0) & (t < 1200.0)) | (t > 1600.0)
+    assert angle[outside].max() > 80.0  # free between the passes: the window is what holds it
+    i = tr.names.index("communication")
+    assert np.all(np.isinf(tr.h[outside, i]))  # not active outside its windows
