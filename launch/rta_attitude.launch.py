@@ -4,10 +4,12 @@
     ros2 launch rta_attitude rta_attitude.launch.py stepping:=realtime real_time_factor:=50.0
     ros2 launch rta_attitude rta_attitude.launch.py --show-args
 
-Starts plant_node, pd_controller_node, asif_filter_node (pass-through with rta:=false),
-bag_recorder_node and scene_node (the 3D view, off the control path; scene:=false leaves it out) under
-`namespace`, all with the package's parameter file (`params_file`) and
-use_sim_time (except the plant, which publishes /clock).
+Starts plant_node, pd_controller_node (not with controller:=none: then the plant waits for a node of
+yours that publishes torque_des, e.g. examples/my_controller_node.py), asif_filter_node (pass-through with
+rta:=false), bag_recorder_node and scene_node (the 3D view, off the control path; scene:=false leaves it
+out) under `namespace`, all with the package's parameter file (`params_file`), use_sim_time (except the
+plant, which publishes /clock) and exit_with_parent (a SIGTERM to `ros2 launch` leaves its processes
+running; with it they notice that the launch is gone and stop cleanly).
 
 Every argument is checked before any node starts (rta_attitude.ros.launch_file.validate): a bad one
 is one error line and exit code 1. The launch ends with the run: when the plant is done and the
@@ -30,7 +32,7 @@ from launch_ros.actions import Node
 
 from launch import LaunchDescription
 from rta_attitude import topics
-from rta_attitude.ros.launch_file import ARGUMENTS, SIGTERM_TIMEOUT_S, RunEnd, validate
+from rta_attitude.ros.launch_file import ARGUMENTS, NODE_PARAMETERS, SIGTERM_TIMEOUT_S, RunEnd, node_roles, validate
 
 
 def _nodes(context, *args, **kwargs):
@@ -46,22 +48,21 @@ def _nodes(context, *args, **kwargs):
     # scene_node process of its own
     scene = (topics.SCENE_OFF if not a["scene"] else topics.SCENE_RECORDER if a["record"] else topics.SCENE_NODE)
     common = {"config_file": a["params_file"], "scenario": a["scenario"], "rta": a["rta"], "record": a["record"],
-              "scene": scene}
+              "scene": scene, **NODE_PARAMETERS}
 
     def node(executable: str, extra: dict, sim_time: bool = True) -> Node:
         return Node(package="rta_attitude", executable=executable, namespace=a["namespace"], output="screen",
                     parameters=[a["params_file"], {**common, **extra, "use_sim_time": sim_time}],
                     sigterm_timeout=str(SIGTERM_TIMEOUT_S))
 
-    plant = {"stepping": a["stepping"], "real_time_factor": a["real_time_factor"]}
+    # controller:=none: no pd_controller_node; the plant waits for a node of the user's that publishes torque_des
+    plant = {"stepping": a["stepping"], "real_time_factor": a["real_time_factor"],
+             "external_controller": a["controller"] == "none"}
+    extra = {topics.PLANT: plant, topics.RECORDER: {"bag_path": a["bag"], "bag_overwrite": a["bag_overwrite"]}}
     exe = topics.EXECUTABLES
-    nodes = {exe[topics.FILTER]: node(exe[topics.FILTER], {}), exe[topics.CONTROLLER]: node(exe[topics.CONTROLLER], {}),
-             exe[topics.PLANT]: node(exe[topics.PLANT], plant, sim_time=False)}
-    if scene == topics.SCENE_NODE:
-        nodes = {exe[topics.SCENE]: node(exe[topics.SCENE], {}, sim_time=False), **nodes}  # draws by the stamps
-    if a["record"]:
-        recorder = {"bag_path": a["bag"], "bag_overwrite": a["bag_overwrite"]}
-        nodes = {exe[topics.RECORDER]: node(exe[topics.RECORDER], recorder), **nodes}  # readers first
+    # readers first; the plant and a scene_node of its own draw by the stamps (no /clock reader)
+    nodes = {exe[role]: node(exe[role], extra.get(role, {}), sim_time=role not in (topics.PLANT, topics.SCENE))
+             for role in node_roles(a)}
     end = RunEnd(record=a["record"])
 
     def on_exit(name: str):

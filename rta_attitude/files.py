@@ -3,8 +3,11 @@
 Every command that writes files checks its output location before it starts work
 (`output_dir`, `output_file`: created if missing, probed by writing one byte), and writes each file
 through `atomic`: into a temporary file next to it, renamed over the target only once complete, so
-a full disk or an unwritable directory never leaves a half-written file under the final name. Every
-failure is an `OutputError` with one line naming the path and the operating system's reason.
+a full disk or an unwritable directory never leaves a half-written file under the final name. A
+command that fails leaves no empty folder either: `output_dir` removes what it created when its probe
+fails, and `output_folder` (a command's whole work) removes the folders it created that are still
+empty when the work fails. Every failure is an `OutputError` with one line naming the path and the
+operating system's reason.
 """
 
 from __future__ import annotations
@@ -21,8 +24,28 @@ def _reason(exc: OSError) -> str:
     return exc.strerror or type(exc).__name__
 
 
+def _missing(path: Path) -> list[Path]:
+    """path and those of its ancestors that do not exist (not even as a link), deepest first."""
+    out = []
+    p = path
+    while not (p.exists() or p.is_symlink()) and p != p.parent:
+        out.append(p)
+        p = p.parent
+    return out
+
+
+def _remove_empty(created: list[Path]) -> None:
+    """Remove the directories of `created` (deepest first) while they are empty."""
+    for d in created:
+        try:
+            d.rmdir()
+        except OSError:  # not empty (or gone): it and its parents stay
+            return
+
+
 def output_dir(path: Path, option: str = "--out") -> Path:
-    """Create `path` (and its parents) if needed and check that a file can be written in it.
+    """Create `path` (and its parents) if needed and check that a file can be written in it; on failure
+    the directories it created are removed again.
 
     Raises:
         OutputError: it is a file, cannot be created, or is not writable (read-only, full disk).
@@ -30,17 +53,43 @@ def output_dir(path: Path, option: str = "--out") -> Path:
     path = Path(path)
     if path.exists() and not path.is_dir():
         raise OutputError(f"{option} {path}: is a file, not a directory")
+    created = _missing(path)
     try:
         path.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
+        _remove_empty(created)
         raise OutputError(f"{option} {path}: cannot create the directory ({_reason(exc)})") from None
-    _probe(path, option, path)
+    try:
+        _probe(path, option, path)
+    except OutputError:
+        _remove_empty(created)
+        raise
     return path
+
+
+@contextmanager
+def output_folder(path: Path, option: str = "--out") -> Iterator[Path]:
+    """`output_dir` around a command's work: yields the checked directory, and if the block raises
+    (an error or an interrupt), removes the directories this call created that are still empty, so a
+    failed command leaves no empty folder behind. Whole files written before the failure stay.
+
+    Raises:
+        OutputError: as `output_dir`.
+    """
+    path = Path(path)
+    created = _missing(path)
+    output_dir(path, option)
+    try:
+        yield path
+    except BaseException:
+        _remove_empty(created)
+        raise
 
 
 def output_file(path: Path, option: str, overwrite: bool = True) -> Path:
     """Check that `path` can be written as a new file: not a directory, its directory exists (created
-    if missing) and is writable; with overwrite False, not an existing file.
+    if missing, and removed again if the check fails) and is writable; with overwrite False, not an
+    existing file.
 
     Raises:
         OutputError: any of these fails.
@@ -52,11 +101,17 @@ def output_file(path: Path, option: str, overwrite: bool = True) -> Path:
         raise OutputError(f"{option} {path}: exists")
     if path.parent.exists() and not path.parent.is_dir():
         raise OutputError(f"{option} {path}: {path.parent} is not a directory")
+    created = _missing(path.parent)
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
+        _remove_empty(created)
         raise OutputError(f"{option} {path}: cannot create directory {path.parent} ({_reason(exc)})") from None
-    _probe(path.parent, option, path)
+    try:
+        _probe(path.parent, option, path)
+    except OutputError:
+        _remove_empty(created)
+        raise
     return path
 
 
@@ -109,4 +164,4 @@ def write_text(path: Path, text: str) -> Path:
     return Path(path)
 
 
-__all__ = ["atomic", "output_dir", "output_file", "write_text"]
+__all__ = ["atomic", "output_dir", "output_file", "output_folder", "write_text"]

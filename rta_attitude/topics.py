@@ -236,22 +236,26 @@ def recorded(rta: bool, truth: bool = False, scene: str = SCENE_OFF) -> list[Top
             if (rta or t.name != FILTER_STATUS) and _in_run(t.name, truth, scene)]
 
 
-def reader_roles(topic: str, rta: bool, record: bool, truth: bool = False, scene: str = SCENE_OFF) -> list[str]:
+def reader_roles(topic: str, rta: bool, record: bool, truth: bool = False, scene: str = SCENE_OFF,
+                 external_controller: bool = False) -> list[str]:
     """The roles of the run's own nodes that subscribe to `topic` (`scene`, SCENE_MODES: a scene_node of its
     own has best-effort readers of `state` and `filter_status`, waited for at start-up like any reader, so
     the view misses no state, but never holding a writer back during the run; a scene hosted by the
-    recorder reads nothing, and the recorder does not read its topics)."""
+    recorder reads nothing, and the recorder does not read its topics). With `external_controller` the
+    run has no pd_controller_node: the CONTROLLER role reads nothing (the plant counts the readers of the
+    node that publishes torque_des instead, `ros.plant_node`)."""
     if not _in_run(topic, truth, scene) or (topic in SCENE_TOPICS and scene == SCENE_RECORDER):
         return []
     return [who for who, only_rta, only_plain in TOPICS[topic].readers
             if not ((only_rta and not rta) or (only_plain and rta) or (who == RECORDER and not record)
-                    or (who == SCENE and scene != SCENE_NODE))]
+                    or (who == SCENE and scene != SCENE_NODE) or (who == CONTROLLER and external_controller))]
 
 
-def expected_readers(topic: str, rta: bool, record: bool, truth: bool = False, scene: str = SCENE_OFF) -> int:
+def expected_readers(topic: str, rta: bool, record: bool, truth: bool = False, scene: str = SCENE_OFF,
+                     external_controller: bool = False) -> int:
     """How many of the run's own nodes subscribe to `topic`; a writer waits for this many matches
     before its first message (tools such as `ros2 topic echo` only add readers)."""
-    return len(reader_roles(topic, rta, record, truth, scene))
+    return len(reader_roles(topic, rta, record, truth, scene, external_controller))
 
 
 # ----------------------------------------------------------------------------- diagnostics
@@ -289,6 +293,16 @@ INPUT_COUNTERS: tuple[str, ...] = (
   sent to a dead plant); it counts as back after 3 leases alive again (one episode, one report);
 - `clock_jumps`: /clock jumped backwards (a replay restarted): the stamp screens were reset.
 """
+REJECTED_COMMANDS: tuple[str, ...] = (
+    "torque_des_rejected", "torque_des_duplicate", "torque_des_out_of_order", "torque_des_late",
+)  # fmt: skip
+"""The INPUT_COUNTERS of desired commands the filter did not use as sent (wrong frame, not finite, invalid
+stamp; stale: a repeated, older or late stamp): what `rta-attitude analyze`'s verdict reports as rejected."""
+REJECTION_KEY = "torque_des_rejected_reason"
+"""filter_status key: why the latest rejected torque_des was rejected (`frame 'base_link'`, `not finite`,
+`invalid stamp`, `stale (late)`, `stale (duplicate)`, `stale (out of order)`); empty while none was. The last key
+of the `filter` entry (the scene reads `gave_way` before it by position; no value is a single word, so none can
+be taken for a constraint entry's name)."""
 INPUT_SOURCE_KEY = "u_des_source"
 """filter_status key: where this call's u_des came from: `torque_des`, or `missing` (u_des = 0 after a
 timeout or with the controller gone)."""
@@ -300,14 +314,14 @@ QP_KEYS: tuple[str, ...] = (
     "u_des_x", "u_des_y", "u_des_z", "u_x", "u_y", "u_z", "u_held_x", "u_held_y", "u_held_z",
     *(f"{KEY_BOX_ACTIVE}_{a}" for a in "xyz"),
     "calls", "fast_path", "solved", "fallbacks", "solver_failures", "backup_solves", "invalid_states",
-    INPUT_SOURCE_KEY, *INPUT_COUNTERS, "gate", "gave_way",
+    INPUT_SOURCE_KEY, *INPUT_COUNTERS, "gate", "gave_way", REJECTION_KEY,
 )  # fmt: skip
 """Keys of the `filter` entry: status ('pass', 'solved', 'fallback'), solver status (outcome.solve_text), iterations,
 fallback policy applied ('none' if none), solve time [s], preset, u_des, u (the command sent) and u_held (the
 filter's answer: what the wheels hold, u but where the drive's lag is compensated) [rad/s^2], box flags,
 the filter's running counters (core: calls .. invalid_states), the source of u_des, the node's
-input counters (INPUT_COUNTERS) and what the gatekeeper did (`filter.outcome.GATE_NAMES`: 'off'
-without a backup law)."""
+input counters (INPUT_COUNTERS), what the gatekeeper did (`filter.outcome.GATE_NAMES`: 'off'
+without a backup law) and why the latest rejected torque_des was rejected (REJECTION_KEY)."""
 NO_FALLBACK = "none"
 KEY_SLACK, KEY_INTERVENING, KEY_SLACKED = "slack", "intervening", "slacked"
 CONSTRAINT_KEYS: tuple[str, ...] = (
@@ -377,6 +391,10 @@ KNOBS: tuple[Knob, ...] = (
          "what the node published (recorder: for the last messages) [s]"),
     Knob("executor", "events", _EVERY, "events: rclpy's C++ EventsExecutor; single: SingleThreadedExecutor",
          ("events", "single")),
+    Knob("exit_with_parent", False, _EVERY,
+         "stop cleanly (as on SIGTERM: the run ends `interrupted`, the bag is closed) when the process that "
+         "started this node exits; the launch file and `rta-attitude launch` set it (a SIGTERM to `ros2 launch` "
+         "leaves its nodes running otherwise)"),
     Knob("liveliness_lease_s", 2.0, _EVERY,
          "automatic liveliness lease of `state` (the plant offers it, its readers request it): a plant that "
          "shows no sign of life for this long (killed, hung) is reported lost once; 0 = no lease. Readers "
@@ -389,6 +407,9 @@ KNOBS: tuple[Knob, ...] = (
     Knob("desired_timeout_s", 1.0, (FILTER,),
          "a state without torque_des this long (wall) is filtered with u_des = 0 (at once if the controller "
          "is gone) [s]", positive=True),
+    Knob("external_controller", False, (PLANT,),
+         "true: no pd_controller_node; the run starts once a node that publishes torque_des on the run's "
+         "namespace reads the state (`rta-attitude launch --controller none`, the launch file's controller:=none)"),
     Knob("stepping", "lockstep", (PLANT,), "lockstep (deterministic) or realtime (wall-clock timer)",
          ("lockstep", "realtime")),
     Knob("real_time_factor", 1.0, (PLANT,), "realtime: sim seconds per wall second", positive=True),
@@ -457,7 +478,8 @@ __all__ = [
     "LIVE_PARAMETERS", "MODULES",
     "NODE_NAMES", "NO_FALLBACK", "ODOMETRY", "PACKAGE", "PER_STEP_ANSWERS", "PLANT", "PLANT_COUNTERS", "QP_KEYS",
     "QP_STATUS_NAME",
-    "RECORDER", "RUN_DONE", "RUN_FAILED", "RUN_INTERRUPTED", "RUN_RUNNING", "RUN_STATUS",
+    "RECORDER", "REJECTED_COMMANDS", "REJECTION_KEY",
+    "RUN_DONE", "RUN_FAILED", "RUN_INTERRUPTED", "RUN_RUNNING", "RUN_STATUS",
     "RUN_STATUS_NAME", "SCENE", "SCENE_MARKERS", "SCENE_MODES", "SCENE_NODE", "SCENE_OFF", "SCENE_RECORDER",
     "SCENE_TOPICS", "SCENE_TRANSFORM", "STATE", "STATE_QOS",
     "STATE_TRUE", "TRUTH_TOPICS", "VIEW_QOS",

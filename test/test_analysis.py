@@ -30,7 +30,7 @@ from rta_attitude.recording import analysis
 from rta_attitude.recording import summary as bag_summary
 from rta_attitude.recording.bag import BagWriter, Qos
 from rta_attitude.simulation.closed_loop import ClosedLoop, Trajectory
-from rta_attitude.simulation.metrics import summarize_trajectory
+from rta_attitude.simulation.metrics import format_summary, summarize_trajectory
 
 DURATION_S = 150.0
 NS = "/rta"
@@ -64,12 +64,14 @@ def runs(cfg: Any) -> dict[bool, Run]:
     return {rta: _reference(cfg, rta) for rta in (True, False)}
 
 
-def _messages(run: Run) -> list[tuple[str, Any, int]]:
+def _messages(run: Run, rejected: int = 0) -> list[tuple[str, Any, int]]:
     """(topic, rclpy message, time [ns]) of the run, in the order the nodes publish them.
 
     Per step k: plant state + /clock (t_k) and, from k = 1, torque_applied (t_k-1); controller
     torque_des; filter torque_cmd + filter_status (RTA) or the pass-through torque_cmd. The chain
-    also answers the final state, as in the DDS run. run_status at the start and the end.
+    also answers the final state, as in the DDS run. run_status at the start and the end. `rejected`:
+    the first that many torque_des go out in frame `base_link`, and filter_status counts them as the filter
+    node does (`torque_des_rejected`, the reason).
     """
     from rta_attitude.ros import convert
 
@@ -100,7 +102,10 @@ def _messages(run: Run) -> list[tuple[str, Any, int]]:
             q_c = loop.scenario.command_at(float(traj.t_s[k]))
             law = controller_record(cfg, loop.scenario.controller == "pd")
             u_des = through_dds(desired_command(traj.x[k], q_c, law))
-        out.append((f"{NS}/torque_des", convert.torque_msg(to_tau(u_des), t), t))
+        desired = convert.torque_msg(to_tau(u_des), t)
+        if k < rejected:
+            desired.header.frame_id = "base_link"
+        out.append((f"{NS}/torque_des", desired, t))
         if not loop.rta:
             out.append((f"{NS}/torque_cmd", convert.torque_msg(to_tau(u_des), t), t))
             continue
@@ -110,17 +115,19 @@ def _messages(run: Run) -> list[tuple[str, Any, int]]:
             res.record["solve_time_s"] = float(traj.solve_time_s[k])
         tau = to_tau(res.u)
         out.append((f"{NS}/torque_cmd", convert.torque_msg(tau, t), t))
+        inputs = {"torque_des_rejected": min(k + 1, rejected)}
         out.append((f"{NS}/filter_status",
-                    convert.filter_status_msg(res, t, loop.filter.counters, cfg.filter.preset, slacked), t))
+                    convert.filter_status_msg(res, t, loop.filter.counters, cfg.filter.preset, slacked, inputs,
+                                              rejection="frame 'base_link'" if rejected else ""), t))
     done = {**values, "step": n}
     out.append((f"{NS}/run_status", convert.run_status_msg(t_ns[-1], topics.RUN_DONE, done), t_ns[-1]))
     return out
 
 
-def _write(run: Run, path: Path, chunk_size: int = 256 * 1024, metadata: bool = True) -> Path:
+def _write(run: Run, path: Path, chunk_size: int = 256 * 1024, metadata: bool = True, rejected: int = 0) -> Path:
     """A bag as bag_recorder_node writes it (BagWriter; the `rta_attitude` metadata record)."""
 
-    msgs = _messages(run)
+    msgs = _messages(run, rejected)
     with BagWriter(path, chunk_size=chunk_size) as bag:
         for spec in topics.recorded(run.loop.rta):
             name = spec.name if spec.name.startswith("/") else f"{NS}/{spec.name}"
@@ -265,6 +272,43 @@ def test_truncated_bag_is_analysed_up_to_where_it_stops(runs: dict[bool, Run], b
     summary = bag_summary.summarize_run(run, cfg)
     assert summary["bag"]["truncated"] and summary["steps"] == n
     assert f"bag truncated: data ends at t = {run.data_end_s:.1f} s" in bag_summary.format_bag_lines(summary)
+    # the verdict says how far it goes (data_end_s is a whole number of seconds here)
+    assert summary["bag"]["verdict"] == {"data_ends_s": run.data_end_s, "caveats": []}
+    assert f"SAFE up to t = {run.data_end_s:,.0f} s (bag truncated): no non-slacked constraint violated" in \
+        format_summary(summary).splitlines()
+
+
+def test_verdict_of_a_run_whose_commands_were_rejected_says_so(runs: dict[bool, Run], tmp_path: Path,
+                                                                cfg: Any) -> None:
+    """A bag whose filter_status counts rejected torque_des (here in frame `base_link`): the summary carries
+    the counts and the reason, and the verdict is not a plain SAFE; a clean bag's verdict is."""
+    rejected = 90
+    bag = _write(runs[True], tmp_path / "rejected.mcap", rejected=rejected)
+    summary = bag_summary.summarize_run(analysis.load_run(bag, cfg), cfg)
+    n = runs[True].traj.steps + 1  # the chain answers the final state too
+    commands = summary["bag"]["commands"]  # `answered`: the filter's calls (here the re-used in-process filter's)
+    assert {k: v for k, v in commands.items() if k != "answered"} == {
+        "received": n, "rejected": rejected, "reason": "frame 'base_link'", "missing": 0}
+    line = f"SAFE, but {rejected} of {n} commands were rejected (frame 'base_link'): no non-slacked constraint violated"
+    assert line in format_summary(summary).splitlines()
+    code, out, err = (lambda p: (p.wait(timeout=120), *p.communicate()))(
+        _cli("analyze", str(bag), "--out", str(tmp_path / "out"), "--no-plot"))
+    assert code == 0 and line in out.splitlines(), err
+    assert json.loads((tmp_path / "out" / "summary.json").read_text())["bag"]["verdict"]["caveats"] == [
+        f"{rejected} of {n} commands were rejected (frame 'base_link')"]
+    clean = bag_summary.summarize_run(analysis.load_run(_write(runs[True], tmp_path / "clean.mcap"), cfg), cfg)
+    assert clean["bag"]["verdict"] == {"data_ends_s": None, "caveats": []}
+    assert "SAFE: no non-slacked constraint violated" in format_summary(clean).splitlines()
+
+
+def test_verdict_qualifiers_count_with_thousands_separators() -> None:
+    bag = {"commands": {"received": 2000, "rejected": 900, "reason": "frame 'base_link'", "missing": 1200,
+                        "answered": 2001}, "run": {"deadline_misses": 3}, "truncated": True, "data_ends_s": 1004.0}
+    verdict = bag_summary.verdict_qualifiers(bag, 2000)
+    assert verdict == {"data_ends_s": 1004.0, "caveats": [
+        "900 of 2,000 commands were rejected (frame 'base_link')",
+        "1,200 of 2,001 states were answered without a command (u_des = 0)",
+        "3 of 2,000 steps missed their command deadline (the plant's fallback was applied)"]}
 
 
 def _cli(*args: str) -> subprocess.Popen[str]:
@@ -300,7 +344,8 @@ def test_cli_bad_and_truncated_bags(bags: dict[str, Path], tmp_path: Path) -> No
     summary = json.loads((tmp_path / "truncated" / "summary.json").read_text())
     assert summary["bag"]["truncated"]
     assert f"bag truncated: data ends at t = {summary['bag']['data_ends_s']:.1f} s" in out
-    assert "SAFE" in out and "Traceback" not in err
+    assert f"SAFE up to t = {summary['bag']['data_ends_s']:,.0f} s (bag truncated): no non-slacked constraint " \
+        "violated" in out.splitlines() and "Traceback" not in err
     assert results["ros_free"][0] == 0, results["ros_free"]
 
 

@@ -148,8 +148,9 @@ def test_cli_unknown_scenario(tmp_path):
 
 def test_cli_simulate_writes_summary_timeseries_and_figure(tmp_path):
     r = _cli("simulate", "--scenario", "passed-example", "--duration", "60", "--out", str(tmp_path))
-    assert r.returncode == 0, r.stderr
     s = json.loads((tmp_path / "summary.json").read_text())
+    # the verdict is the exit status (its printed omega starts above w_max: UNSAFE, 2; docs/decisions.md)
+    assert r.returncode == (0 if s["safe"] else 2), r.stderr
     assert s["steps"] == 60 and s["scenario"] == "passed_example"
     assert "exclusion_zone" in s["constraints"] and "intervening_steps" in s
     data = np.load(tmp_path / "timeseries.npz")

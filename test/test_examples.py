@@ -53,3 +53,19 @@ def test_the_antenna_is_on_the_station_throughout_each_pass() -> None:
     assert angle[outside].max() > 80.0  # free between the passes: the window is what holds it
     i = tr.names.index("communication")
     assert np.all(np.isinf(tr.h[outside, i]))  # not active outside its windows
+
+
+def test_the_gate_checks_the_slew_to_a_cone_clear_target_that_moved() -> None:
+    """With the star tracker, the backup law's cone-clear target changes at once as the sun moves on (a smaller
+    tilt clears the cones again, or the tilt in use stops clearing them), and the law's slew to the new one
+    crosses the cone the tilt avoided. Seed 7's runs 43 and 718 of the example met it (the tracker at t =
+    1,791 s, the sensor's keep-out cone at t = 1,845 s) while the gate followed a settled plan; the gate now
+    checks the slew afresh when the state leaves the terminal set, and both stay safe."""
+    from rta_attitude.montecarlo.runner import run_runs
+    from rta_attitude.montecarlo.sampling import sample_initial_states
+
+    cfg = config.load(ROOT / "config" / "examples" / "star_tracker.yaml")
+    x0, _ = sample_initial_states(5000, 7, cfg)
+    out = run_runs(cfg, x0[[43, 718]], 2000.0)
+    hard = [i for i, n in enumerate(cfg.constraint_names) if n not in cfg.slacked_constraints]
+    assert not out.violated_substeps[:, hard].any(), out.violated_substeps

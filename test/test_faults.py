@@ -111,6 +111,7 @@ def _reset(node: FilterNode, gone: bool = False, **knobs: Any) -> dict[str, Coll
     node.state_order, node.desired_order = StampOrder(), StampOrder()
     node.answered_ns = -1
     node.heard_controller = False
+    node.rejection = ""
     for k in list(node.counts):
         node.counts[k] = 0
     node.faults.active.clear()
@@ -262,11 +263,14 @@ def test_filter_node_counts_and_logs_each_fault_once_per_episode(filter_node: An
     assert (node.counts["state_duplicate"], node.counts["state_out_of_order"]) == (1, 1)
     assert (node.counts["torque_des_duplicate"], node.counts["torque_des_out_of_order"]) == (2, 1)
     assert node.faults.episodes["torque_des_duplicate"] == 1  # two in a row: one line
+    assert node.rejection == "stale (out of order)"  # why the latest was rejected
     # a NaN torque_des with a valid stamp: the core's non-finite-u_des fallback answers it
     _feed(node, _state(61 * S))
     _desired(node, _torque(61 * S, [math.nan, 0.0, 0.0]))
     rec = convert.filter_record(out[topics.FILTER_STATUS].msgs[-1], node.filter.names)
     assert rec["fallback"] == "non_finite_u_des" and node.counts["torque_des_rejected"] == 1
+    last = convert.diagnostic_values(out[topics.FILTER_STATUS].msgs[-1])[topics.QP_STATUS_NAME]
+    assert last[topics.REJECTION_KEY] == "not finite" and last["torque_des_rejected"] == 1
     # a quaternion slightly off unit is renormalised (counted), far off rejected (invalid state, u = 0)
     x = X0.copy()
     x[0:4] *= 1.005
@@ -278,6 +282,12 @@ def test_filter_node_counts_and_logs_each_fault_once_per_episode(filter_node: An
     assert node.counts["state_renormalised"] == 1 and node.counts["state_rejected"] == 61
     recs = [convert.filter_record(m, node.filter.names) for m in out[topics.FILTER_STATUS].msgs[-2:]]
     assert recs[0]["fallback"] == "" and recs[1]["fallback"] == "invalid_state"
+    # a torque_des in another frame: filtered as u_des = 0 as well, and filter_status says which frame
+    _feed(node, _state(64 * S))
+    _desired(node, _torque(64 * S, [1e-4, 0.0, 0.0], frame="base_link"))
+    last = convert.diagnostic_values(out[topics.FILTER_STATUS].msgs[-1])[topics.QP_STATUS_NAME]
+    assert (last["fallback"], last[topics.REJECTION_KEY], last["torque_des_rejected"]) == (
+        "non_finite_u_des", "frame 'base_link'", 2)
     _check_outputs(out)
 
 

@@ -211,3 +211,68 @@ def test_launch_on_a_disk_too_small_stops_with_one_line_and_a_readable_bag(cli: 
     _one_error_line(proc, "bag_recorder_node exited with code 1", "No space left on device")
     contents = read_bag(bag, decode=False)
     assert contents.truncated and contents.messages
+
+
+# ----------------------------------------------------------------------------- a failed command leaves no folder
+def test_a_failed_command_leaves_no_new_folder(cli: Cli, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """simulate, analyze and montecarlo create --out (and its missing parents) before they work, so that a
+    bad location fails at once; when the work then fails (a bag that does not load, a run that raises, a
+    controller that answers nonsense, an interrupt) they remove again what they created and is still empty."""
+    from rta_attitude.errors import RtaError
+    from rta_attitude.simulation.closed_loop import ClosedLoop
+
+    text_bag = tmp_path / "notes.mcap"
+    text_bag.write_text("not a bag")
+    _one_error_line(cli("analyze", str(text_bag), "--out", str(tmp_path / "a" / "deeper")), "not an MCAP file")
+    assert not (tmp_path / "a").exists()
+
+    (tmp_path / "nan_law.py").write_text("def law(y, q_c, t_s):\n    return [0.0, float('nan'), 0.0]\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    _one_error_line(cli("montecarlo", "--runs", "2", "--duration", "5", "--workers", "1", "--no-progress",
+                        "--controller", "nan_law:law", "--out", str(tmp_path / "m" / "deeper")),
+                    "returned [0.0, nan, 0.0]")
+    assert not (tmp_path / "m").exists()
+
+    def fail(self: ClosedLoop, dt_s: float | None = None) -> None:
+        raise RtaError("the run failed")
+
+    monkeypatch.setattr(ClosedLoop, "run", fail)
+    _one_error_line(cli("simulate", "--duration", "5", "--out", str(tmp_path / "s" / "deeper")), "the run failed")
+    assert not (tmp_path / "s").exists()
+
+    def interrupt(self: ClosedLoop, dt_s: float | None = None) -> None:
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(ClosedLoop, "run", interrupt)
+    existing = tmp_path / "kept"
+    existing.mkdir()
+    proc = cli("simulate", "--duration", "5", "--out", str(existing / "new"))
+    assert proc.returncode == 130 and proc.stderr == "ERROR: interrupted\n"
+    assert _files(existing) == []  # what the command created is gone, what was there stays
+
+
+def test_output_folder_removes_only_what_it_created_and_only_while_empty(tmp_path: Path) -> None:
+    from rta_attitude.files import output_folder
+
+    class BoomError(Exception):
+        pass
+
+    with pytest.raises(BoomError), output_folder(tmp_path / "a" / "b" / "c") as out:
+        assert out.is_dir() and _files(out) == []
+        raise BoomError
+    assert _files(tmp_path) == []
+    with pytest.raises(BoomError), output_folder(tmp_path / "x" / "y") as out:
+        (out / "summary.json").write_text("{}")  # a whole file written before the failure stays
+        raise BoomError
+    assert _files(tmp_path / "x" / "y") == ["summary.json"]
+    with output_folder(tmp_path / "ok") as out:
+        pass
+    assert out.is_dir()  # success: the folder stays, even empty
+
+
+def test_an_unwritable_output_folder_is_not_left_behind(cli: Cli, full_disk: Path) -> None:
+    """On a full disk the directory may be created and its probe fail: it is removed again."""
+    for args in (("simulate", "--duration", "5"), ("montecarlo", "--runs", "2", "--duration", "5", "--workers", "1"),
+                 ("analyze", "NOPE.mcap")):
+        _one_error_line(cli(*args, "--out", str(full_disk / "new" / "out")))
+        assert not (full_disk / "new").exists(), args

@@ -4,7 +4,9 @@ Live server (marked dds): an rclpy publisher in this process sends the run's `st
 `filter_status` (DiagnosticArray) with the run's QoS over Fast DDS; the command runs as a subprocess; the test is
 a Foxglove WebSocket client written here on the standard library (handshake, masked frames), which offers the
 subprotocol `foxglove.websocket.v1` and decodes the binary MessageData payloads with rosbags' own CDR reader and
-its own Jazzy type store (never rclpy). Every wait is a condition with a deadline.
+its own Jazzy type store (never rclpy). Every wait is a condition with a deadline. The server completes the
+WebSocket closing handshake (a Close frame back, not a dropped connection), and finds the message definitions
+without AMENT_PREFIX_PATH, as on a plain pip install into a venv.
 
 Layout (no DDS): config/foxglove_layout.json is what `recording.layout` writes for the default configuration; it is
 a react-mosaic tree whose every panel has a config and a title under both apps' keys; every message path names a
@@ -193,13 +195,19 @@ class FoxgloveClient:
 # ----------------------------------------------------------------------------- processes
 
 
+def plain_venv_env() -> dict[str, str]:
+    """The environment of a plain `pip install` into a venv: no AMENT_PREFIX_PATH (which conftest.py and the
+    launcher set)."""
+    return {k: v for k, v in os.environ.items() if k != "AMENT_PREFIX_PATH"}
+
+
 class Server:
     """`rta-attitude foxglove` as a subprocess; stdout lines collected by a thread."""
 
-    def __init__(self, *args: str) -> None:
+    def __init__(self, *args: str, env: dict[str, str] | None = None) -> None:
         self.popen = subprocess.Popen([sys.executable, "-m", "rta_attitude.cli", "foxglove", *args],
                                       stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT,
-                                      env={**os.environ, "PYTHONUNBUFFERED": "1"})
+                                      env={**(os.environ if env is None else env), "PYTHONUNBUFFERED": "1"})
         self.lines: queue.Queue[str] = queue.Queue()
         self.stderr: list[str] = []
         self.threads = [threading.Thread(target=self._pump, args=(self.popen.stdout, self.lines.put), daemon=True),
@@ -244,8 +252,8 @@ class Server:
 def servers() -> Iterator[Callable[..., Server]]:
     started: list[Server] = []
 
-    def start(*args: str) -> Server:
-        started.append(Server(*args))
+    def start(*args: str, env: dict[str, str] | None = None) -> Server:
+        started.append(Server(*args, env=env))
         return started[-1]
 
     yield start
@@ -415,6 +423,93 @@ def test_ctrl_c_and_sigterm_exit_0_and_free_the_port(servers: Callable[..., Serv
         assert "Traceback" not in "".join(server.stderr)
         with socket.socket() as sock:  # nothing (no orphan) holds the port any more
             sock.bind(("127.0.0.1", port))
+
+
+def close_reply(ws: WsClient) -> bytes:
+    """The payload of the next Close frame from the server (frames before it are skipped); ConnectionError if
+    the connection ends without one (what a browser reports as code 1006)."""
+    while True:
+        b0, b1 = ws._exact(2)
+        n = b1 & 0x7F
+        if n == 126:
+            n = struct.unpack(">H", ws._exact(2))[0]
+        elif n == 127:
+            n = struct.unpack(">Q", ws._exact(8))[0]
+        payload = ws._exact(n)
+        if b0 & 0x0F == 0x8:
+            return payload
+
+
+@pytest.mark.dds
+def test_the_server_completes_the_closing_handshake(servers: Callable[..., Server]) -> None:
+    """A client's Close (1000) gets a Close with its code back before the connection ends, on the port and on
+    the legacy port (foxglove-sdk alone drops the connection: code 1006); clients still connected when the
+    server stops get 1001 (going away)."""
+    server = servers("--port", "0", "--legacy-port", "0")
+    ports = {SDK_SUBPROTOCOL: server.port(),
+             LEGACY_SUBPROTOCOL: server.port("foxglove server (foxglove.websocket.v1 relay) listening on ")}
+    for protocol, port in ports.items():
+        for code in (1000, 4001):
+            ws = WsClient(port, [protocol])
+            try:
+                assert ws.status == 101 and ws.subprotocol == protocol
+                client = FoxgloveClient(ws)
+                client.pump_until(lambda c=client: c.server_info is not None, "serverInfo")
+                ws.send(0x8, struct.pack(">H", code))
+                assert close_reply(ws)[:2] == struct.pack(">H", code), protocol
+                assert ws.sock.recv(1) == b""  # then the server closes the connection
+            finally:
+                ws.sock.close()
+    connected = [WsClient(port, [protocol]) for protocol, port in ports.items()]
+    try:
+        for ws in connected:
+            client = FoxgloveClient(ws)
+            client.pump_until(lambda c=client: c.server_info is not None, "serverInfo")
+        assert server.stop(signal.SIGINT) == 0, "".join(server.stderr)
+        for ws in connected:
+            assert close_reply(ws)[:2] in (struct.pack(">H", 1001), b"")  # going away (the SDK's: no code)
+    finally:
+        for ws in connected:
+            ws.sock.close()
+
+
+def test_message_definitions_are_found_without_ament_prefix_path() -> None:
+    """A plain venv sets no AMENT_PREFIX_PATH: the bridge finds the definitions of every run topic's type where
+    the pip wheels put them (sys.prefix), the same as with the variable set."""
+    from rta_attitude.ros.foxglove_bridge import MessageDefinitionCache
+
+    types = sorted(set(RUN_TOPICS.values()))
+    code = ("import json, os, sys; from rta_attitude.ros.foxglove_bridge import MessageDefinitionCache; "
+            "c = MessageDefinitionCache(); "
+            f"print(json.dumps({{'env': 'AMENT_PREFIX_PATH' in os.environ, 'defs': {{t: c.complete_definition(t) "
+            f"for t in {types!r}}}}}))")
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, cwd=ROOT,
+                          env=plain_venv_env())
+    assert proc.returncode == 0, proc.stderr
+    found = json.loads(proc.stdout)
+    assert found["env"] is False
+    with_variable = MessageDefinitionCache()
+    assert found["defs"] == {t: list(with_variable.complete_definition(t)) for t in types}
+    assert all(encoding == "ros2msg" for encoding, _ in found["defs"].values())
+
+
+@pytest.mark.dds
+def test_a_plain_venv_server_advertises_the_run_topics(run_publisher: dict[str, Any],
+                                                       servers: Callable[..., Server]) -> None:
+    server = servers("--port", "0", "--topics", "/rta/.*", "--rescan-period", "0.3", env=plain_venv_env())
+    ws = WsClient(server.port(), [SDK_SUBPROTOCOL])
+    client = FoxgloveClient(ws)
+    wanted = {f"/rta/{topics.STATE}": "sensor_msgs/msg/JointState",
+              f"/rta/{topics.FILTER_STATUS}": "diagnostic_msgs/msg/DiagnosticArray"}
+    try:
+        client.pump_until(lambda: all(client.channel(t) for t in wanted), "advertise of state and filter_status")
+    finally:
+        ws.close()
+    for topic, type_name in wanted.items():
+        chan = client.channel(topic)
+        assert chan is not None and (chan["schemaName"], chan["schemaEncoding"]) == (type_name, "ros2msg")
+        assert get_types_from_msg(chan["schema"], type_name)[type_name][1] == TYPESTORE.fielddefs[type_name][1]
+    assert not any("cannot bridge" in line for line in server.stderr), server.stderr
 
 
 @pytest.mark.dds

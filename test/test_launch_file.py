@@ -13,7 +13,7 @@ import pytest
 from rta_attitude import topics
 from rta_attitude.errors import ConfigError
 from rta_attitude.recording.bag import default_bag_name
-from rta_attitude.ros.launch_file import ARGUMENTS, RunEnd, validate
+from rta_attitude.ros.launch_file import ARGUMENTS, NODE_PARAMETERS, RunEnd, node_roles, validate
 
 LAUNCH_FILE = Path(__file__).resolve().parents[1] / "launch" / "rta_attitude.launch.py"
 EXE = topics.EXECUTABLES
@@ -135,4 +135,25 @@ def test_the_launch_file_declares_every_argument_and_uses_this_logic() -> None:
     node_calls = [n for n in ast.walk(tree) if isinstance(n, ast.Call) and getattr(n.func, "id", "") == "Node"]
     assert all("sigterm_timeout" in {k.arg for k in n.keywords} for n in node_calls)  # no SIGTERM race on Ctrl-C
     assert "is_shutdown" in LAUNCH_FILE.read_text()  # exits after a user's shutdown are not failures
-    assert len(ARGUMENTS) == len({a.name for a in ARGUMENTS}) == 12
+    assert len(ARGUMENTS) == len({a.name for a in ARGUMENTS}) == 13
+    assert "node_roles(a)" in LAUNCH_FILE.read_text() and "NODE_PARAMETERS" in LAUNCH_FILE.read_text()
+
+
+def test_controller_none_starts_no_controller_and_the_plant_waits_for_the_users(tmp_path: Path) -> None:
+    """controller:=none: plant, filter and recorder (the scene hosted by the recorder); the plant's
+    `external_controller` knob is set from it; a bad value is one line."""
+    a = validate({"controller": "none"}, cwd=tmp_path)
+    assert a["controller"] == "none"
+    assert node_roles(a) == [topics.RECORDER, topics.FILTER, topics.PLANT]
+    assert node_roles(validate({}, cwd=tmp_path)) == [topics.RECORDER, topics.FILTER, topics.CONTROLLER, topics.PLANT]
+    assert node_roles(validate({"record": "false", "controller": "NONE"}, cwd=tmp_path)) == [
+        topics.SCENE, topics.FILTER, topics.PLANT]  # no recorder: the scene is a process of its own
+    assert node_roles(validate({"record": "false", "scene": "false"}, cwd=tmp_path)) == [
+        topics.FILTER, topics.CONTROLLER, topics.PLANT]
+    assert '"external_controller": a["controller"] == "none"' in LAUNCH_FILE.read_text()
+    with pytest.raises(ConfigError, match=r"^launch argument controller:='lqr': must be one of pd, none$"):
+        validate({"controller": "lqr"}, cwd=tmp_path)
+    # every node the launch file starts declares the knobs it is given (a node ignores another role's knob)
+    for role in (topics.PLANT, topics.FILTER, topics.CONTROLLER, topics.RECORDER, topics.SCENE):
+        assert set(NODE_PARAMETERS) <= {k.name for k in topics.knobs_for(role)}
+    assert "external_controller" in {k.name for k in topics.knobs_for(topics.PLANT)}

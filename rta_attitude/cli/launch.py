@@ -1,5 +1,5 @@
-"""`rta-attitude launch`: a scenario as four ROS 2 nodes over DDS, recorded and summarized; the
-process management lives in `cli.launcher`."""
+"""`rta-attitude launch`: a scenario as four ROS 2 nodes over DDS, recorded and summarized (`--controller none`:
+three, and a controller node of yours); the process management lives in `cli.launcher`."""
 
 from __future__ import annotations
 
@@ -12,7 +12,16 @@ from pathlib import Path
 from typing import Any
 
 from rta_attitude import topics
-from rta_attitude.cli.launcher import DEFAULT_DOMAIN_ID, DISCOVERY_RANGES, Plan, launch, plan
+from rta_attitude.cli.launcher import (
+    CONTROLLER_PD,
+    CONTROLLERS,
+    DEFAULT_DOMAIN_ID,
+    DISCOVERY_RANGES,
+    Plan,
+    controller_mode,
+    launch,
+    plan,
+)
 from rta_attitude.config.schema import PRESETS
 from rta_attitude.errors import RtaError
 from rta_attitude.files import output_dir, write_text
@@ -22,6 +31,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Arguments of `rta-attitude launch`."""
     parser.add_argument("--scenario", default="paper-example", help="scenario in the parameter file")
     parser.add_argument("--no-rta", action="store_true", help="filter node passes torque_des through (no RTA)")
+    parser.add_argument("--controller", choices=CONTROLLERS, default=CONTROLLER_PD,
+                        help="pd: the paper's PD controller node (default); none: no controller node, the run waits "
+                             "for a node of yours that publishes torque_des on --namespace and reads the state "
+                             "(examples/my_controller_node.py)")
     parser.add_argument("--scene", choices=(topics.SCENE_RECORDER, topics.SCENE_NODE), default=topics.SCENE_RECORDER,
                         help="the scene node (3D view topics scene/transform, scene/markers): hosted in the recorder's "
                              "process (default) or a process of its own")
@@ -69,6 +82,10 @@ def run(args: argparse.Namespace) -> int:
         # installation's compile happens before any node waits on another
         ready_s = compile_kernels(p.cfg)
         print(f"compiled kernels ready in {ready_s:.1f} s", flush=True)
+        if controller_mode(args) != CONTROLLER_PD:
+            print(f"controller: none; waiting for your node to publish {args.namespace.rstrip('/')}/"
+                  f"{topics.TORQUE_DES} (e.g. python examples/my_controller_node.py --ros-args "
+                  f"-r __ns:={args.namespace})", flush=True)
         print(f"launch {p.scenario_key}: {p.steps} steps, {mode}, rta={'off' if args.no_rta else 'on'}, "
               f"namespace {args.namespace}, domain {p.env['ROS_DOMAIN_ID']} "
               f"({p.env['ROS_AUTOMATIC_DISCOVERY_RANGE'].lower()}), bag {p.bag}", flush=True)

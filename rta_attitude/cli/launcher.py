@@ -9,8 +9,10 @@ knobs as `-p` overrides; the namespace is set by remapping `__ns`. The launcher 
 ROS node. Sequence:
 
 1. check the inputs (parameter file, scenario, overrides, bag path) with the core loader;
-2. start the recorder, filter, controller and plant (children in their own sessions; output to
-   log files, `--verbose` shows it);
+2. start the recorder, filter, controller (not with `--controller none`: then the plant waits for a node of
+   the user's that publishes torque_des) and plant (children in their own sessions, each with
+   `exit_with_parent`, so a launcher killed outright takes them along; output to log files, `--verbose`
+   shows it);
 3. wait for the plant to finish the scenario (it exits after its final `run_status`) and for the
    recorder to close the bag (it exits once every expected message is in);
 4. stop the controller and filter with SIGINT (then SIGTERM; SIGKILL only as a last resort, which
@@ -100,6 +102,17 @@ def _overrides(args: argparse.Namespace) -> dict[str, Any]:
     return out
 
 
+CONTROLLER_PD, CONTROLLER_NONE = "pd", "none"
+CONTROLLERS = (CONTROLLER_PD, CONTROLLER_NONE)
+"""--controller: the run's pd_controller_node, or none (a node of the user's publishes torque_des; the plant
+waits for it: its knob `external_controller`)."""
+
+
+def controller_mode(args: argparse.Namespace) -> str:
+    """`--controller` (CONTROLLERS; pd where the namespace has no such attribute)."""
+    return str(getattr(args, "controller", CONTROLLER_PD))
+
+
 def scene_mode(args: argparse.Namespace) -> str:
     """The run's scene (topics.SCENE_MODES): `--scene`, or none (topics.SCENE_OFF) with `--no-scene`."""
     return topics.SCENE_OFF if args.no_scene else args.scene
@@ -169,14 +182,16 @@ def plan(args: argparse.Namespace) -> Plan:
     else:
         timeout = 60.0 + 0.1 * steps
     rta = not args.no_rta
+    external = controller_mode(args) == CONTROLLER_NONE
     base = ["--ros-args", "--params-file", str(path), "-r", f"__ns:={args.namespace}",
             "-p", f"config_file:={path}", "-p", f"scenario:={key}", "-p", f"rta:={_ros_value(rta)}",
-            "-p", "record:=true", "-p", f"scene:={scene_mode(args)}"]  # fmt: skip
+            "-p", "record:=true", "-p", f"scene:={scene_mode(args)}", "-p", "exit_with_parent:=true"]  # fmt: skip
     for name, value in core.items():
         base += ["-p", f"{name}:={_ros_value(value)}"]
     per_role: dict[str, dict[str, Any]] = {
         topics.PLANT: {"stepping": "realtime" if args.realtime is not None else "lockstep",
-                       **({"real_time_factor": float(args.realtime)} if args.realtime is not None else {})},
+                       **({"real_time_factor": float(args.realtime)} if args.realtime is not None else {}),
+                       **({"external_controller": True} if external else {})},
         topics.CONTROLLER: {"use_sim_time": True},
         topics.FILTER: {"use_sim_time": True},
         topics.RECORDER: {"use_sim_time": True, "bag_path": str(bag), "bag_overwrite": bool(args.overwrite)},
@@ -187,6 +202,8 @@ def plan(args: argparse.Namespace) -> Plan:
     for role in START_ORDER:
         if role == topics.SCENE and scene_mode(args) != topics.SCENE_NODE:
             continue  # none, or hosted by the recorder
+        if role == topics.CONTROLLER and external:
+            continue  # --controller none: the user's node publishes torque_des
         extra = dict(per_role[role])
         extra.update({k: v for k, v in knobs.items() if any(k == kn.name for kn in topics.knobs_for(role))})
         cmd = [sys.executable, "-m", topics.MODULES[role], *base]

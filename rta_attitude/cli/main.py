@@ -1,6 +1,11 @@
 """`rta-attitude`: the command line. Every subcommand checks its inputs first, prints one
 `ERROR: ...` line and returns 1 on bad input or a file error (no traceback).
 
+Exit status (docs/decisions.md, "Exit codes"): 0 done (and, for simulate, analyze and montecarlo,
+SAFE); 1 the command could not do its work: bad input (argument errors included), a file error, one
+`ERROR: ...` line on stderr; 2 UNSAFE (simulate, analyze, montecarlo: the verdict is UNSAFE, every
+output written; `--allow-unsafe` exits 0 instead); 130 interrupted.
+
     rta-attitude simulate --scenario paper-example [--no-rta] [--preset robust|paper] --out DIR
     rta-attitude check-config [--config FILE]
     rta-attitude launch ...        (the nodes over DDS: cli/launch.py)
@@ -23,9 +28,25 @@ import importlib
 import logging
 import sys
 from collections.abc import Callable
-from typing import Any
+from typing import Any, NoReturn
 
 from rta_attitude.errors import RtaError
+
+EXIT_OK = 0
+"""Done; for simulate, analyze and montecarlo: the verdict is SAFE (or --allow-unsafe)."""
+EXIT_ERROR = 1
+"""The command could not do its work: bad input, a file error (one `ERROR: ...` line on stderr)."""
+EXIT_UNSAFE = 2
+"""simulate, analyze, montecarlo: the run(s) finished and every output is written, the verdict is UNSAFE."""
+EXIT_INTERRUPTED = 130
+"""Ctrl-C (128 + SIGINT, as shells report it)."""
+EXIT_STATUS_HELP = (
+    (EXIT_OK, "SAFE: {safe}"),
+    (EXIT_ERROR, "the command could not run: bad input or a file error, one 'ERROR: ...' line on stderr"),
+    (EXIT_UNSAFE, "UNSAFE: {unsafe}; every output is written (--allow-unsafe: exit 0 instead)"),
+    (EXIT_INTERRUPTED, "interrupted"),
+)
+"""The epilog of the commands that give a verdict (`add_verdict_arguments`)."""
 
 SUBCOMMANDS: dict[str, tuple[str, str]] = {
     "simulate": ("simulate", "run a scenario in process (no DDS); summary, time series, figure"),
@@ -42,9 +63,41 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
 """Subcommand -> (module of rta_attitude.cli, help)."""
 
 
+class Parser(argparse.ArgumentParser):
+    """argparse with the CLI's error contract: a bad argument is one `ERROR: ...` line and exit 1, like every
+    other bad input (argparse's own is a usage block and exit 2, which is UNSAFE here)."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(EXIT_ERROR, f"ERROR: {self.prog}: {' '.join(message.split())} (see {self.prog} --help)\n")
+
+
+def add_verdict_arguments(parser: argparse.ArgumentParser, safe: str, unsafe: str) -> None:
+    """`--allow-unsafe` and the exit-status epilog of a command that gives a verdict; safe, unsafe: what
+    each verdict means for this command."""
+    parser.add_argument("--allow-unsafe", action="store_true",
+                        help=f"exit 0 even when the verdict is UNSAFE (default: exit {EXIT_UNSAFE}: {unsafe})")
+    import textwrap
+
+    parser.formatter_class = argparse.RawDescriptionHelpFormatter
+    parser.epilog = "exit status:\n" + "\n".join(
+        textwrap.fill(text.format(safe=safe, unsafe=unsafe), width=88, initial_indent=f"  {code:<5}",
+                      subsequent_indent=" " * 7) for code, text in EXIT_STATUS_HELP)
+
+
+def verdict_status(safe: bool, allow_unsafe: bool, what: str) -> int:
+    """The exit status of a finished command with this verdict; on UNSAFE, one line on stderr says why the
+    status is not 0 (what: the verdict's detail)."""
+    if safe:
+        return EXIT_OK
+    if allow_unsafe:
+        return EXIT_OK
+    print(f"UNSAFE: {what} (exit status {EXIT_UNSAFE}; --allow-unsafe exits 0)", file=sys.stderr)
+    return EXIT_UNSAFE
+
+
 def build_parser() -> tuple[argparse.ArgumentParser, dict[str, Callable[[argparse.Namespace], int]]]:
     """The argument parser and the handler of each subcommand."""
-    parser = argparse.ArgumentParser(prog="rta-attitude", description=__doc__.split("\n")[0])
+    parser = Parser(prog="rta-attitude", description=__doc__.split("\n")[0])
     parser.add_argument("-v", "--verbose", action="store_true", help="log debug messages")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     handlers: dict[str, Callable[[argparse.Namespace], int]] = {}
@@ -72,14 +125,14 @@ def main(argv: list[str] | None = None) -> int:
         return int(handlers[args.command](args) or 0)
     except RtaError as exc:
         print(f"ERROR: {exc}", file=sys.stderr)
-        return 1
+        return EXIT_ERROR
     except OSError as exc:  # a file error no command anticipated: still one line, not a traceback
         where = f"{exc.filename}: " if exc.filename else ""
         print(f"ERROR: {where}{exc.strerror or exc}", file=sys.stderr)
-        return 1
+        return EXIT_ERROR
     except KeyboardInterrupt:
         print("ERROR: interrupted", file=sys.stderr)
-        return 130
+        return EXIT_INTERRUPTED
 
 
 if __name__ == "__main__":

@@ -1,4 +1,5 @@
-"""`rta-attitude simulate`: a scenario in process (no DDS): summary, time series, figure, sky map."""
+"""`rta-attitude simulate`: a scenario in process (no DDS): summary, time series, figure, sky map, and the
+verdict as the exit status (0 SAFE, 2 UNSAFE unless --allow-unsafe, 1 bad input: `cli.main`)."""
 
 from __future__ import annotations
 
@@ -8,6 +9,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from rta_attitude.cli.main import add_verdict_arguments, verdict_status
 from rta_attitude.cli.options import add_config_arguments
 from rta_attitude.config.schema import BACKUP_LAWS, PRESETS, SIMULATORS, SOLVERS
 from rta_attitude.errors import RtaError
@@ -32,6 +34,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", type=Path, default=Path("out/simulate"), help="output directory")
     parser.add_argument("--no-plot", action="store_true", help="skip the PNG figures (figure.png, skymap.png)")
     add_config_arguments(parser)
+    add_verdict_arguments(parser, safe="no non-slacked constraint violated at a sample or an RK4 substep",
+                          unsafe="a non-slacked constraint violated, also with --no-rta")
 
 
 def write_trajectory(traj: Any, out: Path) -> Path:
@@ -55,7 +59,7 @@ def write_trajectory(traj: Any, out: Path) -> Path:
 def run(args: argparse.Namespace) -> int:
     """`rta-attitude simulate`."""
     from rta_attitude.cli.options import load
-    from rta_attitude.files import output_dir, write_text
+    from rta_attitude.files import output_folder, write_text
     from rta_attitude.simulation.closed_loop import ClosedLoop
     from rta_attitude.simulation.metrics import format_summary, summarize_trajectory
 
@@ -75,28 +79,29 @@ def run(args: argparse.Namespace) -> int:
         if not args.duration > 0:
             raise RtaError(f"--duration must be > 0 s, got {args.duration}")
         scenario = replace(scenario, duration_s=float(args.duration))
-    out = output_dir(args.out)
-    loop = ClosedLoop(cfg, scenario, rta=not args.no_rta)
-    t0 = time.perf_counter()
-    traj = loop.run()
-    wall = time.perf_counter() - t0
-    summary = summarize_trajectory(traj, loop.cfg)
-    summary["wall_time_s"] = wall
-    summary["simulator"] = loop.cfg.plant.simulator
-    summary["filter_model"] = loop.cfg.filter.model  # the scenario's (the paper's scenarios run the paper's model)
-    write_trajectory(traj, out)
-    write_text(out / "summary.json", json.dumps(summary, indent=2) + "\n")
-    print(format_summary(summary))
-    if not args.no_plot:
-        from rta_attitude.recording.plots import plot_runs
-        from rta_attitude.recording.skymap import plot_skymap
+    with output_folder(args.out) as out:  # a failed run leaves no empty folder
+        loop = ClosedLoop(cfg, scenario, rta=not args.no_rta)
+        t0 = time.perf_counter()
+        traj = loop.run()
+        wall = time.perf_counter() - t0
+        summary = summarize_trajectory(traj, loop.cfg)
+        summary["wall_time_s"] = wall
+        summary["simulator"] = loop.cfg.plant.simulator
+        summary["filter_model"] = loop.cfg.filter.model  # the scenario's (the paper's scenarios run the paper's model)
+        write_trajectory(traj, out)
+        write_text(out / "summary.json", json.dumps(summary, indent=2) + "\n")
+        print(format_summary(summary))
+        if not args.no_plot:
+            from rta_attitude.recording.plots import plot_runs
+            from rta_attitude.recording.skymap import plot_skymap
 
-        rta = f"RTA on ({cfg.filter.preset})" if not args.no_rta else "RTA off"
-        png = plot_runs([(rta, traj)], loop.cfg, out / "figure.png", f"{scenario.name}: {rta}")
-        sky = plot_skymap([(rta, traj)], loop.cfg, out / "skymap.png", f"{scenario.name}: {rta}")
-        print(f"figure: {png}\nsky map: {sky}")
+            rta = f"RTA on ({cfg.filter.preset})" if not args.no_rta else "RTA off"
+            png = plot_runs([(rta, traj)], loop.cfg, out / "figure.png", f"{scenario.name}: {rta}")
+            sky = plot_skymap([(rta, traj)], loop.cfg, out / "skymap.png", f"{scenario.name}: {rta}")
+            print(f"figure: {png}\nsky map: {sky}")
     print(f"wrote {out / 'summary.json'}, {out / 'timeseries.npz'} ({traj.steps} steps in {wall:.2f} s)")
-    return 0
+    return verdict_status(summary["safe"], args.allow_unsafe,
+                          f"scenario {scenario.name} violated {', '.join(summary['violated'])}")
 
 
 __all__ = ["add_arguments", "run", "write_trajectory"]

@@ -1,4 +1,5 @@
-"""The paper's primary controller: a saturated PD attitude law (SPEC sec. 5.1), compiled.
+"""The paper's primary controller: a saturated PD attitude law (SPEC sec. 5.1), compiled; and the
+convention any other primary controller follows.
 
     u_des = psi_dot_max tanh(-kp dq_{1:3} - kd omega),    dq = q (x) q_c^-1 (no sign flip)
 
@@ -6,21 +7,38 @@ omega in rad/s; psi_dot_max is the actuator limit, so u_des can exceed the tight
 angular-acceleration bounds of U, which the filter enforces. `pd_command` is the compiled law of one
 state (the closed loop and the Monte Carlo call it); `desired_command` its face for the controller
 node and tools.
+
+A primary controller of your own (`PrimaryController`, for `simulation.closed_loop.run_stepped` and
+`rta-attitude montecarlo --controller module:function`) answers what `desired_command` answers:
+u_des = f(y, q_c, t_s), the desired wheel accelerations (3,) in rad/s^2 (the filter's u, not a torque:
+the loop sends tau = D u_des across the torque interface itself, as the controller node does), from
+the state y (19,) as the filter reads it (measured, `dynamics.state` layout, quaternion scalar last),
+the commanded attitude q_c (4,, scalar last, Hill to body as x's) and the time t_s since the run's
+start. `checked_command` holds it to that.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numba
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from rta_attitude.config.schema import Config
 from rta_attitude.dynamics.quaternion import error_vector
+from rta_attitude.errors import RtaError
 from rta_attitude.jit import LEAF
 
 Array = NDArray[np.float64]
+
+PrimaryController = Callable[[Array, Array, float], ArrayLike]
+"""u_des = f(y (19,), q_c (4,), t_s): desired wheel accelerations (3,), rad/s^2 (the module's docstring)."""
+
+
+class ControllerError(RtaError):
+    """A primary controller answered something other than 3 finite wheel accelerations."""
 
 CONTROLLER_DTYPE = np.dtype([
     ("pd", np.uint8),                        # 1: the PD law; 0: no primary controller (u_des = 0)
@@ -62,4 +80,23 @@ def desired_command(x: Array, q_c: Array, k: NDArray[np.void]) -> Array:
     return out
 
 
-__all__ = ["CONTROLLER_DTYPE", "controller_record", "desired_command", "pd_command"]
+def checked_command(u_des: ArrayLike, t_s: float) -> Array:
+    """A primary controller's answer at t_s as the float array (3,) the loop sends on.
+
+    Raises:
+        ControllerError: not 3 finite numbers (one line: what came back, and when).
+    """
+    try:
+        u = np.asarray(u_des, dtype=float)
+    except (TypeError, ValueError):
+        u = None
+    if u is None or u.shape != (3,) or not np.all(np.isfinite(u)):
+        shown = " ".join(repr(u_des).split())
+        shown = shown if len(shown) <= 80 else shown[:77] + "..."
+        raise ControllerError(f"the primary controller returned {shown} at t = {t_s:g} s: it must return 3 finite "
+                              "wheel accelerations, rad/s^2")
+    return u
+
+
+__all__ = ["CONTROLLER_DTYPE", "ControllerError", "PrimaryController", "checked_command", "controller_record",
+           "desired_command", "pd_command"]

@@ -24,6 +24,7 @@ from rta_attitude.filter.outcome import (
     GATE_UNVERIFIED,
 )
 from rta_attitude.montecarlo.classify import UNRECOVERABLE_RULES
+from rta_attitude.montecarlo.controllers import RunController, attitude_error_deg
 from rta_attitude.montecarlo.runner import BatchOutcome
 
 Array = NDArray[np.float64]
@@ -44,11 +45,13 @@ PAPER_VEHICLE = {"inertia_kgm2": (0.022, 0.044, 0.056), "wheel_inertia_kgm2": 4.
 PAPER_DURATION_S = 2000.0
 
 
-def paper_protocol(cfg: Config, duration_s: float) -> bool:
+def paper_protocol(cfg: Config, duration_s: float, controller: str = "none") -> bool:
     """The campaign is the paper's: its vehicle and limits (SPEC sec. 3), its sensor's keep-out cone, no primary
     controller over 2,000 s; only then is the paper's table printed beside ours."""
     from rta_attitude.config import load, package_config_path
 
+    if controller != "none":
+        return False
     ref = load(package_config_path()).limits  # the package's limits are the paper's
     sc = cfg.spacecraft
     return (tuple(sc.inertia_kgm2) == PAPER_VEHICLE["inertia_kgm2"]
@@ -85,6 +88,8 @@ class MonteCarloResult:
     """CPU time of this process and its finished worker processes during the runs (local backend), s."""
     unrecoverable: NDArray[np.bool_] = field(default_factory=lambda: np.zeros(0, dtype=bool))
     rules: list[str] = field(default_factory=list)
+    controller: RunController = field(default_factory=RunController)
+    """The runs' primary controller and their targets (`montecarlo.controllers`)."""
 
     @property
     def names(self) -> tuple[str, ...]:
@@ -98,8 +103,56 @@ class MonteCarloResult:
         return cs.enabled & (cs.slack_weights == 0)
 
     def failed(self, substeps: bool = False) -> NDArray[np.bool_]:
+        """(N,) runs where a counted constraint has h < 0 at a sample (the paper's criterion), or with
+        substeps also between samples."""
         v = self.outcome.violated_substeps if substeps else self.outcome.violated_samples
         return np.any(v & self.counted, axis=1)
+
+    @property
+    def run_length_s(self) -> float:
+        """What each run simulated: duration_s in whole samples, s (the runner's length)."""
+        dt = self.cfg.filter.sample_time_s
+        return round(self.duration_s / dt) * dt
+
+    def targets(self) -> tuple[Array, Array]:
+        """(times (K,), targets (N, K, 4)) the runs were commanded to (zeros without a controller)."""
+        ctrl = self.controller
+        return ctrl.target_times(self.run_length_s), ctrl.targets(0, len(self.x0), self.run_length_s)
+
+    def final_attitude_error_deg(self) -> Array:
+        """(N,) angle from each run's final attitude to its target in force at the end, deg (NaN without a
+        controller): whether the controller got where it was sent while the filter kept it safe."""
+        if self.controller.kind == "none":
+            return np.full(len(self.x0), np.nan)
+        times, q = self.targets()
+        last = int(np.searchsorted(times, self.run_length_s, side="right")) - 1
+        return attitude_error_deg(self.outcome.x_final[:, :4], q[:, max(last, 0)])
+
+
+def verdict(result: MonteCarloResult, min_safe_rate: float = 1.0) -> dict[str, Any]:
+    """The campaign's verdict for the command's exit status: SAFE when the share of runs that keep every
+    counted constraint at every sample and every RK4 substep (the stricter of the table's two columns, and
+    `simulate`'s criterion for one run) is at least min_safe_rate (default 1: any failed run is UNSAFE)."""
+    failed = result.failed(substeps=True)
+    n = len(failed)
+    safe_runs = n - int(failed.sum())
+    rate = safe_runs / n if n else math.nan
+    return {"safe": bool(n and rate >= min_safe_rate), "runs": n, "safe_runs": safe_runs, "safe_rate": rate,
+            "min_safe_rate": min_safe_rate,
+            "criterion": "every counted constraint kept at every sample and RK4 substep"}
+
+
+def format_verdict(v: dict[str, Any]) -> str:
+    """The verdict's line: SAFE or UNSAFE, the counts, the rate against the threshold."""
+    rate, need = v["safe_rate"], v["min_safe_rate"]
+    failed = v["runs"] - v["safe_runs"]
+    if v["safe"]:
+        if failed == 0:
+            return f"SAFE: all {v['runs']} runs kept every counted constraint at every sample and substep"
+        return (f"SAFE: {failed} of {v['runs']} runs violated a counted constraint (incl. substeps): safe rate "
+                f"{rate:.2%} >= --min-safe-rate {need:.2%}")
+    return (f"UNSAFE: {failed} of {v['runs']} runs violated a counted constraint (incl. substeps): safe rate "
+            f"{rate:.2%} < --min-safe-rate {need:.2%}")
 
 
 def _shares(result: MonteCarloResult, substeps: bool) -> dict[str, Any]:
@@ -120,8 +173,9 @@ def _shares(result: MonteCarloResult, substeps: bool) -> dict[str, Any]:
     }
 
 
-def summary(result: MonteCarloResult) -> dict[str, Any]:
-    """The JSON-ready summary: paper-style tables at samples and incl. substeps, counts, timing."""
+def summary(result: MonteCarloResult, min_safe_rate: float = 1.0) -> dict[str, Any]:
+    """The JSON-ready summary: paper-style tables at samples and incl. substeps, counts, timing, the
+    primary controller (and how close the runs ended to their targets), the verdict (`verdict`)."""
     o = result.outcome
     failed = result.failed()
     cs = ConstraintSet.from_config(result.cfg)
@@ -135,11 +189,21 @@ def summary(result: MonteCarloResult) -> dict[str, Any]:
     short = failed & ~result.unrecoverable
     steps = round(result.duration_s / result.cfg.filter.sample_time_s)
     paper = None
-    if paper_protocol(result.cfg, result.duration_s):
+    if paper_protocol(result.cfg, result.duration_s, result.controller.name):
         names = paper_names(result.cfg)
         paper = {**PAPER_RESULTS, "by_constraint": {names[k]: v for k, v in PAPER_RESULTS["by_constraint"].items()}}
+    ctrl = result.controller
+    tracking = None
+    if ctrl.kind != "none":
+        err = result.final_attitude_error_deg()
+        tracking = {**ctrl.as_dict(), "targets_per_run": len(ctrl.target_times(result.run_length_s)),
+                    "final_attitude_error_deg": {
+                        "median": float(np.median(err)), "p95": float(np.percentile(err, 95)),
+                        "max": float(err.max())} if len(err) else None}
     return {
         "paper": paper,
+        "verdict": verdict(result, min_safe_rate),
+        "controller": tracking,
         "at_samples": _shares(result, False),
         "incl_substeps": _shares(result, True),
         "slacked_constraints": slacked,
@@ -179,7 +243,7 @@ def summary(result: MonteCarloResult) -> dict[str, Any]:
             "preset": result.cfg.filter.preset, "plant_model": result.cfg.spacecraft.model,
             "filter_model": result.cfg.filter.model, "dt_s": result.cfg.filter.sample_time_s,
             "substeps": result.cfg.substeps, "config": result.cfg.source, "backend": result.backend,
-            "simulator": result.cfg.plant.simulator,
+            "simulator": result.cfg.plant.simulator, "controller": ctrl.as_dict(),
             "sensors": f"on (seed {result.cfg.sensors.seed})" if result.cfg.sensors.enabled else "off",
             "workers": result.workers, "wall_s": result.wall_s,
             "cpu_s": None if math.isnan(result.cpu_s) else result.cpu_s,
@@ -199,8 +263,16 @@ def format_table(s: dict[str, Any]) -> str:
     lines = [f"Monte Carlo: {setup['runs']} runs x {setup['duration_s']:.0f} s, preset {setup['preset']}, "
              f"{models}seed {setup['seed']}, {setup['wall_s']:.1f} s wall{cpu} "
              f"({setup['backend']}, {setup['workers']} workers; simulator {setup.get('simulator', 'compiled')}; "
-             f"sensor errors {setup.get('sensors', 'off')})",
-             f"{'':<28}{'paper' if p else '':>10}{'at samples':>14}{'incl. substeps':>16}"]
+             f"sensor errors {setup.get('sensors', 'off')})"]
+    tracking = s.get("controller")
+    if tracking:
+        where = (f"a new random target every {tracking['retarget_s']:g} s" if tracking["retarget_s"] is not None
+                 else "one random target per run")
+        err = tracking["final_attitude_error_deg"]
+        ends = (f"; final attitude error to the target: median {err['median']:.3g} deg, 95 % {err['p95']:.3g} deg, "
+                f"max {err['max']:.3g} deg" if err else "")
+        lines.append(f"primary controller {tracking['name']}, {where}{ends}")
+    lines.append(f"{'':<28}{'paper' if p else '':>10}{'at samples':>14}{'incl. substeps':>16}")
 
     def ref(value: float | None, spec: str) -> str:  # the paper's column: only for the paper's protocol
         return f"{value:>10{spec}}" if (p and value is not None) else f"{'-' if p else '':>10}"
@@ -236,18 +308,28 @@ def format_table(s: dict[str, Any]) -> str:
                      f"{g['backup']} backup steps in {f['runs_with_backup']} runs, {g['filtered_backup']} through the "
                      f"filter in {f['runs_with_filtered_backup']} runs, {g['unverified']} unverified and "
                      f"{g['toward_backup']} toward the backup law in {f['runs_with_unverified']} runs")
+    if "verdict" in s:
+        lines.append(format_verdict(s["verdict"]))
     return "\n".join(lines)
 
 
-def write_outputs(result: MonteCarloResult, out: Path, plot: bool = True) -> dict[str, Path]:
-    """summary.json, runs.csv and (optionally) initial_conditions.png in out. Returns the paths."""
+def write_outputs(result: MonteCarloResult, out: Path, plot: bool = True, min_safe_rate: float = 1.0
+                  ) -> dict[str, Path]:
+    """summary.json, runs.csv, outcome.npz and (optionally) initial_conditions.png in out. outcome.npz names
+    the primary controller (`controller`) and, with one, holds the targets (target_times_s, targets_q);
+    runs.csv then has each run's final attitude error. Returns the paths."""
     output_dir(out)
-    s = summary(result)
+    s = summary(result, min_safe_rate)
     paths = {"json": out / "summary.json", "csv": out / "runs.csv", "npz": out / "outcome.npz"}
     write_text(paths["json"], json.dumps(s, indent=2) + "\n")
     o = result.outcome
+    controlled = result.controller.kind != "none"
+    extra: dict[str, Any] = {"controller": np.array(result.controller.name)}
+    if controlled:
+        extra["target_times_s"], extra["targets_q"] = result.targets()
+    error_deg = result.final_attitude_error_deg()
     with atomic(paths["npz"]) as tmp:
-        np.savez_compressed(tmp, x0=result.x0, redraws=result.redraws, unrecoverable=result.unrecoverable,
+        np.savez_compressed(tmp, x0=result.x0, redraws=result.redraws, unrecoverable=result.unrecoverable, **extra,
                             constraint_names=np.array(result.names), state_names=np.array(STATE_NAMES),
                             **{k: getattr(o, k) for k in ("violated_samples", "violated_substeps",
                                                           "first_violation_s", "min_h_samples", "qp_steps",
@@ -260,7 +342,8 @@ def write_outputs(result: MonteCarloResult, out: Path, plot: bool = True) -> dic
         w.writerow(["run", *STATE_NAMES[:13], "redraws", "failed", "failed_incl_substeps", "unrecoverable",
                     "unrecoverable_rules", "violated", "violated_incl_substeps", "first_violation_s", "qp_steps",
                     "fallback_steps", "qp_failures", "max_comm_slack_rad",
-                    *[f"min_h_{n}" for n in result.names]])
+                    *[f"min_h_{n}" for n in result.names],
+                    *(["final_attitude_error_deg"] if controlled else [])])
         for k in range(len(failed)):
             vs = [n for i, n in enumerate(result.names) if o.violated_samples[k, i]]
             vb = [n for i, n in enumerate(result.names) if o.violated_substeps[k, i]]
@@ -271,7 +354,8 @@ def write_outputs(result: MonteCarloResult, out: Path, plot: bool = True) -> dic
                         int(failed_sub[k]), int(result.unrecoverable[k] and failed[k]), rules,
                         ";".join(vs), ";".join(vb), first, int(o.qp_steps[k]), int(o.fallback_steps[k]),
                         int(o.qp_failures[k]), repr(float(o.max_comm_slack[k])),
-                        *[repr(float(v)) for v in o.min_h_samples[k]]])
+                        *[repr(float(v)) for v in o.min_h_samples[k]],
+                        *([repr(float(error_deg[k]))] if controlled else [])])
     if plot:
         from rta_attitude.montecarlo.plots import plot_initial_conditions
 
@@ -281,4 +365,5 @@ def write_outputs(result: MonteCarloResult, out: Path, plot: bool = True) -> dic
 
 
 
-__all__ = ["PAPER_RESULTS", "MonteCarloResult", "format_table", "summary", "write_outputs"]
+__all__ = ["PAPER_RESULTS", "MonteCarloResult", "format_table", "format_verdict", "summary", "verdict",
+           "write_outputs"]

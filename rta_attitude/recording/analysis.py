@@ -30,7 +30,8 @@ run, which proves the recomputed substep minima are the plant's own. A bag cut s
 is analysed up to its last complete step and the summary says where the data stops.
 
 The summary has the keys and values of `simulate`'s (`metrics.summarize`) plus a `bag` section
-(file, topics, truncation, residual); only `wall_time_s` is absent (no simulation ran here).
+(file, topics, truncation, residual, the commands the filter rejected and the verdict's qualifiers:
+`recording.summary`); only `wall_time_s` is absent (no simulation ran here).
 
 One module because everything in it serves `load_run`: the private helpers are the steps of one
 rebuild (which topics, pairing by stamp, which torque was applied, what goes into `notes`), whose rules
@@ -147,6 +148,12 @@ class BagRun:
     y: Array | None = None
     """The measured states the controller and the filter read (N + 1, 19), when the bag has the true
     state beside them (sensor errors on; `x` is then the truth); None: x is what everyone read."""
+    input_counts: dict[str, int] = field(default_factory=dict)
+    """The filter node's input counters (topics.INPUT_COUNTERS) and its `calls`, from the last filter_status
+    of the bag ({} without filter_status)."""
+    rejection: str = ""
+    """Why the filter rejected its latest rejected torque_des (topics.REJECTION_KEY, e.g. "frame 'base_link'");
+    '' if it rejected none, or the bag does not say."""
 
     @property
     def steps(self) -> int:
@@ -540,6 +547,8 @@ def load_run(
 
     slacked = tuple(c for c in constraints.names if c in slacked_recorded) if slacked_recorded \
         else run_cfg.slacked_constraints
+    last = rec.status[max(rec.status)].get(topics.QP_STATUS_NAME, {}) if rec.status else {}
+    input_counts = {k: int(last[k]) for k in (*topics.INPUT_COUNTERS, "calls") if last.get(k, "").isdigit()}
     run = BagRun(
         path=file, namespace=ns, names=constraints.names, t_s=t_s, x=x, u_des=u_des, u=u, omega_dot=omega_dot,
         h=h, h_substep_min=h_min, h_substep_argmin_s=h_arg, slack=slack, intervening=inter, box_active=box,
@@ -547,7 +556,8 @@ def load_run(
         preset=preset if rta else None, scenario=scen_name, dt_s=float(np.median(dt_steps)),
         truncated=contents.truncated, data_end_s=float(t_s[-1]), reintegration_residual=residual,
         topic_types={t: available[t] for t in wanted if t in available}, counts=dict(contents.counts), notes=notes,
-        run_facts={k: info[k] for k in RUN_FACTS if k in info}, y=y,
+        run_facts={k: info[k] for k in RUN_FACTS if k in info}, y=y, input_counts=input_counts,
+        rejection=last.get(topics.REJECTION_KEY, ""),
     )  # fmt: skip
     log.debug("read %s: %d steps in %.2f s", file, n, time.perf_counter() - t_start)
     return run

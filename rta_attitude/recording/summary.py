@@ -9,6 +9,7 @@ from typing import Any
 
 import numpy as np
 
+from rta_attitude import topics
 from rta_attitude.config.schema import Config
 from rta_attitude.constraints.registry import registry
 from rta_attitude.dynamics.state import STATE_NAMES
@@ -21,7 +22,8 @@ def summarize_run(run: BagRun, cfg: Config) -> dict[str, Any]:
     """`metrics.summarize` of a bag run: the keys and values of `simulate`'s summary, plus `bag`.
 
     `bag` holds the file, topics and counts, truncation (`truncated`, `data_ends_s`), the
-    re-integration residual and how the minima between samples were obtained.
+    re-integration residual and how the minima between samples were obtained, what the filter made of the
+    controller's commands (`commands`) and what qualifies the verdict (`verdict`: `verdict_qualifiers`).
     """
     meta = {"scenario": run.scenario, "rta": run.rta, "preset": run.preset if run.rta else None,
             "config": cfg.source, "dt_s": run.dt_s, "substeps": cfg.substeps}
@@ -48,8 +50,42 @@ def summarize_run(run: BagRun, cfg: Config) -> dict[str, Any]:
                            "estimated: re-integration does not reproduce the recorded states"),
         "run": dict(run.run_facts),
         "notes": list(run.notes),
+        "commands": command_facts(run),
     }
+    out["bag"]["verdict"] = verdict_qualifiers(out["bag"], run.steps)
     return out
+
+
+def command_facts(run: BagRun) -> dict[str, Any]:
+    """What the filter made of the controller's commands, from the bag: `received` (torque_des messages
+    recorded), `rejected` (topics.REJECTED_COMMANDS: wrong frame, not finite, invalid stamp, stale), `reason`
+    (the latest rejection's, e.g. "frame 'base_link'"), `missing` (states answered without a command: u_des
+    = 0) and `answered` (the filter's calls); counts from the last filter_status (0 without one)."""
+    counts = run.input_counts
+    rejected = sum(counts.get(k, 0) for k in topics.REJECTED_COMMANDS)
+    received = run.counts.get(f"{run.namespace.rstrip('/')}/{topics.TORQUE_DES}", 0)
+    return {"received": max(received, rejected), "rejected": rejected, "reason": run.rejection,
+            "missing": counts.get("torque_des_missing", 0), "answered": counts.get("calls", 0)}
+
+
+def verdict_qualifiers(bag: Mapping[str, Any], steps: int) -> dict[str, Any]:
+    """What qualifies the SAFE/UNSAFE verdict of a bag (`metrics.format_summary` prints it in the verdict line):
+    `data_ends_s` (a truncated bag: judged only up to there; None otherwise) and `caveats`, one phrase each for
+    commands the filter rejected, states answered without a command and deadline misses of the plant: a run
+    that flew u_des = 0 instead of the controller's commands is safe, but not the run that was meant."""
+    c = bag["commands"]
+    caveats = []
+    if c["rejected"]:
+        caveats.append(f"{c['rejected']:,} of {c['received']:,} commands were rejected"
+                       + (f" ({c['reason']})" if c["reason"] else ""))
+    if c["missing"]:
+        caveats.append(f"{c['missing']:,} of {max(c['answered'], c['missing']):,} states were answered without a "
+                       "command (u_des = 0)")
+    misses = bag["run"].get("deadline_misses")
+    if isinstance(misses, int) and not isinstance(misses, bool) and misses > 0:
+        caveats.append(f"{misses:,} of {max(steps, misses):,} steps missed their command deadline (the plant's "
+                       "fallback was applied)")
+    return {"data_ends_s": bag["data_ends_s"] if bag["truncated"] else None, "caveats": caveats}
 
 
 def format_bag_lines(summary: Mapping[str, Any]) -> str:
@@ -124,4 +160,5 @@ def write_timeseries(run: BagRun, path: Path) -> Path:
     return path
 
 
-__all__ = ["compare_summaries", "format_bag_lines", "format_comparison", "label", "summarize_run", "write_timeseries"]
+__all__ = ["command_facts", "compare_summaries", "format_bag_lines", "format_comparison", "label", "summarize_run",
+           "verdict_qualifiers", "write_timeseries"]

@@ -143,9 +143,17 @@ def torque_msg(tau_Nm: Array, t_ns: int) -> Vector3Stamped:
     return vector_msg(tau_Nm, t_ns, topics.BODY_FRAME)
 
 
+class FrameError(MessageError):
+    """A message in another frame than its topic's; `frame_id` is the one it carried."""
+
+    def __init__(self, what: str, expected: str, frame_id: str) -> None:
+        super().__init__(f"{what} frame_id must be {expected!r}, got {frame_id!r}")
+        self.frame_id = frame_id
+
+
 def _frame(msg: Any, what: str, frame_id: str) -> None:
     if msg.header.frame_id != frame_id:
-        raise MessageError(f"{what} frame_id must be {frame_id!r}, got {msg.header.frame_id!r}")
+        raise FrameError(what, frame_id, str(msg.header.frame_id))
 
 
 def torque_from_msg(msg: Any) -> tuple[int, Array]:
@@ -688,7 +696,8 @@ class FilterStatusBuilder:
         self._keys = [_cdr_text(k) for k in topics.CONSTRAINT_KEYS]
 
     def _texts(self, res: FilterResult, counters: FilterCounters, preset: str, slacked: Sequence[str],
-               inputs: Mapping[str, int] | None, source: str) -> tuple[bytes, str, list[str], list[_Entry]]:
+               inputs: Mapping[str, int] | None, source: str,
+               rejection: str) -> tuple[bytes, str, list[str], list[_Entry]]:
         """(level, message, values) of the QP entry, then of each constraint's."""
         inputs = inputs or {}
         r = res.record
@@ -700,7 +709,7 @@ class FilterStatusBuilder:
             *map(_bool, box),
             str(counters.calls), str(counters.fast_path), str(counters.solved), str(counters.fallbacks),
             str(counters.solver_failures), str(counters.backup_solves), str(counters.invalid_states), source,
-            *(str(inputs.get(k, 0)) for k in topics.INPUT_COUNTERS), str(res.gate), str(res.gave_way),
+            *(str(inputs.get(k, 0)) for k in topics.INPUT_COUNTERS), str(res.gate), str(res.gave_way), rejection,
         ]  # fmt: skip
         h, psi0, psi1, bc, slack = (r[k].tolist() for k in ("h", "psi0", "psi1", "bc", "slack"))
         inter_all, unctl = r["intervening"].tolist(), r["uncontrollable"].tolist()
@@ -714,14 +723,16 @@ class FilterStatusBuilder:
         return _level_text(status), status + (f" ({fallback})" if fallback else ""), texts, per
 
     def build(self, res: FilterResult, t_ns: int, counters: FilterCounters, preset: str, slacked: Sequence[str],
-              inputs: Mapping[str, int] | None = None, source: str = "torque_des") -> DiagnosticArray:
+              inputs: Mapping[str, int] | None = None, source: str = "torque_des",
+              rejection: str = "") -> DiagnosticArray:
         """The message of one filter result (the builder's message object, rewritten).
 
         Args:
             inputs: the node's input counters (topics.INPUT_COUNTERS; missing ones are 0).
             source: where u_des came from ('torque_des', or 'missing': u_des = 0 after a timeout).
+            rejection: why the latest rejected torque_des was rejected (topics.REJECTION_KEY; '' if none was).
         """
-        level, message, texts, per = self._texts(res, counters, preset, slacked, inputs, source)
+        level, message, texts, per = self._texts(res, counters, preset, slacked, inputs, source, rejection)
         for kv, text in zip(self.qp.values, texts, strict=True):
             kv.value = text
         self.qp.level, self.qp.message = level, message
@@ -733,17 +744,19 @@ class FilterStatusBuilder:
         return self.msg
 
     def build_cdr(self, res: FilterResult, t_ns: int, counters: FilterCounters, preset: str,
-                  slacked: Sequence[str], inputs: Mapping[str, int] | None = None, source: str = "torque_des") -> bytes:
+                  slacked: Sequence[str], inputs: Mapping[str, int] | None = None, source: str = "torque_des",
+                  rejection: str = "") -> bytes:
         """`build`'s message as little-endian CDR bytes (what rclpy would serialize, with zero padding).
 
         Written as a str of byte values (latin-1) and encoded once: ~130 strings a message, each a length,
         its characters, a NUL and padding. Every text here is ASCII (numbers, names, words); should one not
         be, the message goes through rclpy's serializer instead."""
-        level, message, texts, per = self._texts(res, counters, preset, slacked, inputs, source)
+        level, message, texts, per = self._texts(res, counters, preset, slacked, inputs, source, rejection)
         if not (message + "".join(texts) + "".join(m + "".join(v) for _, m, v in per)).isascii():
             from rclpy.serialization import serialize_message
 
-            return bytes(serialize_message(self.build(res, t_ns, counters, preset, slacked, inputs, source)))
+            return bytes(serialize_message(self.build(res, t_ns, counters, preset, slacked, inputs, source,
+                                                      rejection)))
         prefix, tail = _PREFIX, _NUL_PAD_TEXT
         parts = ["\x00\x01\x00\x00", _STAMP.pack(*divmod(t_ns, NS_PER_S)).decode("latin-1"), _cdr_text(""),
                  _u32_text(1 + len(per))]
@@ -785,9 +798,9 @@ def _cdr_text(text: str) -> str:
 
 def filter_status_msg(res: FilterResult, t_ns: int, counters: FilterCounters, preset: str,
                       slacked: Sequence[str], inputs: Mapping[str, int] | None = None,
-                      source: str = "torque_des") -> DiagnosticArray:
+                      source: str = "torque_des", rejection: str = "") -> DiagnosticArray:
     """One filter_status message (a new object; the filter node reuses a `FilterStatusBuilder`)."""
-    return FilterStatusBuilder(res.names).build(res, t_ns, counters, preset, slacked, inputs, source)
+    return FilterStatusBuilder(res.names).build(res, t_ns, counters, preset, slacked, inputs, source, rejection)
 
 
 def _value(text: str) -> Any:
@@ -1137,7 +1150,8 @@ class SceneBuilder:
 
 __all__ = [
     "CONE_ID_BASE", "CONE_ID_STRIDE", "NS_PER_S", "SCENE_IDS", "SCENE_NS", "STAMP_OFFSETS", "UNIT_NORM_EPS",
-    "CdrLayout", "FilterStatusBuilder", "Layouts", "SceneBuilder", "clock_cdr", "cone_marker_ids", "cone_points",
+    "CdrLayout", "FilterStatusBuilder", "FrameError", "Layouts", "SceneBuilder", "clock_cdr", "cone_marker_ids",
+    "cone_points",
     "layouts", "scene_marker_ids", "state_cdr", "state_messages_cdr", "torque_cdr",
     "x_to", "battery_msg", "cdr_stamp_ns", "clock_msg",
     "diagnostic_values", "filter_record", "filter_status_msg", "odometry_fields", "odometry_msg",

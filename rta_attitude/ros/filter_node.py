@@ -32,6 +32,13 @@ per episode, faults.FaultLog):
   fault-free lockstep run it never fires (the run stays deterministic);
 - every output is checked once more: a u that is not finite or outside U is replaced by 0
   (`output_guard`; the core already guarantees it, so this never happens).
+
+A desired command the node does not use as sent (wrong frame, not finite, invalid stamp, or stale: a
+repeated, older or late stamp; `topics.REJECTED_COMMANDS`) must not pass unseen, since the run then flies
+u_des = 0 while a plain verdict says SAFE: each is counted in filter_status and the reason of the latest
+(`frame 'base_link'`, `not finite`, ...) is its `torque_des_rejected_reason`; on /diagnostics the
+filter's status carries the non-zero counters and the reason, and is at least WARN, naming the trouble,
+while an episode of rejected (or missing) torque_des lasts. `rta-attitude analyze` reports both.
 """
 
 from __future__ import annotations
@@ -52,7 +59,7 @@ from rta_attitude.errors import MessageError
 from rta_attitude.filter import outcome
 from rta_attitude.filter.asif import AsifFilter, FilterResult
 from rta_attitude.ros import convert, interface, spin
-from rta_attitude.ros.diagnostics import DiagnosticsPublisher, filter_level
+from rta_attitude.ros.diagnostics import OK, WARN, DiagnosticsPublisher, filter_level
 from rta_attitude.ros.faults import StampOrder
 from rta_attitude.ros.spin import RtaNode
 
@@ -92,6 +99,8 @@ class FilterNode(RtaNode):
         """Newest stamp answered with a torque_cmd."""
         self.heard_controller = False
         """A torque_des arrived: from now on a missing one is a fault (desired_timeout_s)."""
+        self.rejection = ""
+        """Why the latest rejected torque_des was rejected (topics.REJECTION_KEY; '' while none was)."""
         self.out: dict[str, Any] = {}
         for spec in topics.published(topics.FILTER, self.rta):
             pub = self.create_publisher(interface.msg_class(spec.type_name), spec.name, self.qos(spec.name))
@@ -155,6 +164,7 @@ class FilterNode(RtaNode):
             return
         t_ns = self.message_stamp(msg, "torque_des_rejected")
         if t_ns is None:
+            self._rejected("invalid stamp")
             return
         order = self.desired_order.check(t_ns)
         if not order and t_ns <= self.answered_ns:
@@ -163,6 +173,7 @@ class FilterNode(RtaNode):
             self.faults.fault(f"torque_des_{order}", f"stamp t = {self.sim_s(t_ns):g} s, newest taken "
                               f"{self.sim_s(self.desired_order.newest_ns or self.epoch_ns):g} s, answered "
                               f"{self.sim_s(max(self.answered_ns, self.epoch_ns)):g} s; dropped")
+            self._rejected(f"stale ({order.replace('_', ' ')})")
             return
         self.desired_order.take(t_ns)
         self.heard_controller = True
@@ -170,8 +181,10 @@ class FilterNode(RtaNode):
         try:
             _, tau = convert.torque_from_msg(msg)
         except MessageError as exc:
+            self._rejected(f"frame {exc.frame_id!r}" if isinstance(exc, convert.FrameError) else "not finite")
             if not self.rta:
                 self.faults.fault("torque_des_rejected", f"{exc}; not passed through")
+                self._diagnose_pass_through(t_ns)
                 return
             self.faults.fault("torque_des_rejected", f"{exc}; filtered as a non-finite u_des")
             tau = np.full(3, np.nan)  # the core's non-finite-u_des fallback answers it
@@ -180,11 +193,37 @@ class FilterNode(RtaNode):
         if not self.rta:
             self.answered_ns = max(self.answered_ns, t_ns)
             self.out[topics.TORQUE_CMD].publish(convert.torque_cdr(tau, t_ns))
+            self._diagnose_pass_through(t_ns)
             return
         self.desired[t_ns] = tau
         if t_ns in self.states:
             self._filter(t_ns, self.states.pop(t_ns)[0], self.desired.pop(t_ns), SOURCE_DESIRED)
         self._trim()
+
+    def _rejected(self, why: str) -> None:
+        """Note why a torque_des was rejected (filter_status and /diagnostics carry the latest reason)."""
+        self.rejection = why
+
+    def _input_values(self) -> dict[str, Any]:
+        """The non-zero input counters and the latest rejection's reason, for /diagnostics."""
+        values: dict[str, Any] = {k: self.counts[k] for k in topics.INPUT_COUNTERS if self.counts.get(k)}
+        if self.rejection:
+            values[topics.REJECTION_KEY] = self.rejection
+        return values
+
+    def _desired_trouble(self) -> str:
+        """What is wrong with torque_des now (an active fault episode), for the /diagnostics message; ''."""
+        if any(k in self.faults.active for k in topics.REJECTED_COMMANDS):
+            return f"torque_des rejected ({self.rejection})"
+        if "torque_des_missing" in self.faults.active:
+            return "torque_des missing (u_des = 0)"
+        return ""
+
+    def _diagnose_pass_through(self, t_ns: int) -> None:
+        """rta off: OK while torque_des passes through, WARN while it is rejected (not passed through)."""
+        trouble = self._desired_trouble()
+        level, text = (WARN, f"{trouble}: not passed through") if trouble else (OK, "passing torque_des through")
+        self.diagnostics.update(level, text, {"t_s": self.sim_s(t_ns), **self._input_values()}, t_ns)
 
     def _controller_gone(self) -> bool:
         """The controller was heard and its torque_des publisher has left (no match any more)."""
@@ -241,11 +280,16 @@ class FilterNode(RtaNode):
         self.answered_ns = max(self.answered_ns, t_ns)
         self.out[topics.TORQUE_CMD].publish(convert.torque_cdr(wheel_accel_to_torque(res.u, D), t_ns))
         self.out[topics.FILTER_STATUS].publish(self.status_builder.build_cdr(
-            res, t_ns, self.filter.counters, self.cfg.filter.preset, self.slacked, self.counts, source))
+            res, t_ns, self.filter.counters, self.cfg.filter.preset, self.slacked, self.counts, source,
+            self.rejection))
         level, text = filter_level(str(res.status), str(res.fallback), bool((res.record["slack"] > 0.0).any()))
+        trouble = self._desired_trouble()
+        if trouble:  # the command filtered is not the controller's: say so, at least as a warning
+            level, text = max(level, WARN), f"{text}; {trouble}"
         c = self.filter.counters
         self.diagnostics.update(level, text, {"preset": self.cfg.filter.preset, "calls": c.calls, "solved": c.solved,
-                                              "fallbacks": c.fallbacks, "t_s": self.sim_s(t_ns)}, t_ns)
+                                              "fallbacks": c.fallbacks, "t_s": self.sim_s(t_ns),
+                                              **self._input_values()}, t_ns)
         if res.fallback and res.fallback not in ("non_finite_u_des", "invalid_state"):
             self.faults.fault("qp_fallback", f"t = {self.sim_s(t_ns):g} s: QP {res.solver_status}, "
                               f"fallback {res.fallback}")

@@ -25,24 +25,32 @@ that reconciles subscriptions). The SDK server runs on its own threads; its subs
 count under a lock and trigger the guard condition, so every rclpy entity is made and destroyed on the executor
 thread. SIGINT/SIGTERM set a flag: the loop ends, the server stops, and the command returns 0.
 
-foxglove-sdk servers accept the subprotocol `foxglove.sdk.v1`, the current name of `foxglove.websocket.v1`
-(the same protocol); clients that offer only the old name (Lichtblick before its `foxglove.sdk.v1` support)
-are served through `legacy_port`, a relay that accepts the old name and forwards frames unchanged.
+Ports: the SDK's server listens on a free loopback port, behind `WebSocketFront`, which serves `port` (and
+`legacy_port`) and forwards the frames unchanged. The front completes the WebSocket closing handshake, which
+the SDK leaves undone (a client that closes gets a Close frame with its code, 1000, not a dropped connection:
+code 1006; clients still connected when the server stops get 1001). foxglove-sdk servers accept the
+subprotocol `foxglove.sdk.v1`, the current name of `foxglove.websocket.v1` (the same protocol); clients that
+offer only the old name (Lichtblick before its `foxglove.sdk.v1` support) are served through `legacy_port`,
+where the front accepts the old name.
+
+Message definitions are read from the interface files under the prefixes the bag writer searches
+(`$AMENT_PREFIX_PATH`, then `sys.prefix`: a plain pip install into a venv sets no AMENT_PREFIX_PATH).
 """
 
 from __future__ import annotations
 
 import asyncio
 import contextlib
+import errno
 import importlib
 import logging
-import os
 import re
 import signal
 import struct
 import threading
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 from types import FrameType
 from typing import Any
@@ -60,6 +68,7 @@ from rclpy.signals import SignalHandlerOptions
 from rclpy.subscription import Subscription
 
 from rta_attitude.errors import RtaError
+from rta_attitude.recording.bag import _share_dirs as interface_share_dirs
 
 LOG = logging.getLogger(__name__)
 
@@ -100,7 +109,7 @@ _IDL_INCLUDE = re.compile(r'^\s*#include\s+[<"]([A-Za-z0-9_/]+)\.idl[>"]', re.MU
 
 
 class DefinitionNotFoundError(LookupError):
-    """No ``.msg``/``.idl`` file was found for a type under any ``AMENT_PREFIX_PATH`` prefix."""
+    """No ``.msg``/``.idl`` file was found for a type under any of the searched prefixes."""
 
 
 def split_type_name(ros_type: str) -> tuple[str, str, str]:
@@ -145,10 +154,11 @@ class MessageDefinitionCache:
     """Builds rosbag2-style complete message definitions from the installed interface files."""
 
     def __init__(self, prefixes: Sequence[Path] | None = None) -> None:
-        """Search the given install prefixes (default: ``$AMENT_PREFIX_PATH``) for definitions."""
+        """Search the given install prefixes for definitions; default: those the bag writer searches
+        (`recording.bag`: ``$AMENT_PREFIX_PATH``, then ``sys.prefix``, where the pip wheels of Jazzy put
+        ``share/``, so a plain venv without ``AMENT_PREFIX_PATH`` finds them)."""
         if prefixes is None:
-            env = os.environ.get("AMENT_PREFIX_PATH", "")
-            prefixes = [Path(p) for p in env.split(os.pathsep) if p]
+            prefixes = [share.parent for share in interface_share_dirs()]
         self._prefixes = list(prefixes)
         self._texts: dict[tuple[str, str], str] = {}
         self._complete: dict[str, tuple[str, str]] = {}
@@ -562,81 +572,183 @@ def _with_protocol(head: bytes, protocol: str) -> bytes:
     return lines[:-2] + f"Sec-WebSocket-Protocol: {protocol}\r\n\r\n".encode()
 
 
-class LegacySubprotocolRelay:
-    """Lets clients that offer only `foxglove.websocket.v1` reach the SDK server, which answers such a handshake
-    with HTTP 400. The protocol is otherwise the same, so this TCP relay rewrites the subprotocol header of the
-    upgrade request (to `foxglove.sdk.v1`) and of the 101 answer (back to `foxglove.websocket.v1`), then copies
-    the bytes both ways unchanged (WebSocket frames carry no subprotocol). An asyncio loop on a daemon thread."""
+OP_CLOSE = 0x8
+NORMAL_CLOSURE, GOING_AWAY = struct.pack(">H", 1000), struct.pack(">H", 1001)
+"""Close frame payloads: status code 1000 (normal closure), 1001 (the server goes away)."""
 
-    def __init__(self, host: str, port: int, upstream_port: int) -> None:
-        self._host, self._port, self._upstream = host, port, upstream_port
+
+class FrameTracker:
+    """Follows the frame boundaries of one direction of a WebSocket stream (RFC 6455 sec. 5.2) as its bytes
+    pass, without holding them: `feed` takes each chunk; `close_payload` is the (unmasked) payload of the first
+    Close frame seen (None before), `at_boundary` whether the bytes so far end with a whole frame."""
+
+    def __init__(self) -> None:
+        self._head = bytearray()
+        self._remaining = 0
+        self._close: bytearray | None = None
+        self._key = b""
+        self.close_payload: bytes | None = None
+
+    @property
+    def at_boundary(self) -> bool:
+        return not self._head and self._remaining == 0
+
+    def feed(self, data: bytes) -> None:
+        i, n = 0, len(data)
+        while i < n:
+            if self._remaining:  # inside a payload: skip it (a Close frame's is kept)
+                take = min(self._remaining, n - i)
+                if self._close is not None:
+                    self._close += data[i:i + take]
+                self._remaining -= take
+                i += take
+                if not self._remaining:
+                    self._end_frame()
+                continue
+            self._head.append(data[i])
+            i += 1
+            if len(self._head) < 2:
+                continue
+            b1 = self._head[1]
+            ext = {126: 2, 127: 8}.get(b1 & 0x7F, 0)
+            mask = 4 if b1 & 0x80 else 0
+            if len(self._head) < 2 + ext + mask:
+                continue
+            self._remaining = int.from_bytes(self._head[2:2 + ext], "big") if ext else b1 & 0x7F
+            closing = self._head[0] & 0x0F == OP_CLOSE and self.close_payload is None
+            self._close = bytearray() if closing else None
+            self._key = bytes(self._head[2 + ext:2 + ext + mask])
+            self._head.clear()
+            if not self._remaining:
+                self._end_frame()
+
+    def _end_frame(self) -> None:
+        if self._close is not None:
+            key = self._key or b"\0\0\0\0"
+            self.close_payload = bytes(b ^ key[j % 4] for j, b in enumerate(self._close))
+            self._close = None
+
+
+def close_frame(client_payload: bytes) -> bytes:
+    """The server's Close frame (unmasked) answering a client's Close: its status code echoed (RFC 6455 sec.
+    5.5.1), 1000 when the client gave none."""
+    code = client_payload[:2] if len(client_payload) >= 2 else NORMAL_CLOSURE
+    return bytes([0x80 | OP_CLOSE, len(code)]) + code
+
+
+class WebSocketFront:
+    """The server's listening ports: a TCP relay (an asyncio loop on a daemon thread) in front of the SDK's
+    WebSocket server, which listens on a loopback port of its own. It copies the bytes both ways unchanged,
+    and adds two things the SDK does not do:
+
+    - the closing handshake: foxglove-sdk stops reading at a client's Close frame and drops the connection
+      without a Close of its own, which clients report as an abnormal closure (code 1006). The relay follows
+      the frames of both directions (`FrameTracker`); when the SDK closes the connection after a client's
+      Close without having sent one, the relay sends the client a Close with its status code (1000), then
+      closes the connection, as RFC 6455 sec. 7.1.2 asks of a server;
+    - on a port opened with `legacy`: clients that offer only the subprotocol `foxglove.websocket.v1` (the
+      protocol's former name, which the SDK answers with HTTP 400): the upgrade request's subprotocol header is
+      rewritten to `foxglove.sdk.v1` and the 101 answer's back (frames carry no subprotocol).
+    """
+
+    def __init__(self, upstream_port: int, upstream_host: str = "127.0.0.1") -> None:
+        self._upstream = (upstream_host, upstream_port)
         self._loop = asyncio.new_event_loop()
-        self._server: asyncio.Server | None = None
+        self._servers: list[asyncio.Server] = []
         self._writers: set[asyncio.StreamWriter] = set()
-        self._thread = threading.Thread(target=self._loop.run_forever, name="foxglove-legacy-relay", daemon=True)
+        self._open: dict[asyncio.StreamWriter, FrameTracker] = {}
+        """Upgraded connections: the client's writer -> the tracker of what the SDK sent it."""
+        self._thread = threading.Thread(target=self._loop.run_forever, name="foxglove-front", daemon=True)
+        self._thread.start()
 
-    def start(self) -> int:
-        """Listen; returns the bound port.
+    def listen(self, host: str, port: int, legacy: bool = False, option: str = "--port") -> int:
+        """Listen on host:port (0: any free port); returns the bound port.
 
         Raises:
-            RtaError: the port cannot be bound.
+            RtaError: the port cannot be bound, in one line naming `option`.
         """
-        self._thread.start()
         try:
-            return asyncio.run_coroutine_threadsafe(self._start(), self._loop).result(timeout=10.0)
+            return asyncio.run_coroutine_threadsafe(self._listen(host, port, legacy), self._loop).result(timeout=10.0)
         except OSError as exc:
-            raise RtaError(f"cannot listen on {self._host}:{self._port} for the legacy relay "
-                           f"({exc.strerror or exc}; choose another --legacy-port)") from None
+            if exc.errno == errno.EADDRINUSE:
+                raise RtaError(f"port {port} on {host} is in use (choose another with {option})") from None
+            raise RtaError(f"cannot listen on {host}:{port} ({exc.strerror or exc}; choose another with "
+                           f"{option})") from None
 
-    async def _start(self) -> int:
-        self._server = await asyncio.start_server(self._handle, self._host, self._port)
-        return int(self._server.sockets[0].getsockname()[1])
+    async def _listen(self, host: str, port: int, legacy: bool) -> int:
+        server = await asyncio.start_server(partial(self._handle, legacy=legacy), host, port)
+        self._servers.append(server)
+        return int(server.sockets[0].getsockname()[1])
 
-    async def _handle(self, down_r: asyncio.StreamReader, down_w: asyncio.StreamWriter) -> None:
+    async def _handle(self, down_r: asyncio.StreamReader, down_w: asyncio.StreamWriter, legacy: bool) -> None:
         up_w: asyncio.StreamWriter | None = None
         self._writers.add(down_w)
         try:
             request = await _read_head(down_r)
-            offered = b""
             m = _PROTOCOL_HEADER.search(request)
-            if m is not None:
-                offered = m.group(0)
-            legacy = LEGACY_SUBPROTOCOL.encode() in offered and SDK_SUBPROTOCOL.encode() not in offered
-            up_r, up_w = await asyncio.open_connection(self._host, self._upstream)
+            offered = m.group(0) if m is not None else b""
+            rename = legacy and LEGACY_SUBPROTOCOL.encode() in offered and SDK_SUBPROTOCOL.encode() not in offered
+            up_r, up_w = await asyncio.open_connection(*self._upstream)
             self._writers.add(up_w)
-            up_w.write(_with_protocol(request, SDK_SUBPROTOCOL) if legacy else request)
+            up_w.write(_with_protocol(request, SDK_SUBPROTOCOL) if rename else request)
             await up_w.drain()
             response = await _read_head(up_r)
-            if legacy and response.startswith(b"HTTP/1.1 101"):
+            upgraded = response.startswith(b"HTTP/1.1 101")
+            if rename and upgraded:
                 response = _with_protocol(response, LEGACY_SUBPROTOCOL)
             down_w.write(response)
             await down_w.drain()
-            await asyncio.gather(self._pump(down_r, up_w), self._pump(up_r, down_w))
+            if not upgraded:  # a refused handshake (HTTP 400 ...): its body, then the end
+                await asyncio.gather(self._pump(down_r, up_w), self._pump(up_r, down_w))
+                return
+            from_client, from_server = FrameTracker(), FrameTracker()
+            self._open[down_w] = from_server
+            await asyncio.gather(self._pump(down_r, up_w, from_client),
+                                 self._pump(up_r, down_w, from_server, partial(self._finish, from_client)))
         except Exception as exc:  # a connection's end (reset, EOF mid-handshake, bad head): never the relay's
-            LOG.debug("legacy relay: connection ended: %s", exc)
+            LOG.debug("foxglove front: connection ended: %s", exc)
         finally:
+            self._open.pop(down_w, None)
             for writer in (down_w, up_w):
                 if writer is not None:
                     self._writers.discard(writer)
                     writer.close()
 
     @staticmethod
-    async def _pump(source: asyncio.StreamReader, sink: asyncio.StreamWriter) -> None:
+    def _finish(from_client: FrameTracker, from_server: FrameTracker, client: asyncio.StreamWriter) -> bool:
+        """The SDK closed the connection: complete the closing handshake it left undone (see the class); True if
+        this sent the client a Close."""
+        if from_client.close_payload is None or from_server.close_payload is not None or not from_server.at_boundary:
+            return False
+        client.write(close_frame(from_client.close_payload))
+        return True
+
+    @staticmethod
+    async def _pump(source: asyncio.StreamReader, sink: asyncio.StreamWriter, tracker: FrameTracker | None = None,
+                    on_end: Callable[[FrameTracker, asyncio.StreamWriter], bool] | None = None) -> None:
         try:
             while data := await source.read(65536):
+                if tracker is not None:
+                    tracker.feed(data)
                 sink.write(data)
                 await sink.drain()
+            if on_end is not None and tracker is not None and on_end(tracker, sink):
+                await sink.drain()
+                sink.close()  # the server closes the TCP connection after the closing handshake
         finally:
-            if sink.can_write_eof():
+            if not sink.is_closing() and sink.can_write_eof():
                 with contextlib.suppress(OSError):
                     sink.write_eof()
 
     def stop(self) -> None:
-        """Close the listening socket and every relayed connection, then stop the loop."""
+        """Close the listening sockets and every relayed connection, then stop the loop."""
 
         async def _close() -> None:
-            if self._server is not None:
-                self._server.close()
+            for server in self._servers:
+                server.close()
+            for client, from_server in list(self._open.items()):  # the server goes away: say so (1001)
+                if from_server.close_payload is None and from_server.at_boundary and not client.is_closing():
+                    client.write(close_frame(GOING_AWAY))
             for writer in list(self._writers):  # the handlers then end on their own (EOF or a reset)
                 writer.close()
             tasks = [t for t in asyncio.all_tasks() if t is not asyncio.current_task()]
@@ -652,6 +764,8 @@ class LegacySubprotocolRelay:
 
 SERVER_NAME = "rta_attitude foxglove"
 NODE_NAME = "rta_attitude_foxglove"
+UPSTREAM_HOST = "127.0.0.1"
+"""Where the SDK's server listens (a free port), behind the `WebSocketFront` that serves the chosen ports."""
 
 
 def start_websocket_server(host: str, port: int, sim_time: bool, listener: ServerListener) -> WebSocketServer:
@@ -719,13 +833,14 @@ def serve(
         )
         wake.append(node.create_guard_condition(lambda: None))
         tracker = ClientSubscriptionTracker()
-        server = start_websocket_server(host, port, config.sim_time, tracker)
+        server = start_websocket_server(UPSTREAM_HOST, 0, config.sim_time, tracker)  # behind the front
+        relay = WebSocketFront(server.port)
+        url = f"ws://{host}:{relay.listen(host, port)}"
         bridge = RosFoxgloveBridge(node, server, tracker, config)
-        url = f"ws://{host}:{server.port}"
         say(f"foxglove server listening on {url}")
         if legacy_port is not None:
-            relay = LegacySubprotocolRelay(host, legacy_port, server.port)
-            say(f"foxglove server (foxglove.websocket.v1 relay) listening on ws://{host}:{relay.start()}")
+            legacy = relay.listen(host, legacy_port, legacy=True, option="--legacy-port")
+            say(f"foxglove server (foxglove.websocket.v1 relay) listening on ws://{host}:{legacy}")
         executor = SingleThreadedExecutor(context=context)
         executor.add_node(node)
         while not stop.is_set():

@@ -19,7 +19,9 @@ Two jobs, each a plain function or class the launch file calls:
 
 Every node gets `sigterm_timeout` = SIGTERM_TIMEOUT_S: on SIGINT a node waits up to stop_timeout_s +
 2 s for its readers to acknowledge what it published, which raced launch's default 5 s and printed
-"failed to terminate '5' seconds after receiving 'SIGINT', escalating to 'SIGTERM'" on Ctrl-C.
+"failed to terminate '5' seconds after receiving 'SIGINT', escalating to 'SIGTERM'" on Ctrl-C. Every node
+also gets `exit_with_parent` (NODE_PARAMETERS): stock launch leaves its processes running when it gets
+SIGTERM (what `docker stop` sends), and with it each node stops cleanly when `ros2 launch` is gone.
 """
 
 from __future__ import annotations
@@ -37,6 +39,8 @@ from rta_attitude.errors import ConfigError
 from rta_attitude.recording.bag import default_bag_name
 
 TRUE_FALSE = ("true", "false")
+CONTROLLERS = ("pd", "none")
+"""`controller:=`: the paper's PD controller node, or none (a node of the user's publishes torque_des)."""
 STEPPING = ("lockstep", "realtime")
 DISCOVERY = ("LOCALHOST", "SUBNET", "OFF")
 MAX_DOMAIN_ID = 232
@@ -65,6 +69,8 @@ ARGUMENTS: tuple[LaunchArgument, ...] = (
                    kind="file"),
     LaunchArgument("scenario", "paper_example", "scenario name in params_file"),
     LaunchArgument("rta", "true", "false: the filter node passes torque_des through", TRUE_FALSE, "bool"),
+    LaunchArgument("controller", "pd", "pd: start pd_controller_node; none: no controller node, the plant waits "
+                   "for a node of yours that publishes torque_des on the namespace and reads the state", CONTROLLERS),
     LaunchArgument("record", "true", "start bag_recorder_node (writers wait for its subscriptions)", TRUE_FALSE,
                    "bool"),
     LaunchArgument("bag", "", "MCAP file the recorder writes (default: rta_attitude_YYYY_MM_DD-HH_MM_SS.mcap "
@@ -81,6 +87,21 @@ ARGUMENTS: tuple[LaunchArgument, ...] = (
 """Every argument, in the order `ros2 launch ... --show-args` lists them."""
 
 _BY_NAME = {a.name: a for a in ARGUMENTS}
+NODE_PARAMETERS: dict[str, bool] = {"exit_with_parent": True}
+"""Knobs the launch file gives every node it starts."""
+
+
+def node_roles(values: dict[str, Any]) -> list[str]:
+    """The roles the launch file starts for validated arguments (`validate`), readers first: the recorder
+    (record:=true), the scene as a process of its own (scene:=true without a recorder, which would host it),
+    the filter, the controller (controller:=pd), the plant."""
+    roles = [topics.RECORDER] if values["record"] else []
+    if values["scene"] and not values["record"]:
+        roles.append(topics.SCENE)
+    roles.append(topics.FILTER)
+    if values["controller"] == "pd":
+        roles.append(topics.CONTROLLER)
+    return [*roles, topics.PLANT]
 
 
 def _bad(name: str, value: str, what: str) -> ConfigError:
@@ -196,4 +217,5 @@ class RunEnd:
         return verdict
 
 
-__all__ = ["ARGUMENTS", "SIGTERM_TIMEOUT_S", "LaunchArgument", "RunEnd", "validate"]
+__all__ = ["ARGUMENTS", "CONTROLLERS", "NODE_PARAMETERS", "SIGTERM_TIMEOUT_S", "LaunchArgument", "RunEnd", "node_roles",
+           "validate"]

@@ -210,4 +210,32 @@ def load(node: Node, role: str,
     return cfg, values
 
 
-__all__ = ["check_knob", "descriptor", "flatten", "load", "nest"]
+def declared_names(role: str, scenario: str = "paper_example", path: str | None = None) -> list[str]:
+    """The parameters a node of `role` declares when it runs `scenario` with the parameter file `path` (default:
+    the package's) and no overrides, sorted: what `ros2 param list` lists for it. Its knobs (topics.knobs_for),
+    the file's leaves in its sections (topics.config_sections) and rclpy's own (topics.SYSTEM_PARAMETERS),
+    as `load` declares them. ROS-free."""
+    file_params, source = config.read_parameters(path)
+    flat = dict(flatten(file_params))
+    key = config.from_parameters(file_params, source=str(source)).scenario(scenario).name
+    sections = topics.config_sections(role, key)
+    names = {k.name for k in topics.knobs_for(role)} | {n for n in flat if _in_sections(n, sections)}
+    return sorted(names | set(SYSTEM_PARAMETERS))
+
+
+COUNTED_ROLES: tuple[str, ...] = (topics.PLANT, topics.FILTER, topics.CONTROLLER, topics.RECORDER, topics.SCENE)
+
+
+def counts_sentence(scenario: str = "paper_example") -> str:
+    """The sentence of docs/ros_interface.md that states how many parameters each node declares with the
+    package's parameter file (`declared_names`); a test checks that the doc has it and that running nodes
+    list these parameters."""
+    counts = [f"{len(declared_names(role, scenario))} on `{topics.NODE_NAMES[role]}`" for role in COUNTED_ROLES]
+    listed = ", ".join(counts[:-1]) + f" and {counts[-1]}"
+    return (f"With the package's parameter file and the scenario `{scenario}`, `ros2 param list` shows "
+            f"{listed.replace(' on ', ' parameters on ', 1)} (rclpy's own `{'` and `'.join(SYSTEM_PARAMETERS)}` "
+            "included).")
+
+
+__all__ = ["COUNTED_ROLES", "check_knob", "counts_sentence", "declared_names", "descriptor", "flatten", "load",
+           "nest"]

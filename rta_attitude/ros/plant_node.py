@@ -29,9 +29,13 @@ U); one beyond the actuator limit is applied saturated, as `dynamics.spacecraft.
 When a fault episode starts or ends the plant republishes run_status (`running`, with the counters).
 
 Start: the first state is published only after every writer of the plant matched the run's
-readers (topics.expected_readers). End: run_status `done` (or `failed: reason`, or
-`interrupted: SIGINT` on a signal), wait until all readers acknowledged, exit when `exit_when_done`
-(always after a signal).
+readers (topics.expected_readers). With `external_controller` (no pd_controller_node: `rta-attitude
+launch --controller none`) the controller is whichever node publishes torque_des on the run's
+namespace: the run starts once such a node also reads the state (any of the plant's topics), and its
+readers are waited for like the run's own. A reader (or a node of the chain, for the first command)
+that is alive and still starting extends every start-up wait (`RtaNode.peers_starting`). End:
+run_status `done` (or `failed: reason`, or `interrupted: SIGINT` on a signal), wait until all readers
+acknowledged, exit when `exit_when_done` (always after a signal).
 """
 
 from __future__ import annotations
@@ -64,6 +68,8 @@ LIMIT_RTOL = 1e-9
 FINAL_STATUS_ACK_S = 10.0
 """Longest wait for the readers' acknowledgement of the final run_status before exiting [s] (at least
 stop_timeout_s; the wait ends as soon as every reader acknowledged)."""
+NOT_STATE = (topics.RUN_STATUS, topics.CLOCK)
+"""The plant's topics that do not carry the state: a controller node that reads only these cannot answer yet."""
 QUIET_KINDS = ("outside_u", "saturated")
 """Counted and logged once per episode, but do not republish run_status: without RTA they happen in
 fault-free runs (the paper's PD law exceeds U), and saturation is the actuator's normal behaviour."""
@@ -114,50 +120,82 @@ class PlantNode(RtaNode):
         self._running = False
         self._started_s = 0.0
         self.startup_extensions = 0
-        """How often startup_timeout_s ran out while a reader was alive but still starting (then: wait on)."""
+        """How often startup_timeout_s ran out while a peer was alive but still starting (then: wait on)."""
+        self._chain = (topics.FILTER,) if self.knobs["external_controller"] else (topics.FILTER, topics.CONTROLLER)
+        """The roles whose answers make the command of a step (the first command waits while one is starting)."""
         self.first_command_extensions = 0
         """How often startup_timeout_s ran out without a first command while its writer was alive."""
         self._startup = self.wall_timer(STARTUP_POLL_S, self._check_ready)
         self.get_logger().info(f"scenario {self.scenario.name}: {self.steps} steps of {self.dt_s:g} s, "
-                               f"{self.knobs['stepping']}, rta={'on' if self.rta else 'off'}; waiting for readers")
+                               f"{self.knobs['stepping']}, rta={'on' if self.rta else 'off'}; waiting for readers"
+                               + (" and a controller node (one that publishes "
+                                  f"{self.resolve_topic_name(topics.TORQUE_DES)} and reads the state)"
+                                  if self.knobs["external_controller"] else ""))
 
     # ------------------------------------------------------------------ start
     def _readers_starting(self) -> list[str]:
-        """The run's reader nodes that exist in the ROS graph under our namespace but have not subscribed
-        to everything they read yet: started, still building (a first start compiles the filter's kernels
-        for tens of seconds). Judged per topic: a node that already reads /clock (every use_sim_time node
-        does from its first moment) but not `state` is still starting. Empty if every reader has
-        subscribed, or if one is not even in the graph (that one counts against startup_timeout_s)."""
-        ns = self.get_namespace()
-        alive = {name for name, node_ns in self.get_node_names_and_namespaces() if node_ns == ns}
+        """The run's reader nodes, not subscribed yet to a topic they read, that are alive and still
+        starting (`RtaNode.peers_starting`: in the graph, without endpoints on the run's topics; a first
+        start compiles the filter's kernels for tens of seconds). Empty if none is (a reader not in the
+        graph at all counts against startup_timeout_s)."""
         pending: set[str] = set()
         for n, pub in self.pubs.items():
-            want = topics.reader_roles(n, self.rta, self.record, self.truth, self.scene)
-            if len(want) <= pub.get_subscription_count():
-                continue
-            readers = {info.node_name for info in self.get_subscriptions_info_by_topic(pub.topic_name)
-                       if info.node_namespace == ns}
-            pending |= {topics.NODE_NAMES[r] for r in want if topics.NODE_NAMES[r] not in readers}
-        return sorted(pending) if pending and all(name in alive for name in pending) else []
+            pending.update(self.missing_readers(n, pub))
+        return self.peers_starting(pending)
+
+    def _controller_readers(self) -> dict[str, int]:
+        """external_controller: how many readers of each of our topics the controller adds, i.e. the nodes
+        that publish torque_des on our namespace and subscribe to that topic ({} while no node that
+        publishes torque_des reads the state)."""
+        writers = {(i.node_name, i.node_namespace) for i in self.get_publishers_info_by_topic(
+            self.resolve_topic_name(topics.TORQUE_DES))}
+        if not writers:
+            return {}
+        extra = {n: sum((i.node_name, i.node_namespace) in writers
+                        for i in self.get_subscriptions_info_by_topic(pub.topic_name)) for n, pub in self.pubs.items()}
+        # it reads the state once it reads a topic that carries it: run_status and /clock do not (a controller
+        # that watches run_status from its start, as the template does, is not ready to answer yet)
+        return extra if any(v for n, v in extra.items() if n not in NOT_STATE) else {}
+
+    def _missing(self) -> list[tuple[str, int, int]]:
+        """(topic, readers matched, readers expected) of our topics still short of readers; with
+        external_controller, once the run's own are there, also the controller's, or a line for torque_des
+        while no controller node is there (the graph is asked only then: this runs every STARTUP_POLL_S)."""
+        external = self.knobs["external_controller"]
+
+        def short(extra: dict[str, int]) -> list[tuple[str, int, int]]:
+            return [(self.pubs[n].topic_name, self.pubs[n].get_subscription_count(), want)
+                    for n in self.pubs
+                    if (want := topics.expected_readers(n, self.rta, self.record, self.truth, self.scene,
+                                                        external) + extra.get(n, 0))
+                    and self.pubs[n].get_subscription_count() < want]  # fmt: skip
+
+        missing = short({})
+        if missing or not external:
+            return missing
+        extra = self._controller_readers()
+        return short(extra) if extra else [(self.resolve_topic_name(topics.TORQUE_DES), 0, 1)]
 
     def _check_ready(self) -> None:
-        missing = [(self.pubs[n].topic_name, self.pubs[n].get_subscription_count(), want)
-                   for n in self.pubs
-                   if (want := topics.expected_readers(n, self.rta, self.record, self.truth, self.scene))
-                   and self.pubs[n].get_subscription_count() < want]  # fmt: skip
+        missing = self._missing()
         if missing:
             if self.wall_now_s() - self._progress_s > self.knobs["startup_timeout_s"]:
                 starting = self._readers_starting()
                 if starting:  # alive in the graph, not subscribed yet (compiling kernels): wait as long as it takes
-                    self.get_logger().info(f"waiting for {', '.join(starting)} to finish starting (alive, not "
-                                           f"subscribed after {self.knobs['startup_timeout_s']:g} s)")
+                    self.get_logger().info(f"waiting for {', '.join(starting)} to finish starting (alive, no "
+                                           f"endpoints after {self.knobs['startup_timeout_s']:g} s)")
                     self._progress_s = self.wall_now_s()
                     self.startup_extensions += 1
                     return
                 self.destroy_timer(self._startup)
                 name, have, want = missing[0]
-                self._end(topics.RUN_FAILED + f": {name} has {have} of {want} readers after "
-                          f"{self.knobs['startup_timeout_s']:g} s")
+                if name == self.resolve_topic_name(topics.TORQUE_DES):
+                    self._end(topics.RUN_FAILED + f": no node publishes {name} and reads the state after "
+                              f"{self.knobs['startup_timeout_s']:g} s (external_controller: start your "
+                              "controller node on this namespace)")
+                else:
+                    self._end(topics.RUN_FAILED + f": {name} has {have} of {want} readers after "
+                              f"{self.knobs['startup_timeout_s']:g} s")
             return
         self.destroy_timer(self._startup)
         self._started_s = self.wall_now_s()
@@ -302,6 +340,13 @@ class PlantNode(RtaNode):
         waited = self.wall_now_s() - self._progress_s
         if self.counts["commands"] == 0:  # the chain has not answered yet: it may still be discovering
             if waited > self.knobs["startup_timeout_s"]:
+                starting = self.peers_starting(self._chain)
+                if starting:  # a node of the chain is alive and still starting (compiling): wait as long as it takes
+                    self.startup_extensions += 1
+                    self.get_logger().info(f"no {self.command_topic} yet after {waited:.0f} s; waiting for "
+                                           f"{', '.join(starting)} to finish starting (alive, no endpoints)")
+                    self._progress_s = self.wall_now_s()
+                    return
                 writers = self._command_writers()
                 if writers and self.first_command_extensions < FIRST_COMMAND_EXTENSIONS:
                     # a writer of the command topic is alive and matched: the chain is still discovering

@@ -187,13 +187,13 @@ class SceneNode(RtaNode):
         self.states: dict[int, np.ndarray] = {}
         self.statuses: dict[int, tuple[str, int]] = {}
         self.drawn_ns = -1
-        view = interface.qos_profile(topics.VIEW_QOS)
         source = topics.STATE
-        for topic, callback in ((source, self.take_state), (topics.FILTER_STATUS, self.take_status)):
-            if (topic == topics.FILTER_STATUS and not self.rta) or hosted is not None:
-                continue
-            spec = topics.TOPICS[topic]
-            self.create_subscription(interface.msg_class(spec.type_name), spec.name, callback, view, raw=True)
+        if hosted is None:
+            # a process of its own reads the state only once its readers (the recorder) have matched what it
+            # publishes: the plant waits for this node to read the state, so the run cannot outpace a
+            # discovery that is slow under load (a run of 300 steps took 3 s, and every drawing waited in
+            # the gates until the bag was closed)
+            self._subscribe_timer = self.wall_timer(spin.GATE_POLL_S, self._subscribe_when_matched)
         self.get_logger().info(f"drawing {self.resolve_topic_name(source)} every {self.every} step(s)"
                                + (" with the filter's status" if self.rta else "")
                                + (", hosted by the recorder" if hosted is not None else ""))
@@ -248,6 +248,17 @@ class SceneNode(RtaNode):
             self.statuses[t_ns] = info
             while len(self.statuses) > self.pending_max:
                 self.statuses.pop(min(self.statuses))
+
+    def _subscribe_when_matched(self) -> None:
+        if not all(gate.matched() for gate in self.outs.values()):
+            return
+        self.destroy_timer(self._subscribe_timer)
+        view = interface.qos_profile(topics.VIEW_QOS)
+        for topic, callback in ((topics.STATE, self.take_state), (topics.FILTER_STATUS, self.take_status)):
+            if topic == topics.FILTER_STATUS and not self.rta:
+                continue
+            spec = topics.TOPICS[topic]
+            self.create_subscription(interface.msg_class(spec.type_name), spec.name, callback, view, raw=True)
 
     def _draw(self, t_ns: int, x: np.ndarray, info: tuple[str, int] | None) -> None:
         t_s = self.sim_s(t_ns)

@@ -19,6 +19,29 @@ readers (topics.expected_readers), polling on a steady timer so the executor kee
 nodes can share one executor); past `startup_timeout_s` the node fails with a line naming the
 topic and the counts.
 
+Peers still starting: no node gives up at `startup_timeout_s` while a node of the run it waits for is
+alive and still starting (a first start compiles numba's kernels for 40-70 s; with rta:=false nothing
+else made the controller wait for the filter). The ROS graph itself is the announcement: rclpy puts a
+node into the graph (its participant and name are discovered) the moment the node object exists, before
+its slow start-up work, and the node creates the run's endpoints only when that work is done. So a peer
+is *alive and still starting* when a node of its role is in the graph under the run's namespace and has
+no publisher or subscription on any of the run's topics yet (`/clock` aside: rclpy's time source reads
+it from a use_sim_time node's first moment): `RtaNode.peers_starting`. Waiting is extended one
+`startup_timeout_s` at a time while that holds (each extension logged). Why this and not another
+mechanism: it needs no extra topic, message or thread, and nothing of a peer that is not ours (a user's
+controller, ros2 tools); lifecycle (managed) nodes are ROS's model of "configuring", but they need an
+orchestrator to drive every transition and cannot answer their state service while their only thread
+compiles; a heartbeat topic would need a thread beside the compiler and a subscriber in every peer. A
+peer that dies leaves the graph (Fast DDS's participant lease), so waiting for it ends; a peer that has
+started but does not read what it should (e.g. another `rta` value) has endpoints, so the timeout still
+ends the wait with the line naming the topic.
+
+Parent: with the knob `exit_with_parent` (the launch file and `rta-attitude launch` set it) a node asks
+the kernel for SIGHUP when the process that started it exits (Linux `prctl(PR_SET_PDEATHSIG)`, and a
+check of `os.getppid()` in the spin loop elsewhere), so a launcher stopped with SIGTERM or SIGKILL (stock
+`ros2 launch` leaves its nodes running on SIGTERM; `docker stop` sends it) takes its nodes with it through
+the ordinary stop, as on SIGTERM: the run ends `interrupted: SIGHUP`, the bag is closed.
+
 One module because its parts are one lifecycle: `run` spins until the node's `finished` future is
 set, and a signal (`RtaNode.request_stop`, which waits on the gates' publishers), a failure
 (`RtaNode.fail`) or a gate's startup timeout all end the node through that future; apart, the stop
@@ -28,10 +51,12 @@ protocol would be spread over several files.
 from __future__ import annotations
 
 import contextlib
+import ctypes
+import os
 import signal
 import sys
 import time
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from functools import partial
 from pathlib import Path
 from typing import Any
@@ -62,10 +87,19 @@ from rta_attitude.ros.faults import FaultLog, StampOrder
 GATE_POLL_S = 0.005
 """How often a closed gate checks its publisher's matches [s]."""
 SPIN_TIMEOUT_S = 0.1
-PEER_BACK_LEASES = 3
-"""A lost peer counts as back after this many liveliness leases alive again (`RtaNode._on_liveliness`)."""
 """spin_once timeout of main's loop: a signal is noticed within this time [s] (the EventsExecutor's
 own spin() does not return on SIGINT in rclpy 7.1)."""
+PEER_BACK_LEASES = 3
+"""A lost peer counts as back after this many liveliness leases alive again (`RtaNode._on_liveliness`)."""
+PR_SET_PDEATHSIG = 1
+"""prctl option (linux/prctl.h): the signal the kernel sends this process when its parent exits."""
+PARENT_EXIT_SIGNAL = signal.SIGHUP
+"""The signal a node with `exit_with_parent` gets when its parent exits ("hang up": the process that controls
+it went away). Not SIGTERM: when a multi-threaded parent is killed, the kernel sends the parent-death signal
+once for each of its threads that exits (the child is re-parented to the next), and a second SIGTERM means
+"stop at once"; repeats of this one are ignored, so the node stops cleanly."""
+PARENT_PID = os.getppid()
+"""The process that started this one, as it was when the node's process imported this module."""
 FLUSH_SLICE_S = 0.05
 """`flush` waits for acknowledgements in slices this long [s] (see there)."""
 STOP_MARGIN_S = 2.0
@@ -116,6 +150,8 @@ class RtaNode(Node):
         """Peers (roles) whose writer lost its liveliness and has not shown a sign of life since."""
         self.returning: dict[str, Timer] = {}
         """Lost peers alive again, not yet for PEER_BACK_LEASES leases (`_on_liveliness`)."""
+        self.watch_parent = bool(self.knobs["exit_with_parent"]) and not exit_with_parent()
+        """exit_with_parent where the kernel does not signal a parent's death: `run` watches os.getppid()."""
         self.counts.setdefault("clock_jumps", 0)
         # a backward jump of /clock (a replay that starts over) resets the stamp screens
         self._jump_handle = self.get_clock().create_jump_callback(
@@ -159,8 +195,8 @@ class RtaNode(Node):
     def _on_liveliness(self, peer: str, info: QoSLivelinessChangedInfo) -> None:
         """A peer's writer lost its liveliness: reported once (fault `<peer>_lost`). It counts as back only once
         alive again for PEER_BACK_LEASES leases: a killed writer's last packets, delivered late under load,
-        assert its liveliness once more, and it is lost again a lease later (found by the flake hunt of
-        2026-11-27: the controller reported a killed plant lost, back and lost again within 1.3 s)."""
+        assert its liveliness once more, and it is lost again a lease later (without this, a killed plant was
+        reported lost, back and lost again within 1.3 s)."""
         if info.not_alive_count_change > 0 and info.alive_count == 0:
             back = self.returning.pop(peer, None)
             if back is not None:  # alive for less than PEER_BACK_LEASES leases: the same episode
@@ -209,8 +245,36 @@ class RtaNode(Node):
     def gate(self, topic: str, publisher: Publisher) -> PublishGate:
         """A PublishGate for one of this node's publishers, expecting the run's readers of `topic`."""
         expected = topics.expected_readers(topic, self.rta, self.record, self.truth, self.scene)
-        self.gates[topic] = PublishGate(self, publisher, expected, self.knobs["startup_timeout_s"])
+        self.gates[topic] = PublishGate(self, publisher, expected, self.knobs["startup_timeout_s"], topic)
         return self.gates[topic]
+
+    def missing_readers(self, topic: str, publisher: Publisher) -> list[str]:
+        """The roles that read `topic` in this run (topics.reader_roles) whose node has no subscription on it
+        yet (judged by node name in the graph, under this node's namespace)."""
+        ns = self.get_namespace()
+        have = {i.node_name for i in self.get_subscriptions_info_by_topic(publisher.topic_name)
+                if i.node_namespace == ns}
+        want = topics.reader_roles(topic, self.rta, self.record, self.truth, self.scene,
+                                   bool(self.knobs.get("external_controller", False)))
+        return [r for r in want if topics.NODE_NAMES[r] not in have]
+
+    def peers_starting(self, roles: Iterable[str]) -> list[str]:
+        """The node names of `roles` that are alive and still starting (see the module docstring): in the
+        ROS graph under this node's namespace, without a publisher or subscription on any of the run's
+        topics but /clock."""
+        ns = self.get_namespace()
+        alive = {name for name, node_ns in self.get_node_names_and_namespaces() if node_ns == ns}
+        run_topics = {self.resolve_topic_name(t) for t in topics.TOPICS if t != topics.CLOCK}
+        starting = set()
+        for name in {topics.NODE_NAMES[r] for r in roles} & alive:
+            try:
+                endpoints = [*self.get_publisher_names_and_types_by_node(name, ns),
+                             *self.get_subscriber_names_and_types_by_node(name, ns)]
+            except RuntimeError:  # rclpy's NodeNameNonExistentError: it left the graph in between
+                continue
+            if not any(topic in run_topics for topic, _ in endpoints):
+                starting.add(name)
+        return sorted(starting)
 
     def on_fault_change(self, kind: str, active: bool) -> None:
         """A fault episode of `kind` started (active) or ended; the plant republishes run_status."""
@@ -332,11 +396,16 @@ class PublishGate:
     """Publish through this: messages wait (serialized, so later changes of the message object do not
     reach them) until the publisher matched `expected` subscriptions.
 
-    Once open the gate stays open (later publishes go straight through).
+    Once open the gate stays open (later publishes go straight through). Past `timeout_s` the node fails,
+    unless a missing reader of `topic` is alive and still starting (`RtaNode.peers_starting`): then it
+    waits another `timeout_s` (counted in `extensions`).
     """
 
-    def __init__(self, node: RtaNode, publisher: Publisher, expected: int, timeout_s: float) -> None:
+    def __init__(self, node: RtaNode, publisher: Publisher, expected: int, timeout_s: float,
+                 topic: str = "") -> None:
         self.node, self.publisher, self.expected = node, publisher, expected
+        self.topic = topic
+        """The relative topic name (topics.TOPICS) whose readers are expected; '' = none known by role."""
         self.timeout_s = timeout_s
         self.is_open = expected <= 0
         self._queue: list[Any] = []
@@ -344,6 +413,8 @@ class PublishGate:
         self._since = 0.0
         self.sent = 0
         """Messages handed to the publisher (not counting those still held)."""
+        self.extensions = 0
+        """How often `timeout_s` ran out while a missing reader was alive and still starting."""
 
     def matched(self) -> bool:
         """True (and open from now on) once the expected readers are matched."""
@@ -371,6 +442,14 @@ class PublishGate:
             self.sent += len(self._queue)
             self._queue.clear()
         elif self.node.wall_now_s() - self._since > self.timeout_s:
+            starting = self.node.peers_starting(self.node.missing_readers(self.topic, self.publisher)) \
+                if self.topic else []
+            if starting:  # alive, not subscribed yet (compiling its kernels): wait as long as it takes
+                self.extensions += 1
+                self._since = self.node.wall_now_s()
+                self.node.get_logger().info(f"{self.publisher.topic_name}: waiting for {', '.join(starting)} to "
+                                            f"finish starting (alive, no endpoints after {self.timeout_s:g} s)")
+                return
             have = self.publisher.get_subscription_count()
             self.node.fail(f"{self.publisher.topic_name}: {have} of {self.expected} expected readers after "
                            f"{self.timeout_s:g} s (is every node of the run up? set record:=false without a recorder)")
@@ -445,11 +524,13 @@ def run(factory: Callable[[], RtaNode], args: Sequence[str] | None = None, name:
     received: list[int] = []
 
     def on_signal(signum: int, frame: Any) -> None:
+        if signum == PARENT_EXIT_SIGNAL and received:
+            return  # the parent's exit is one event: the kernel signals it once per exiting thread of the parent
         received.append(signum)
         if _INTERRUPTIBLE[0]:  # compiling kernels in a constructor (nothing to close yet): abandon the start
             raise KeyboardInterrupt
 
-    previous = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
+    previous = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM, PARENT_EXIT_SIGNAL)}
     node: RtaNode | None = None
     executor: Executor | None = None
     code = 0
@@ -472,6 +553,8 @@ def run(factory: Callable[[], RtaNode], args: Sequence[str] | None = None, name:
             executor.add_node(companion)
         hard_stop = float("inf")
         while rclpy.ok() and not node.finished.done():
+            if node.watch_parent and not received and os.getppid() != PARENT_PID:  # no PR_SET_PDEATHSIG here
+                received.append(PARENT_EXIT_SIGNAL)
             if received and not node.stopping:
                 node.request_stop(signal.Signals(received[0]).name)
                 hard_stop = node.wall_now_s() + node.knobs["stop_timeout_s"] + STOP_MARGIN_S
@@ -516,7 +599,7 @@ def main(factory: Callable[[], RtaNode], args: Sequence[str] | None, name: str) 
     run ends, and one that reached a finished node during interpreter teardown would turn a clean end
     into "process has died [exit code -2]"."""
     code = run(factory, args, name, restore_signals=False)
-    for s in (signal.SIGINT, signal.SIGTERM):
+    for s in (signal.SIGINT, signal.SIGTERM, PARENT_EXIT_SIGNAL):
         signal.signal(s, signal.SIG_IGN)
     sys.exit(code)
 
@@ -537,10 +620,26 @@ def interruptible() -> Iterator[None]:
         _INTERRUPTIBLE[0] = False
 
 
+def exit_with_parent() -> bool:
+    """Have PARENT_EXIT_SIGNAL (SIGHUP) sent to this process when its parent exits (Linux: prctl
+    PR_SET_PDEATHSIG, which fires when the thread that started this process ends, and again for each thread
+    of the parent it is re-parented to); if the parent is gone already, send it now. `run`'s handler then
+    stops the node as on SIGTERM, once. Returns False where the kernel cannot do it: `run` then compares
+    os.getppid() with PARENT_PID while it spins. (A parent that exits before this process imported this module
+    is not noticed: the window of the interpreter's start.)"""
+    armed = False
+    if sys.platform.startswith("linux"):
+        with contextlib.suppress(OSError, AttributeError):
+            armed = ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, int(PARENT_EXIT_SIGNAL), 0, 0, 0) == 0
+    if os.getppid() != PARENT_PID:
+        os.kill(os.getpid(), PARENT_EXIT_SIGNAL)
+    return armed
+
+
 def _restore(previous: dict[signal.Signals, Any]) -> None:
     for s, handler in previous.items():
         signal.signal(s, handler)
 
 
-__all__ = ["GATE_POLL_S", "SPIN_TIMEOUT_S", "STOP_MARGIN_S", "PublishGate", "RtaNode", "check_params_files",
-           "interruptible", "main", "make_executor", "run"]
+__all__ = ["GATE_POLL_S", "PARENT_PID", "SPIN_TIMEOUT_S", "STOP_MARGIN_S", "PublishGate", "RtaNode",
+           "check_params_files", "exit_with_parent", "interruptible", "main", "make_executor", "run"]

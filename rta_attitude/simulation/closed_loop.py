@@ -28,7 +28,14 @@ from rta_attitude.config.schema import Config, Scenario
 from rta_attitude.constraints import ConstraintSet
 from rta_attitude.constraints.geometry import CONTEXT_DTYPE
 from rta_attitude.constraints.rows import safety_values
-from rta_attitude.dynamics.controller import CONTROLLER_DTYPE, controller_record, desired_command, pd_command
+from rta_attitude.dynamics.controller import (
+    CONTROLLER_DTYPE,
+    PrimaryController,
+    checked_command,
+    controller_record,
+    desired_command,
+    pd_command,
+)
 from rta_attitude.dynamics.plant import Plant, make_plant, simulated_model
 from rta_attitude.dynamics.sensors import (
     INSTRUMENT_DTYPE,
@@ -110,7 +117,7 @@ def advance(x: Array, y: Array, u_des: Array, k: int, lp: np.void, ins: np.void,
 
 
 @numba.njit(**LEAF)
-def _command_at(times: Array, t_s: float) -> int:
+def command_row(times: Array, t_s: float) -> int:
     """Row of the command schedule in force at t_s (numpy.searchsorted(side='right') - 1, at least 0)."""
     k = 0
     while k < times.shape[0] and times[k] <= t_s:
@@ -138,7 +145,7 @@ def run_scenario(x0: Array, steps: int, sched_t: Array, sched_q: Array, loop: ND
     safety_values(X[0], 0.0, p, lp.filter.constraints, ctx[0], H[0])
     for k in range(steps):
         t = k * lp.dt_s
-        Q_C[k] = sched_q[_command_at(sched_t, t)]
+        Q_C[k] = sched_q[command_row(sched_t, t)]
         read(X[k], k, lp.sensors, ins[0], Y[k], yd)
         pd_command(yd, Q_C[k], lp.controller, u_des)
         torque_round_trip(u_des, p, U_DES[k])
@@ -249,10 +256,10 @@ class StepArrays:
 
 
 def run_stepped(cfg: Config, scenario: Scenario, steps: int, plant: Plant, filt: AsifFilter | None,
-                stream: int = 0) -> StepArrays:
+                stream: int = 0, command: PrimaryController | None = None) -> StepArrays:
     """The closed loop of `run_scenario`, one Python step at a time over any plant (`dynamics.plant`):
-    at each sample the sensors (`dynamics.sensors.Instruments`), the PD law (`pd_command`, if the
-    scenario has it), the torque interface, the filter
+    at each sample the sensors (`dynamics.sensors.Instruments`), the primary controller (the PD law
+    `pd_command` if the scenario has it, or `command`), the torque interface, the filter
     (`AsifFilter.filter`, if given), the interface again, the actuator and its limit, `plant.step`, and the safety
     values of every substep. Over `CompiledPlant` it equals `run_scenario` bit for bit (tested).
 
@@ -263,6 +270,13 @@ def run_stepped(cfg: Config, scenario: Scenario, steps: int, plant: Plant, filt:
         plant: the plant, at the scenario's initial state.
         filt: the filter; None: u_des goes to the plant unfiltered.
         stream: the sensors' noise sequence (the Monte Carlo: the run's index).
+        command: a primary controller in Python in place of the scenario's, `PrimaryController`: u_des =
+            command(y, q_c, t_s), the wheel accelerations (3,) in rad/s^2 that `pd_command` would give,
+            from the measured state y (19,) as the filter reads it, the commanded attitude q_c (4,) of the
+            scenario's schedule and the time t_s (copies: the loop's arrays are not the function's to change).
+
+    Raises:
+        ControllerError: `command` returned anything but 3 finite numbers.
     """
     S = cfg.substeps
     run = StepArrays.empty(steps, S, len(cfg.constraint_names))
@@ -281,8 +295,12 @@ def run_stepped(cfg: Config, scenario: Scenario, steps: int, plant: Plant, filt:
         x = run.x[k]
         run.y[k] = instruments.measure(x, k)
         y = instruments.deliver(run.y[k])
-        run.q_c[k] = sched_q[_command_at(sched_t, k * plant.dt_s)]
-        run.u_des[k] = torque_to_wheel_accel(wheel_accel_to_torque(desired_command(y, run.q_c[k], ctrl), D), D)
+        run.q_c[k] = sched_q[command_row(sched_t, k * plant.dt_s)]
+        if command is None:
+            u_des = desired_command(y, run.q_c[k], ctrl)
+        else:
+            u_des = checked_command(command(y.copy(), run.q_c[k].copy(), k * dt), k * dt)
+        run.u_des[k] = torque_to_wheel_accel(wheel_accel_to_torque(u_des, D), D)
         if filt is not None:
             result = filt.filter(y, run.u_des[k], k * dt)
             run.results[k] = result.record
@@ -332,5 +350,5 @@ def compile_kernels(cfg: Config) -> float:
     return time.perf_counter() - t0
 
 
-__all__ = ["LOOP_DTYPE", "ClosedLoop", "StepArrays", "Trajectory", "advance", "compile_kernels", "loop_record",
-           "run_scenario", "run_stepped", "simulate"]
+__all__ = ["LOOP_DTYPE", "ClosedLoop", "StepArrays", "Trajectory", "advance", "command_row", "compile_kernels",
+           "loop_record", "run_scenario", "run_stepped", "simulate"]

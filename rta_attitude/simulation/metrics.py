@@ -152,8 +152,17 @@ def format_summary(summary: dict[str, Any]) -> str:
     if "filter_time_us" in summary:
         ft = summary["filter_time_us"]
         lines.append(f"filter call: median {ft['median']:.0f} us, p99 {ft['p99']:.0f} us, max {ft['max']:.0f} us")
-    lines.append("SAFE: no non-slacked constraint violated" if summary["safe"]
-                 else f"UNSAFE: {', '.join(summary['violated'])}")
+    # a bag's summary qualifies its verdict (recording.summary.verdict_qualifiers): where a truncated bag ends,
+    # and the commands the run did not fly as the controller sent them
+    qualifiers = summary.get("bag", {}).get("verdict", {})
+    verdict = "SAFE" if summary["safe"] else "UNSAFE"
+    if qualifiers.get("data_ends_s") is not None:
+        t = f"{qualifiers['data_ends_s']:,.1f}".rstrip("0").rstrip(".")
+        verdict += f" up to t = {t} s (bag truncated)" if summary["safe"] else f" (bag truncated at t = {t} s)"
+    if qualifiers.get("caveats"):
+        verdict += ", but " + "; ".join(qualifiers["caveats"])
+    lines.append(f"{verdict}: no non-slacked constraint violated" if summary["safe"]
+                 else f"{verdict}: {', '.join(summary['violated'])}")
     return "\n".join(lines)
 
 

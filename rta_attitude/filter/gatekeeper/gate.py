@@ -22,7 +22,7 @@ from rta_attitude.dynamics.sensors import (
     deliver,
 )
 from rta_attitude.dynamics.state import ENERGY, STATE_SIZE, TEMP, THETA_S
-from rta_attitude.filter.gatekeeper.law import SUN_SAFE_VARIANT, VARIANTS, large_momentum, sun_safe_command
+from rta_attitude.filter.gatekeeper.law import SUN_SAFE_VARIANT, VARIANTS, large_momentum, settled, sun_safe_command
 from rta_attitude.filter.gatekeeper.records import NO_LAW
 from rta_attitude.filter.gatekeeper.rollout import FAILED, HORIZON, SETTLED, energy_reserve, hold_sample, rollout
 from rta_attitude.filter.outcome import GATE_BACKUP, GATE_OFF, GATE_TOWARD_BACKUP, GATE_UNVERIFIED, GATE_VERIFIED
@@ -43,7 +43,7 @@ def reset(g: np.void) -> None:
     g.plan_n = g.plan_at = 0
     g.nominal_wait = 0
     g.filtered_wait = g.filtered_backoff = g.filtered_tries = 0
-    g.has_next = g.plan_settled = g.plan_weak = 0
+    g.has_next = g.plan_settled = g.plan_weak = g.in_terminal = 0
     g.reused = 0
     g.weak_law = -1
 
@@ -56,6 +56,7 @@ def commit(first_x: Array, law: int, settled_: bool, weak: bool, b: np.void, g: 
     predict(first_x, b, g, g.next_x)
     g.has_next = 1
     g.plan_settled = settled_
+    g.in_terminal = 0
     g.plan_weak = weak
     g.plan_law = law
     g.plan_steps = b.horizon_steps
@@ -231,6 +232,17 @@ def gate(x: Array, f: np.void, g: np.void, u: Array) -> int:
     if g.plan_steps > 0:  # the plan verified earlier: its next command is its backup law's, here
         on_plan = g.has_next and predicted(x, g.next_x)
         if on_plan and g.plan_settled:
+            g.law = g.plan_law
+            g.t = g.t_call
+            inside = settled(x, b, g)
+            if g.in_terminal and not inside:
+                # the state left the terminal set it had reached: the law's target moved off it (its
+                # cone-clear choice changed as the sun moved on), and the way to the new one was never
+                # checked; a fresh plan checks it, else the plan is over
+                g.plan_settled = 0
+                on_plan = False
+            g.in_terminal = inside
+        if on_plan and g.plan_settled:
             # a settled plan holds for good on its own trajectory, while its next sample holds (a cone the law
             # meets ahead, which the terminal set's look-ahead did not reach: a fresh plan instead)
             g.reused += 1
@@ -250,7 +262,8 @@ def gate(x: Array, f: np.void, g: np.void, u: Array) -> int:
             return GATE_BACKUP
         if not on_plan:
             # off the plan (sensor errors, a model other than the plant's): its command is verified from a
-            # state the spacecraft is not in; the candidate (its rows robust to the errors) instead
+            # state the spacecraft is not in; or out of its terminal set: the law's way on is not verified;
+            # the candidate (its rows robust to the errors) instead
             g.plan_steps = 0
             g.has_next = 0
             return _weak_candidate(x, u, candidate_weak, f, g)

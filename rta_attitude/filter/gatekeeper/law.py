@@ -45,8 +45,8 @@ M = MAX_ROWS
 
 
 RATE_LIMIT_FRACTION = 0.9
-"""The backup law commands |w_ref_a| <= this fraction of w_max (0.7 until 2026-11-25: the rollout checks the
-rate limit at every substep, so the reserve only slowed the way out; the oracle's witnesses run the rates to
+"""The backup law commands |w_ref_a| <= this fraction of w_max. The rollout checks the rate limit at every
+substep, so a larger reserve would only slow the way out (the viability oracle's witnesses run the rates to
 within 2e-6 rad/s of w_max)."""
 
 
@@ -64,9 +64,9 @@ SETTLED_RATE_FRACTION = 0.1
 
 # ... and every wheel can hold its share of the momentum at rest there (`_wheel_load`).
 TILT_WHEEL_MARGIN = 0.002
-"""The tilted sun-safe target keeps the panel-axis wheel this fraction of psi_max (1.2 rad/s) inside its limit
-(0.01 until 2026-11-25: the rollout checks the wheel speeds at every substep; the oracle's witnesses of the
-backup's failures keep the wheels 0.06 rad/s inside psi_max, and the smaller reserve saved two of them)."""
+"""The tilted sun-safe target keeps the panel-axis wheel this fraction of psi_max inside its limit. The rollout
+checks the wheel speeds at every substep, so the reserve only absorbs rounding (the viability oracle's
+witnesses keep the wheels 0.06 rad/s inside psi_max; a reserve of 0.01 lost runs they keep)."""
 
 
 WHEEL_SPEED_RTOL = 1e-12
@@ -616,9 +616,22 @@ def keep_cones(x: Array, p: np.void, b: np.void, g: np.void) -> None:
     best_m = -math.inf  # the most margin of any candidate (where none clears)
     best_near = -math.inf  # the nearest clear candidate's closeness to the body's attitude (trace of T A^T)
     found = False
-    trial, best = g.trial, g.best
+    trial, best, base = g.trial, g.best, g.base
     A = g.A  # the body's attitude now (the law's frame): among clear candidates, the nearest, so that the target
     # does not jump where the nominal one does (its roll flips as the sun crosses the Earth line)
+    # the tilts turn the roll about the sun line nearest the body's attitude (a tilt cannot undo the nominal
+    # target's roll flip: tilts of the flipped target would all be half a turn from the body)
+    base_near = -math.inf
+    for j in range(TILT_AZIMUTHS):
+        _rotate_rows(T, sx, sy, sz, 2.0 * math.pi * j / TILT_AZIMUTHS, trial)
+        near = 0.0
+        for r in range(3):
+            near += trial[r, 0] * A[r, 0] + trial[r, 1] * A[r, 1] + trial[r, 2] * A[r, 2]
+        if near > base_near:
+            base_near = near
+            for r in range(3):
+                for q in range(3):
+                    base[r, q] = trial[r, q]
     for level in range(len(TILT_STEPS_RAD) + 1):
         for j in range(TILT_AZIMUTHS):
             phi = 2.0 * math.pi * j / TILT_AZIMUTHS
@@ -626,8 +639,8 @@ def keep_cones(x: Array, p: np.void, b: np.void, g: np.void) -> None:
                 _rotate_rows(T, sx, sy, sz, phi, trial)
             else:
                 c, s = math.cos(phi), math.sin(phi)
-                _rotate_rows(T, c * e1x + s * e2x, c * e1y + s * e2y, c * e1z + s * e2z, TILT_STEPS_RAD[level - 1],
-                             trial)
+                _rotate_rows(base, c * e1x + s * e2x, c * e1y + s * e2y, c * e1z + s * e2z,
+                             TILT_STEPS_RAD[level - 1], trial)
             m = _cone_margin(x, p, b, g, trial)
             near = 0.0
             for r in range(3):

@@ -97,6 +97,7 @@ GATE_DTYPE = np.dtype([
     # receive it (`sensors.deliver` of the prediction)
     ("has_next", np.uint8),              # ... next_x is set
     ("plan_settled", np.uint8),          # the committed plan reaches the terminal set (holds for good)
+    ("in_terminal", np.uint8),           # the last state on a settled plan was in the terminal set
     ("plan_weak", np.uint8),             # the committed plan is safe to its horizon but short of the energy reserve
     ("weak_law", np.int8),               # the last `verify`'s first variant safe to the horizon without the
     # energy reserve (-1: none), its command and its state after the first sample (`commit_weak`)
@@ -141,6 +142,7 @@ GATE_DTYPE = np.dtype([
     ("trdd", np.float64, (3,)),
     ("trial", np.float64, (3, 3)),       # `law.keep_cones`: a candidate target and the best so far
     ("best", np.float64, (3, 3)),
+    ("base", np.float64, (3, 3)),        # `law.keep_cones`: the roll about the sun line the tilts turn
     ("plan_command", np.float64, (3,)),  # a settled plan's next command, before its sample is known to hold
 ])  # fmt: skip
 """The gatekeeper's memory (plan_steps) and scratch (one per filter workspace)."""
