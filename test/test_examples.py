@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import subprocess
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -59,8 +60,8 @@ def test_the_gate_checks_the_slew_to_a_cone_clear_target_that_moved() -> None:
     """With the star tracker, the backup law's cone-clear target changes at once as the sun moves on (a smaller
     tilt clears the cones again, or the tilt in use stops clearing them), and the law's slew to the new one
     crosses the cone the tilt avoided. Seed 7's runs 43 and 718 of the example met it (the tracker at t =
-    1,791 s, the sensor's keep-out cone at t = 1,845 s) while the gate followed a settled plan; the gate now
-    checks the slew afresh when the state leaves the terminal set, and both stay safe."""
+    1,791 s, the sensor's keep-out cone at t = 1,845 s) where a gate follows a settled plan on; the gate checks the
+    slew afresh when the state leaves the terminal set, and both stay safe."""
     from rta_attitude.montecarlo.runner import run_runs
     from rta_attitude.montecarlo.sampling import sample_initial_states
 
@@ -69,3 +70,22 @@ def test_the_gate_checks_the_slew_to_a_cone_clear_target_that_moved() -> None:
     out = run_runs(cfg, x0[[43, 718]], 2000.0)
     hard = [i for i, n in enumerate(cfg.constraint_names) if n not in cfg.slacked_constraints]
     assert not out.violated_substeps[:, hard].any(), out.violated_substeps
+
+
+def test_a_plan_that_holds_for_its_horizon_only_must_end_at_rest_where_the_example_asks() -> None:
+    """Seed 7's run 34 of the star-tracker example (a large momentum: plans hold for the horizon only) followed
+    a plan to its last sample while the backup law slewed to a new cone-clear target at 0.9 deg/s toward the
+    tracker's cone; nothing verified from there and the cone was broken two samples later. With
+    `filter.backup_horizon_at_rest` (the example's setting) that plan is not accepted and the run stays safe."""
+    from rta_attitude.montecarlo.runner import run_runs
+    from rta_attitude.montecarlo.sampling import sample_initial_states
+
+    cfg = config.load(ROOT / "config" / "examples" / "star_tracker.yaml")
+    assert cfg.filter.backup_horizon_at_rest
+    x0, _ = sample_initial_states(5000, 7, cfg)
+    tracker = cfg.constraint_names.index("star_tracker")
+    on = run_runs(cfg, x0[[34]], 2000.0)
+    off = run_runs(replace(cfg, filter=replace(cfg.filter, backup_horizon_at_rest=False)), x0[[34]], 2000.0)
+    hard = [i for i, n in enumerate(cfg.constraint_names) if n not in cfg.slacked_constraints]
+    assert not on.violated_substeps[0, hard].any(), on.violated_substeps
+    assert off.violated_substeps[0, tracker]

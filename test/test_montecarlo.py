@@ -260,6 +260,8 @@ def test_the_papers_column_is_printed_for_the_papers_protocol_only() -> None:
     assert paper_protocol(cfg, 2000.0) and not paper_protocol(cfg, 40.0)
     twelve_u = dataclasses.replace(cfg, spacecraft=dataclasses.replace(cfg.spacecraft, inertia_kgm2=(0.2, 0.25, 0.15)))
     assert not paper_protocol(twelve_u, 2000.0)
+    beta = dataclasses.replace(cfg, environment=dataclasses.replace(cfg.environment, sun_beta_rad=0.5))
+    assert not paper_protocol(beta, 2000.0)  # the sun out of the orbit plane: not the paper's orbit
     renamed = dataclasses.replace(cfg.pointing[0], name="sun_sensor")
     plain = dataclasses.replace(cfg.filter, priorities=())  # (the default's name the paper's cones)
     other = dataclasses.replace(cfg, pointing=(renamed, cfg.pointing[1]), scenarios={}, filter=plain)

@@ -411,6 +411,7 @@ def from_parameters(params: Mapping[str, Any], source: str = "<memory>") -> Conf
         backup_law=fi.text("backup_law", "none"), backup_horizon_s=fi.number("backup_horizon_s", 300.0),
         backup_nominal_s=fi.number("backup_nominal_s", 20.0),
         backup_energy_lookahead_s=fi.number("backup_energy_lookahead_s", 6000.0),
+        backup_horizon_at_rest=fi.flag("backup_horizon_at_rest", False),
         actuator_lag=fi.text("actuator_lag", "compensate"),
         window_slew_fraction=fi.number("window_slew_fraction", 0.5),
         backup_sun_axis_body=fi.vector("backup_sun_axis_body", 3) if "backup_sun_axis_body" in fi.data

@@ -484,6 +484,12 @@ class FilterOptions:
     accepted only if at its end the battery could stay above E_min for this long more with the panel
     held where the wheels allow it nearest the sun (`filter.gatekeeper.rollout.energy_reserve`); 0: off. About one
     orbit (2 pi / n = 6,118 s): the sun's direction to the momentum repeats each orbit."""
+    backup_horizon_at_rest: bool = False
+    """With a momentum too large for the sun-safe attitude (plans that hold for the horizon only), accept a plan
+    only if the spacecraft is at rest at its end (every body rate within the terminal set's): a plan that ends
+    in the middle of the backup law's slew to a new target is safe to its last sample and no further. Measured
+    on the first 1,000 runs of seed 7: the star-tracker example 95.0 % -> 98.0 % safe, the default 99.9 % ->
+    99.7 %; so on where added cones move the backup law's target, off by default (docs/backup.md)."""
     actuator_lag: str = "compensate"
     """Robust preset with sensor errors on: how the filter treats the wheel drive's lag (ACTUATOR_LAGS)."""
     backup_sun_axis_body: tuple[float, float, float] = (0.0, 0.0, 1.0)

@@ -46,16 +46,18 @@ PAPER_DURATION_S = 2000.0
 
 
 def paper_protocol(cfg: Config, duration_s: float, controller: str = "none") -> bool:
-    """The campaign is the paper's: its vehicle and limits (SPEC sec. 3), its sensor's keep-out cone, no primary
-    controller over 2,000 s; only then is the paper's table printed beside ours."""
+    """The campaign is the paper's: its vehicle, limits and orbit environment (SPEC sec. 3; the sun in the orbit
+    plane), its sensor's keep-out cone, no primary controller over 2,000 s; only then is the paper's table
+    printed beside ours."""
     from rta_attitude.config import load, package_config_path
 
     if controller != "none":
         return False
-    ref = load(package_config_path()).limits  # the package's limits are the paper's
+    ref = load(package_config_path())  # the package's limits and environment are the paper's
     sc = cfg.spacecraft
     return (tuple(sc.inertia_kgm2) == PAPER_VEHICLE["inertia_kgm2"]
-            and sc.wheel_inertia_kgm2 == PAPER_VEHICLE["wheel_inertia_kgm2"] and cfg.limits == ref
+            and sc.wheel_inertia_kgm2 == PAPER_VEHICLE["wheel_inertia_kgm2"] and cfg.limits == ref.limits
+            and cfg.environment == ref.environment
             and duration_s == PAPER_DURATION_S and bool(paper_names(cfg)))
 
 

@@ -58,6 +58,7 @@ BACKUP_DTYPE = np.dtype([
     ("momentum_variant_rad_s", np.float64),  # the MOMENTUM variant only where |J w - s D psi| / D exceeds this
     ("nominal_steps", np.int64),         # samples of the filter's own answers before the backup law (>= 1)
     ("reserve_steps", np.int64),         # steps of `energy_reserve`'s projection (0: off)
+    ("horizon_at_rest", np.uint8),       # a horizon-only plan must end at rest (filter.backup_horizon_at_rest)
     ("reserve_step_s", np.float64),      # ... each this long
     ("margin", np.float64, (M,)),        # what each h must keep in a rollout (`check_margins`; 0 without sensor errors)
     ("candidate_margin", np.float64, (M,)),  # ... in a candidate's rollout (`apply_measurement_margins`)
@@ -169,6 +170,7 @@ def backup_record(cfg: Config) -> NDArray[np.void]:
     b["nominal_steps"] = max(1, round(o.backup_nominal_s / o.sample_time_s))
     b["reserve_step_s"] = RESERVE_STEP_S
     b["reserve_steps"] = round(o.backup_energy_lookahead_s / RESERVE_STEP_S)
+    b["horizon_at_rest"] = o.backup_horizon_at_rest
     b["interface"] = sensors_record(cfg)[0]
     b["dt_s"] = o.sample_time_s
     sun = np.array(o.backup_sun_axis_body)

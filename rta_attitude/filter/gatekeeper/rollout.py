@@ -34,7 +34,7 @@ from rta_attitude.dynamics.spacecraft import (
     saturate,
     torque_round_trip,
 )
-from rta_attitude.dynamics.state import ENERGY, STATE_SIZE, THETA_S
+from rta_attitude.dynamics.state import ENERGY, OMEGA, STATE_SIZE, THETA_S
 from rta_attitude.filter.gatekeeper.law import (
     RATE_LIMIT_FRACTION,
     VARIANTS,
@@ -53,7 +53,10 @@ M = MAX_ROWS
 
 
 FAILED, HORIZON, SETTLED = 0, 1, 2
-"""What a rollout found: a violation; the horizon safe; the terminal set reached, safe till then."""
+"""What a rollout found: a violation (or, with `filter.backup_horizon_at_rest`, a horizon that ends in a slew);
+the horizon safe; the terminal set reached, safe till then."""
+OMEGA0 = OMEGA.start
+"""The first body rate's index in the state (a plain int for the compiled code)."""
 
 
 @numba.njit(**LEAF)
@@ -157,13 +160,20 @@ def hold_sample(u: Array, f: np.void, g: np.void, traj: Array, record: bool) -> 
 @numba.njit(**LEAF)
 def backup_tail(f: np.void, g: np.void, traj: Array, record: bool) -> int:
     """The backup law (variant g.law) from g.x, one held command per sample, for horizon_steps samples or
-    until `settled`: FAILED, HORIZON or SETTLED (`hold_sample` checks each sample)."""
+    until `settled`: FAILED, HORIZON (safe to the horizon; with `filter.backup_horizon_at_rest` also at
+    rest there: every body rate within the terminal set's) or SETTLED (`hold_sample` checks each sample)."""
     c, b = f.constraints, f.backup
     for _ in range(b.horizon_steps):
         if settled(g.x, b, g):
             return SETTLED
         continue_command(c, b, g, g.u)  # from what settled found at g.x
         if not hold_sample(g.u, f, g, traj, record):
+            return FAILED
+    for a in range(3 if b.horizon_at_rest else 0):
+        # a plan that holds for its horizon only must end at rest, as the terminal set asks: one that ends in
+        # the middle of a slew (the law's target moved as the sun moved on) is safe up to its last sample and
+        # no further, and where nothing verifies from there the spacecraft is handed over moving toward a cone
+        if abs(g.x[OMEGA0 + a]) > b.settled_rate_rad_s:
             return FAILED
     return HORIZON
 
