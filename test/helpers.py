@@ -74,3 +74,19 @@ def best_panel_cos(h: np.ndarray, s: np.ndarray, caps: np.ndarray, rng: np.rando
         if min(con["fun"](res.x) for con in cons) > -1e-10:
             best = max(best, -float(res.fun))
     return best
+
+
+def starting_peer(role: str, namespace: str, context: object) -> object:
+    """An rclpy node named like the run's node of `role` that is alive and still starting: in the graph, reading
+    only /clock (as rclpy's time source does from a use_sim_time node's first moment, long before its kernels let
+    it create the run's endpoints)."""
+    import rclpy
+
+    from rta_attitude import topics
+    from rta_attitude.ros import interface
+
+    node = rclpy.create_node(topics.NODE_NAMES[role], namespace=namespace, context=context)
+    clock = topics.TOPICS[topics.CLOCK]
+    node.create_subscription(interface.msg_class(clock.type_name), clock.name, lambda m: None,
+                             interface.qos_profile(clock.qos))
+    return node

@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 import pytest
 import rclpy
-from helpers import integrate, to_torque, to_wheel_accel
+from helpers import integrate, starting_peer, to_torque, to_wheel_accel
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from rclpy.parameter import Parameter
@@ -443,11 +443,7 @@ def test_plant_waits_for_a_reader_that_is_alive_but_still_starting() -> None:
     executor = make_executor("single", context=context)
     plant = PlantNode(context=context, namespace=NS, parameter_overrides=[Parameter(k, value=v) for k, v in {
         "rta": False, "record": False, "startup_timeout_s": 0.5, "stop_timeout_s": 0.5}.items()])
-    starting = rclpy.create_node(topics.NODE_NAMES[topics.CONTROLLER], namespace=NS, context=context)
-    # a use_sim_time node reads /clock from its first moment, long before its kernels let it read `state`
-    clock = topics.TOPICS[topics.CLOCK]
-    starting.create_subscription(interface.msg_class(clock.type_name), clock.name, lambda m: None,
-                                 interface.qos_profile(clock.qos))
+    starting = starting_peer(topics.CONTROLLER, NS, context)  # in the graph, no endpoints of the run yet
     executor.add_node(plant)
     executor.add_node(starting)
 

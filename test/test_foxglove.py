@@ -106,18 +106,22 @@ class WsClient:
     def send_json(self, msg: dict[str, Any]) -> None:
         self.send(0x1, json.dumps(msg).encode())
 
+    def frame(self) -> tuple[int, bytes]:
+        """The next frame from the server (unmasked): its first header byte (FIN, opcode) and its payload."""
+        b0, b1 = self._exact(2)
+        n = b1 & 0x7F
+        if n == 126:
+            n = struct.unpack(">H", self._exact(2))[0]
+        elif n == 127:
+            n = struct.unpack(">Q", self._exact(8))[0]
+        return b0, self._exact(n)
+
     def recv(self) -> str | bytes:
         """The next whole text (str) or binary (bytes) message."""
         parts: list[bytes] = []
         kind = 0
         while True:
-            b0, b1 = self._exact(2)
-            n = b1 & 0x7F
-            if n == 126:
-                n = struct.unpack(">H", self._exact(2))[0]
-            elif n == 127:
-                n = struct.unpack(">Q", self._exact(8))[0]
-            payload = self._exact(n)
+            b0, payload = self.frame()
             opcode = b0 & 0x0F
             if opcode == 0x9:
                 self.send(0xA, payload)
@@ -429,13 +433,7 @@ def close_reply(ws: WsClient) -> bytes:
     """The payload of the next Close frame from the server (frames before it are skipped); ConnectionError if
     the connection ends without one (what a browser reports as code 1006)."""
     while True:
-        b0, b1 = ws._exact(2)
-        n = b1 & 0x7F
-        if n == 126:
-            n = struct.unpack(">H", ws._exact(2))[0]
-        elif n == 127:
-            n = struct.unpack(">Q", ws._exact(8))[0]
-        payload = ws._exact(n)
+        b0, payload = ws.frame()
         if b0 & 0x0F == 0x8:
             return payload
 

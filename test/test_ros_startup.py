@@ -25,6 +25,7 @@ from typing import Any
 
 import pytest
 import rclpy
+from helpers import starting_peer
 from rclpy.parameter import Parameter
 
 from rta_attitude import topics
@@ -89,12 +90,7 @@ def test_a_gate_waits_while_a_reader_is_starting_and_fails_once_it_is_gone() -> 
     executor = make_executor("single", context=context)
     ctl = ControllerNode(context=context, namespace=NS, parameter_overrides=[Parameter(k, value=v) for k, v in {
         "rta": False, "record": False, "startup_timeout_s": 0.5, "stop_timeout_s": 0.5}.items()])
-    # a node named like the filter that has not created its endpoints yet (it reads only /clock, as rclpy's
-    # time source does from a use_sim_time node's first moment)
-    starting = rclpy.create_node(topics.NODE_NAMES[topics.FILTER], namespace=NS, context=context)
-    clock = topics.TOPICS[topics.CLOCK]
-    starting.create_subscription(interface.msg_class(clock.type_name), clock.name, lambda m: None,
-                                 interface.qos_profile(clock.qos))
+    starting = starting_peer(topics.FILTER, NS, context)  # a node named like the filter, no endpoints of the run yet
     plant = rclpy.create_node("state_source", namespace=NS, context=context)
     spec = topics.TOPICS[topics.ODOMETRY]
     odometry = plant.create_publisher(interface.msg_class(spec.type_name), spec.name, ctl.qos(topics.ODOMETRY))

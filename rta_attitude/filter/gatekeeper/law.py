@@ -37,7 +37,7 @@ from rta_attitude.dynamics.quaternion import attitude_matrix, error_vector, from
 from rta_attitude.dynamics.spacecraft import (
     omega_drift,
 )
-from rta_attitude.dynamics.state import STATE_SIZE, THETA_S
+from rta_attitude.dynamics.state import OMEGA, STATE_SIZE, THETA_S
 from rta_attitude.jit import LEAF
 
 Array = NDArray[np.float64]
@@ -528,6 +528,16 @@ def settled(x: Array, b: np.void, g: np.void) -> bool:
 
 
 @numba.njit(**LEAF)
+def at_rest(x: Array, b: np.void) -> bool:
+    """Every body rate of x (19) within the terminal set's, SETTLED_RATE_FRACTION w_max (a per-axis bound alike on
+    every axis, so in the body's frame and the law's)."""
+    for a in range(3):
+        if abs(x[OMEGA.start + a]) > b.settled_rate_rad_s:
+            return False
+    return True
+
+
+@numba.njit(**LEAF)
 def _terminal(x: Array, p: np.void, b: np.void, g: np.void) -> bool:
     """x (19, the law's frame) is in the backup law's terminal set: within SETTLED_ANGLE_RAD of the sun-safe
     attitude, every body rate within SETTLED_RATE_FRACTION w_max, and the wheels can hold the momentum at rest
@@ -539,9 +549,8 @@ def _terminal(x: Array, p: np.void, b: np.void, g: np.void) -> bool:
     dq = g.dq
     if math.sqrt(dq[0] * dq[0] + dq[1] * dq[1] + dq[2] * dq[2]) > b.settled_sin_half_angle:
         return False
-    for a in range(3):
-        if abs(x[4 + a]) > b.settled_rate_rad_s:
-            return False
+    if not at_rest(x, b):
+        return False
     if g.momentum_mode or g.law == TIGHT or g.law == CROSS:
         # not a terminal set: the panel may not charge, the sun moves on (TIGHT, CROSS: their wheels keep
         # less than the rates' margin the set needs)

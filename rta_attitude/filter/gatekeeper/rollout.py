@@ -34,12 +34,13 @@ from rta_attitude.dynamics.spacecraft import (
     saturate,
     torque_round_trip,
 )
-from rta_attitude.dynamics.state import ENERGY, OMEGA, STATE_SIZE, THETA_S
+from rta_attitude.dynamics.state import ENERGY, STATE_SIZE, THETA_S
 from rta_attitude.filter.gatekeeper.law import (
     RATE_LIMIT_FRACTION,
     VARIANTS,
     _momentum,
     _tilt,
+    at_rest,
     continue_command,
     law_state,
     settled,
@@ -55,8 +56,6 @@ M = MAX_ROWS
 FAILED, HORIZON, SETTLED = 0, 1, 2
 """What a rollout found: a violation (or, with `filter.backup_horizon_at_rest`, a horizon that ends in a slew);
 the horizon safe; the terminal set reached, safe till then."""
-OMEGA0 = OMEGA.start
-"""The first body rate's index in the state (a plain int for the compiled code)."""
 
 
 @numba.njit(**LEAF)
@@ -169,12 +168,11 @@ def backup_tail(f: np.void, g: np.void, traj: Array, record: bool) -> int:
         continue_command(c, b, g, g.u)  # from what settled found at g.x
         if not hold_sample(g.u, f, g, traj, record):
             return FAILED
-    for a in range(3 if b.horizon_at_rest else 0):
+    if b.horizon_at_rest and not at_rest(g.x, b):
         # a plan that holds for its horizon only must end at rest, as the terminal set asks: one that ends in
         # the middle of a slew (the law's target moved as the sun moved on) is safe up to its last sample and
         # no further, and where nothing verifies from there the spacecraft is handed over moving toward a cone
-        if abs(g.x[OMEGA0 + a]) > b.settled_rate_rad_s:
-            return FAILED
+        return FAILED
     return HORIZON
 
 
