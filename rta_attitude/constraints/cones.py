@@ -37,7 +37,7 @@ from rta_attitude.jit import LEAF
 Array = NDArray[np.float64]
 
 
-@numba.njit(**LEAF)
+@numba.njit(**LEAF, inline="always")
 def cone_h(j: int, x: Array, t_s: float, p: np.void, c: np.void, ctx: np.void) -> float:
     """The physical h of cone j at state x and time t_s (rad; +inf outside its windows; negative = violated).
     ctx: `geometry.context(x, p, False, ctx)` has run."""

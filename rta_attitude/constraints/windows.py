@@ -76,7 +76,7 @@ def ramp_start(cfg: Config, cone: PointingConstraint, start_s: float) -> float:
     return start_s - rho_on / r
 
 
-@numba.njit(**LEAF)
+@numba.njit(**LEAF, inline="always")
 def window_at(e: np.void, t_s: float) -> tuple[int, float, float]:
     """(OFF, RAMP or INSIDE; rho; rho_dot) of cone e (CONE_DTYPE) at time t_s (module docstring)."""
     if e.n_windows == 0:

@@ -69,7 +69,7 @@ def target_kind(target: str) -> tuple[int, tuple[float, float, float]]:
     raise ValueError(f"unknown target {target!r}; known: {', '.join(TARGETS)}")
 
 
-@numba.njit(**LEAF)
+@numba.njit(**LEAF, inline="always")
 def sun_hill(theta_S_rad: float, cos_beta: float, sin_beta: float) -> tuple[float, float, float]:
     """The unit vector to the sun in Hill, [cos beta cos theta_S, cos beta sin theta_S, sin beta] (SPEC sec. 2,
     [resolved]: the paper prints [cos, cos, 0], not a unit vector; its beta is 0)."""
@@ -100,36 +100,34 @@ def target_direction(kind: int, vector: Array, theta_S_rad: float | Array, beta_
     return np.broadcast_to(np.asarray(vector, dtype=float), (*th.shape, 3)).copy()
 
 
-@numba.njit(**LEAF)
+@numba.njit(**LEAF, inline="always")
 def target_hill(kind: int, v: Array, theta_S_rad: float, cos_beta: float, sin_beta: float, n: float,
-                r: Array, rd: Array, rdd: Array) -> None:
-    """A target's unit vector in Hill (3,) into r and its Hill-frame derivatives into rd, rdd (module
-    docstring): kind SUN (v unused), EARTH or HILL_FIXED (v: the vector in Hill), INERTIAL_FIXED (v in I)."""
+                ) -> tuple[float, float, float, float, float, float, float, float, float]:
+    """A target's unit vector r in Hill and its Hill-frame derivatives r_dot, r_ddot (module docstring), as nine
+    floats: kind SUN (v unused), EARTH or HILL_FIXED (v: the vector in Hill), INERTIAL_FIXED (v in I).
+    Scalars, not arrays, so that the compiler keeps them in registers (the barriers call this for every
+    target of every state)."""
     if kind == SUN:
-        r[0], r[1], r[2] = sun_hill(theta_S_rad, cos_beta, sin_beta)
+        r0, r1, r2 = sun_hill(theta_S_rad, cos_beta, sin_beta)
     elif kind == INERTIAL_FIXED:
         c, s = math.cos(theta_S_rad), math.sin(theta_S_rad)
-        r[0], r[1], r[2] = c * v[0] - s * v[1], s * v[0] + c * v[1], v[2]
+        r0, r1, r2 = c * v[0] - s * v[1], s * v[0] + c * v[1], v[2]
     else:
-        for i in range(3):
-            r[i] = v[i]
-            rd[i] = 0.0
-            rdd[i] = 0.0
-        return
-    rd[0], rd[1], rd[2] = n * r[1], -n * r[0], 0.0
-    rdd[0], rdd[1], rdd[2] = -(n * n) * r[0], -(n * n) * r[1], 0.0
+        return v[0], v[1], v[2], 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+    return r0, r1, r2, n * r1, -n * r0, 0.0, -(n * n) * r0, -(n * n) * r1, 0.0
 
 
-@numba.njit(**LEAF)
-def inertial_rates(r: Array, rd: Array, rdd: Array, nf: float) -> None:
-    """Hill-frame derivatives rd, rdd of a vector r (3,) made inertial in place, for a Hill frame turning at nf
-    about z: r' = r_dot + W x r, r'' = r_ddot + 2 W x r_dot + W x (W x r), W = [0, 0, nf]."""
+@numba.njit(**LEAF, inline="always")
+def inertial_rates(r0: float, r1: float, rd0: float, rd1: float, rdd0: float, rdd1: float, nf: float,
+                   ) -> tuple[float, float, float, float]:
+    """The x, y components of the Hill-frame derivatives (rd, rdd) of a vector r made inertial, for a Hill frame
+    turning at nf about z: r' = r_dot + W x r, r'' = r_ddot + 2 W x r_dot + W x (W x r), W = [0, 0, nf]
+    (z components unchanged). Returns (rd0, rd1, rdd0, rdd1)."""
     if nf == 0.0:
-        return
-    a0 = rdd[0] - 2.0 * nf * rd[1] - nf * nf * r[0]
-    a1 = rdd[1] + 2.0 * nf * rd[0] - nf * nf * r[1]
-    rd[0], rd[1] = rd[0] - nf * r[1], rd[1] + nf * r[0]
-    rdd[0], rdd[1] = a0, a1
+        return rd0, rd1, rdd0, rdd1
+    a0 = rdd0 - 2.0 * nf * rd1 - nf * nf * r0
+    a1 = rdd1 + 2.0 * nf * rd0 - nf * nf * r1
+    return rd0 - nf * r1, rd1 + nf * r0, a0, a1
 
 
 __all__ = [

@@ -573,15 +573,14 @@ def _cone_margin(x: Array, p: np.void, b: np.void, g: np.void, T: Array) -> floa
         e = b.cones[b.keep[k]]
         if e.n_windows > 0 and window_at(e, g.t)[0] != INSIDE:
             continue
-        target_hill(e.target, e.vector, x[THETA_S], p.sun_cos_beta, p.sun_sin_beta, p.mean_motion_rad_s,
-                    g.tr, g.trd, g.trdd)
+        r0, r1, r2, _, _, _, _, _, _ = target_hill(e.target, e.vector, x[THETA_S], p.sun_cos_beta, p.sun_sin_beta,
+                                                   p.mean_motion_rad_s)
         a = b.keep_axes[k]  # the boresight in the law's frame
         bx = a[0] * T[0, 0] + a[1] * T[1, 0] + a[2] * T[2, 0]
         by = a[0] * T[0, 1] + a[1] * T[1, 1] + a[2] * T[2, 1]
         bz = a[0] * T[0, 2] + a[1] * T[1, 2] + a[2] * T[2, 2]
-        r = g.tr
-        m0, m1, m2 = by * r[2] - bz * r[1], bz * r[0] - bx * r[2], bx * r[1] - by * r[0]
-        th = math.atan2(math.sqrt(m0 * m0 + m1 * m1 + m2 * m2), bx * r[0] + by * r[1] + bz * r[2])
+        m0, m1, m2 = by * r2 - bz * r1, bz * r0 - bx * r2, bx * r1 - by * r0
+        th = math.atan2(math.sqrt(m0 * m0 + m1 * m1 + m2 * m2), bx * r0 + by * r1 + bz * r2)
         h = e.angle_rad - th if e.keep_in else th - e.angle_rad
         worst = min(worst, h)
     return worst

@@ -138,9 +138,6 @@ GATE_DTYPE = np.dtype([
     ("xl", np.float64, (STATE_SIZE,)),   # the law's state, in its frame (`law.law_state`)
     ("ul", np.float64, (3,)),            # the law's command, in its frame
     ("xa", np.float64, (STATE_SIZE,)),   # a state ahead (`law._clear_ahead`)
-    ("tr", np.float64, (3,)),            # a cone's target, Hill, with its derivatives (`law._cone_margin`)
-    ("trd", np.float64, (3,)),
-    ("trdd", np.float64, (3,)),
     ("trial", np.float64, (3, 3)),       # `law.keep_cones`: a candidate target and the best so far
     ("best", np.float64, (3, 3)),
     ("base", np.float64, (3, 3)),        # `law.keep_cones`: the roll about the sun line the tilts turn
