@@ -5,19 +5,18 @@ Write one for your own constraints with
 
     python -m rta_attitude.recording.layout --config my.yaml my_layout.json
 
-The margins are drawn in an engineer's units, one unit to a plot (a plot panel has one y axis):
+The margins are drawn one unit to a plot (a plot panel has one y axis), in SI units, as the bag holds them:
 
-- pointing: every cone's h = theta - alpha (keep_out) or alpha - theta (keep_in), in deg (the message path
-  modifier `.@rad2deg` on filter_status's h), on one plot with a zero line: all in deg, each cone a series.
-  Outside a windowed cone's windows h is +inf, written `inf`, which the apps read as no number: the series
-  has a gap there;
+- pointing: every cone's h = theta - alpha (keep_out) or alpha - theta (keep_in), in rad, on one plot with a
+  zero line, each cone a series. Not in deg: Lichtblick's time-series plots (1.10.8, checked in the app) apply
+  only abs, sqrt, the trigonometric, log and rounding modifiers to a path, and ignore `.@rad2deg` without a
+  word, so a plot titled in deg would show radians. Outside a windowed cone's windows h is +inf, written `inf`,
+  which the apps read as no number: the series has a gap there;
 - temperature: h = T_max - T [K]; battery: h = E - E_min [J]; each on a plot of its own with a zero line;
 - body rates and wheel speeds: filter_status's h = v_max^2 - v^2 (rad^2/s^2) reads poorly, and the margin
-  v_max - |v| needs arithmetic a message path has not (one unary modifier: abs, sqrt, rad2deg, ...). The bag
-  has v itself (`state`, JointState positions), so the plots show each axis's v, in deg/s for the body
-  rates (`.@rad2deg`) and rad/s for the wheels, between reference lines at -v_max and +v_max: the margin
-  v_max - |v| is the gap to the nearer line, in the unit of the plot. These plots also work without RTA
-  (no filter_status).
+  v_max - |v| needs arithmetic a message path has not. The bag has v itself (`state`, JointState positions), so
+  the plots show each axis's v in rad/s between reference lines at -v_max and +v_max: the margin v_max - |v| is
+  the gap to the nearer line.
 
 Paths use the receive time (a bag's log time, which the recorder sets to the header stamp). Panel titles are
 written under both apps' keys (`foxglovePanelTitle`, `lichtblickPanelTitle`).
@@ -45,20 +44,24 @@ SERIES_COLORS = ("#4e98e2", "#f5774d", "#f7df71", "#5cd6a9", "#b077e0", "#e05c8a
 LIMIT_COLOR = "#ff3333"
 TIMESTAMP_METHOD = "receiveTime"
 PLOT_OPTIONS: dict[str, Any] = {
-    "showXAxisLabels": True, "showYAxisLabels": True, "showLegend": True, "legendDisplay": "floating",
-    "showPlotValuesInLegend": True, "isSynced": True, "xAxisVal": "timestamp", "followingViewWidth": 30,
-    "sidebarDimension": 240,
+    "showXAxisLabels": True, "showYAxisLabels": True, "showLegend": True, "legendDisplay": "left",
+    "showPlotValuesInLegend": False, "isSynced": True, "xAxisVal": "timestamp", "followingViewWidth": 30,
 }  # fmt: skip
-"""The settings every plot panel shares."""
+"""The settings every plot panel shares. The legend sits left of the plot, as wide as its labels need
+(`legend_width`), never over the lines (a floating legend covered half of a 1,600 x 1,000 window's small plots);
+the values are read by hovering (the apps show them in the legend then)."""
+LEGEND_CHAR_PX = 7.5
+"""About how wide a legend label's character is in both apps (their UI font), px (measured in Lichtblick)."""
+LEGEND_PAD_PX = 140
+"""A legend row's colour swatch, its row actions and padding, px."""
 POINTING_PLOT = "Plot!margins_pointing"
 TEMPERATURE_PLOT = "Plot!margin_temperature"
 BATTERY_PLOT = "Plot!margin_battery"
 RATES_PLOT = "Plot!body_rates"
 WHEELS_PLOT = "Plot!wheel_speeds"
 MARGIN_PLOTS = (POINTING_PLOT, TEMPERATURE_PLOT, BATTERY_PLOT, RATES_PLOT, WHEELS_PLOT)
+TORQUE_PLOT = "Plot!torques"
 """The margin plots, by panel id."""
-RAD_TO_DEG = ".@rad2deg"
-"""The message path modifier that turns radians into degrees (both apps)."""
 
 
 def _titled(title: str, config: dict[str, Any]) -> dict[str, Any]:
@@ -67,8 +70,10 @@ def _titled(title: str, config: dict[str, Any]) -> dict[str, Any]:
 
 
 def number_text(value: float) -> str:
-    """A reference line's value as the apps parse it: decimal, no exponent, at most 4 decimals ('-1', '575.9587')."""
-    text = f"{value:.4f}".rstrip("0").rstrip(".")
+    """A reference line's value as the apps parse it: decimal, no exponent, 4 significant digits after the point
+    at least ('-1', '575.9587', '0.01745')."""
+    decimals = max(4, 3 - math.floor(math.log10(abs(value)))) if value != 0.0 else 0
+    text = f"{value:.{decimals}f}".rstrip("0").rstrip(".")
     return "0" if text in ("-0", "") else text
 
 
@@ -83,8 +88,13 @@ def _line(value: float, label: str) -> dict[str, Any]:
             "color": LIMIT_COLOR}
 
 
+def legend_width(paths: list[dict[str, Any]]) -> int:
+    """The left legend's width for these series: its longest label, px."""
+    return round(LEGEND_PAD_PX + LEGEND_CHAR_PX * max(len(p["label"]) for p in paths))
+
+
 def _plot(title: str, paths: list[dict[str, Any]]) -> dict[str, Any]:
-    return _titled(title, {"paths": paths, **PLOT_OPTIONS})
+    return _titled(title, {"paths": paths, **PLOT_OPTIONS, "sidebarDimension": legend_width(paths)})
 
 
 def status_path(namespace: str, entry: str, key: str | None = None) -> str:
@@ -99,27 +109,26 @@ def state_path(namespace: str, index: int) -> str:
 
 
 def pointing_plot(cfg: Config, namespace: str) -> dict[str, Any]:
-    """Every cone's margin h, in deg, with the zero line."""
-    paths = [_series(status_path(namespace, topics.CONSTRAINT_STATUS_PREFIX + c.name, "h") + RAD_TO_DEG,
-                     f"{c.name} ({c.kind.replace('_', ' ')} {math.degrees(c.half_angle_rad):g} deg, "
+    """Every cone's margin h, in rad, with the zero line."""
+    paths = [_series(status_path(namespace, topics.CONSTRAINT_STATUS_PREFIX + c.name, "h"),
+                     f"{c.name} ({'<=' if c.kind == 'keep_in' else '>='} {math.degrees(c.half_angle_rad):g} deg, "
                      f"{target_label(c.target, c.target_vector)})", k)
              for k, c in enumerate(cfg.pointing)]
-    return _plot("Pointing margins h [deg]: each cone's angle beyond its limit (> 0 safe)",
+    return _plot("Pointing margins h [rad]: each cone's angle beyond its limit (> 0 safe)",
                  [*paths, _line(0.0, "h = 0 (limit)")])
 
 
-def fixed_margin_plot(namespace: str, name: str, title: str) -> dict[str, Any]:
+def fixed_margin_plot(namespace: str, name: str, label: str, title: str) -> dict[str, Any]:
     """One constraint's h in model units (temperature [K], battery [J]) with the zero line."""
-    return _plot(title, [_series(status_path(namespace, topics.CONSTRAINT_STATUS_PREFIX + name, "h"), name, 0),
-                         _line(0.0, "h = 0 (limit)")])
+    return _plot(title, [_series(status_path(namespace, topics.CONSTRAINT_STATUS_PREFIX + name, "h"), label, 0),
+                         _line(0.0, "limit")])
 
 
-def speed_plot(namespace: str, title: str, prefix: str, first: int, limit: float, unit: str,
-               modifier: str) -> dict[str, Any]:
-    """Each axis's speed (state components first..first+2, `modifier` applied) between -limit and +limit."""
-    paths = [_series(state_path(namespace, first + i) + modifier, f"{prefix}_{a}", i) for i, a in enumerate(AXIS_NAMES)]
+def speed_plot(namespace: str, title: str, prefix: str, first: int, limit: float, unit: str) -> dict[str, Any]:
+    """Each axis's speed (state components first..first+2) between -limit and +limit."""
+    paths = [_series(state_path(namespace, first + i), f"{prefix}_{a}", i) for i, a in enumerate(AXIS_NAMES)]
     bound = f"{number_text(limit)} {unit}"
-    return _plot(title, [*paths, _line(limit, f"+{prefix}_max ({bound})"), _line(-limit, f"-{prefix}_max")])
+    return _plot(f"{title} [{unit}]: margin = gap to +-{bound}", [*paths, _line(limit, "+max"), _line(-limit, "-max")])
 
 
 def state_transitions(cfg: Config, namespace: str) -> dict[str, Any]:
@@ -135,10 +144,13 @@ def state_transitions(cfg: Config, namespace: str) -> dict[str, Any]:
                    {"isSynced": True, "showPoints": True, "xAxisRange": 30, "paths": paths})
 
 
-def torque_plot(namespace: str, axis: str) -> dict[str, Any]:
-    return _plot(f"Torque {axis}: u_des (torque_des) vs filtered (torque_cmd) [N m]",
-                 [_series(f"{namespace}/{topics.TORQUE_DES}.vector.{axis}", f"u_des.{axis}", 0),
-                  _series(f"{namespace}/{topics.TORQUE_CMD}.vector.{axis}", f"u.{axis}", 1)])
+def torque_plot(namespace: str) -> dict[str, Any]:
+    """The desired and the filtered torque of each axis, on one plot (one unit)."""
+    paths = []
+    for i, axis in enumerate(AXIS_NAMES):
+        paths.append(_series(f"{namespace}/{topics.TORQUE_DES}.vector.{axis}", f"u_des.{axis}", 2 * i))
+        paths.append(_series(f"{namespace}/{topics.TORQUE_CMD}.vector.{axis}", f"u.{axis}", 2 * i + 1))
+    return _plot("Torques: u_des (torque_des) vs filtered u (torque_cmd) [N m]", paths)
 
 
 def diagnostics_summary(title: str, topic: str) -> dict[str, Any]:
@@ -150,7 +162,7 @@ def attitude_panel(namespace: str) -> dict[str, Any]:
     """The 3D panel: the scene's markers and transform in the hill frame, with a grid."""
     return _titled("Attitude scene (hill frame): body, boresights, pointing cones about their targets", {
         "followTf": topics.HILL_FRAME, "followMode": "follow-none",
-        "cameraState": {"distance": 7, "perspective": True, "phi": 60, "thetaOffset": 45, "target": [0, 0, 0],
+        "cameraState": {"distance": 7.5, "perspective": True, "phi": 60, "thetaOffset": 45, "target": [0, 0, 1.0],
                         "targetOffset": [0, 0, 0], "targetOrientation": [0, 0, 0, 1], "fovy": 45, "near": 0.01,
                         "far": 5000},
         "scene": {"enableStats": False}, "transforms": {},
@@ -173,15 +185,14 @@ def _split(direction: str, first: Any, second: Any, percent: float = 50) -> dict
 
 
 def tabs() -> dict[str, Any]:
-    """The tabbed panel: torques, the filter status and /diagnostics, the raw status."""
+    """The tabbed panel: the torques, the filter status and /diagnostics, the raw status."""
     return {"activeTabIdx": 0, "tabs": [
-        {"title": "u_des vs filtered",
-         "layout": _split("column", "Plot!torque_x", _split("column", "Plot!torque_y", "Plot!torque_z"), 33.3)},
-        {"title": "filter status, /diagnostics",
-         "layout": _split("column", _split("row", "DiagnosticSummary!filter_status",
-                                           "DiagnosticStatusPanel!filter_detail"),
-                          "DiagnosticSummary!diagnostics", 65)},
-        {"title": "raw", "layout": _split("row", "RawMessages!filter_status", "DiagnosticSummary!run_status")},
+        {"title": "torques", "layout": TORQUE_PLOT},
+        {"title": "status, /diagnostics",
+         "layout": _split("row", "DiagnosticSummary!filter_status", "DiagnosticSummary!diagnostics")},
+        {"title": "raw", "layout": _split("row", "RawMessages!filter_status",
+                                          _split("column", "DiagnosticStatusPanel!filter_detail",
+                                                 "DiagnosticSummary!run_status"))},
     ]}  # fmt: skip
 
 
@@ -192,14 +203,12 @@ def layout(cfg: Config, namespace: str = topics.DEFAULT_NAMESPACE) -> dict[str, 
     status = f"{ns}/{topics.FILTER_STATUS}"
     config_by_id: dict[str, Any] = {
         POINTING_PLOT: pointing_plot(cfg, ns),
-        TEMPERATURE_PLOT: fixed_margin_plot(ns, "temperature", "Temperature margin h = T_max - T [K] (> 0 safe)"),
-        BATTERY_PLOT: fixed_margin_plot(ns, "battery", "Battery margin h = E - E_min [J] (> 0 safe)"),
-        RATES_PLOT: speed_plot(ns, "Body rates omega [deg/s] within +-omega_max: the margin is the gap to the "
-                               "nearer limit", "omega", OMEGA.start, math.degrees(L.omega_max_rad_s), "deg/s",
-                               RAD_TO_DEG),
-        WHEELS_PLOT: speed_plot(ns, "Wheel speeds psi [rad/s] within +-psi_max: the margin is the gap to the "
-                                "nearer limit", "psi", PSI.start, L.psi_max_rad_s, "rad/s", ""),
-        **{f"Plot!torque_{a}": torque_plot(ns, a) for a in AXIS_NAMES},
+        TEMPERATURE_PLOT: fixed_margin_plot(ns, "temperature", "T_max - T",
+                                            "Temperature margin T_max - T [K] (> 0 safe)"),
+        BATTERY_PLOT: fixed_margin_plot(ns, "battery", "E - E_min", "Battery margin E - E_min [J] (> 0 safe)"),
+        RATES_PLOT: speed_plot(ns, "Body rates", "omega", OMEGA.start, L.omega_max_rad_s, "rad/s"),
+        WHEELS_PLOT: speed_plot(ns, "Wheel speeds", "psi", PSI.start, L.psi_max_rad_s, "rad/s"),
+        TORQUE_PLOT: torque_plot(ns),
         "StateTransitions!filter_status": state_transitions(cfg, ns),
         "DiagnosticSummary!filter_status": diagnostics_summary("Filter status per constraint", status),
         "DiagnosticStatusPanel!filter_detail": _titled("Filter status detail",
@@ -212,11 +221,14 @@ def layout(cfg: Config, namespace: str = topics.DEFAULT_NAMESPACE) -> dict[str, 
         "DiagnosticSummary!diagnostics": diagnostics_summary("/diagnostics (every node's summary)",
                                                              topics.DIAGNOSTICS),
     }  # fmt: skip
+    # proportions for a 1,600 x 1,000 window (checked in Lichtblick, docs/foxglove.md): the status panel draws 64
+    # px a row (filter, fallback, each cone, temperature, battery): the paper's 6 rows take 55 % of the right column
     margins = _split("column", POINTING_PLOT, _split("column", _split("row", TEMPERATURE_PLOT, BATTERY_PLOT),
-                                                     _split("row", RATES_PLOT, WHEELS_PLOT)), 40)
-    views = _split("column", "3D!attitude", _split("column", "Tab!views", "StateTransitions!filter_status", 65))
+                                                     _split("column", _split("row", RATES_PLOT, WHEELS_PLOT),
+                                                            "Tab!views", 45), 30), 25)
+    views = _split("column", "3D!attitude", "StateTransitions!filter_status", 45)
     return {"configById": config_by_id, "globalVariables": {}, "userNodes": {}, "playbackConfig": {"speed": 1},
-            "layout": _split("row", margins, views, 55)}
+            "layout": _split("row", margins, views, 50)}
 
 
 def layout_json(cfg: Config, namespace: str = topics.DEFAULT_NAMESPACE) -> str:

@@ -1101,7 +1101,7 @@ class SceneBuilder:
         text.header.frame_id = topics.HILL_FRAME
         text.ns, text.id, text.action, text.type = SCENE_NS, SCENE_IDS["text"], Marker.ADD, Marker.TEXT_VIEW_FACING
         text.pose.orientation.w = 1.0
-        text.pose.position.z = 2.8
+        text.pose.position.z = 2.3  # (its lines drawn about it: kept inside the layout's 3D view)
         text.scale.z = 0.15
         text.color = ColorRGBA(r=1.0, g=1.0, b=1.0, a=1.0)
         return out, text
