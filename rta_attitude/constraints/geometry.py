@@ -96,10 +96,8 @@ def context(x: Array, p: np.void, rates: bool, ctx: np.void) -> None:
         ctx.omega[a] = x[4 + a]
     if not rates:  # the directions alone (the safety values, 11 times a sample in a simulation)
         sx, sy, sz = sun_hill(x[12], p.sun_cos_beta, p.sun_sin_beta)
-        ex, ey, ez = EARTH_HILL
-        for i in range(3):  # `to_body` of both, in one loop (7 ns less a call than two)
-            ctx.sun[i] = A[i, 0] * sx + A[i, 1] * sy + A[i, 2] * sz if sz != 0.0 else A[i, 0] * sx + A[i, 1] * sy
-            ctx.earth[i] = A[i, 0] * ex + A[i, 1] * ey + A[i, 2] * ez if ez != 0.0 else A[i, 0] * ex + A[i, 1] * ey
+        to_body(A, sx, sy, sz, ctx.sun)
+        to_body(A, EARTH_HILL[0], EARTH_HILL[1], EARTH_HILL[2], ctx.earth)
         return
     e = ctx.tgt  # (a vector's storage for EARTH_HILL: the Earth's kind reads its direction from it)
     e[0], e[1], e[2] = EARTH_HILL

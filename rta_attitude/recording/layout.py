@@ -60,8 +60,8 @@ BATTERY_PLOT = "Plot!margin_battery"
 RATES_PLOT = "Plot!body_rates"
 WHEELS_PLOT = "Plot!wheel_speeds"
 MARGIN_PLOTS = (POINTING_PLOT, TEMPERATURE_PLOT, BATTERY_PLOT, RATES_PLOT, WHEELS_PLOT)
-TORQUE_PLOT = "Plot!torques"
 """The margin plots, by panel id."""
+TORQUE_PLOT = "Plot!torques"
 
 
 def _titled(title: str, config: dict[str, Any]) -> dict[str, Any]:
@@ -70,8 +70,8 @@ def _titled(title: str, config: dict[str, Any]) -> dict[str, Any]:
 
 
 def number_text(value: float) -> str:
-    """A reference line's value as the apps parse it: decimal, no exponent, 4 significant digits after the point
-    at least ('-1', '575.9587', '0.01745')."""
+    """A reference line's value as the apps parse it: decimal, no exponent, at least 4 decimals and at least 4
+    significant digits ('-1', '575.9587', '0.01745')."""
     decimals = max(4, 3 - math.floor(math.log10(abs(value)))) if value != 0.0 else 0
     text = f"{value:.{decimals}f}".rstrip("0").rstrip(".")
     return "0" if text in ("-0", "") else text
