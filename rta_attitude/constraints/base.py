@@ -221,6 +221,14 @@ def measurement_errors(cfg: Config) -> dict[str, float | NDArray[np.float64]]:
     }
 
 
+@numba.njit(**LEAF, inline="always")
+def hard(c: np.void, i: int) -> bool:
+    """Row i of constraint record c binds hard: enabled and not slacked. A slacked row may be given up by the
+    QP, so the gatekeeper's rollouts neither check it nor compute it (`rows.hard_safety_values`)."""
+    g = c.gains[i]
+    return g.enabled != 0 and g.slack_weight == 0.0
+
+
 @numba.njit(**LEAF)
 def angle_rate_error(sin_theta: float, x: Array, c: np.void) -> float:
     """Bound on |theta_dot(true) - theta_dot(measured)| (rad/s) of a body axis' angle to a target, given
@@ -290,6 +298,6 @@ def nan_min(a: float, b: float) -> float:
 
 __all__ = [
     "CONE_DTYPE", "CONSTRAINT_DTYPE", "GAIN_DTYPE", "MAX_CONES", "MAX_ROWS", "TABLE_DTYPE", "ZOH_CHECKS", "ZOH_ROWS",
-    "angle_rate_error", "constraint_record", "drive_lag", "lag_response", "measurement_errors", "nan_max", "nan_min",
-    "second_order", "speed_limit_row",
+    "angle_rate_error", "constraint_record", "drive_lag", "hard", "lag_response", "measurement_errors", "nan_max",
+    "nan_min", "second_order", "speed_limit_row",
 ]  # fmt: skip

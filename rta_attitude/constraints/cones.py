@@ -29,7 +29,7 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
-from rta_attitude.constraints.base import angle_rate_error, second_order
+from rta_attitude.constraints.base import angle_rate_error, hard, second_order
 from rta_attitude.constraints.geometry import angle, pointing, target
 from rta_attitude.constraints.windows import INSIDE, OFF, window_at
 from rta_attitude.jit import LEAF
@@ -50,10 +50,11 @@ def cone_h(j: int, x: Array, t_s: float, p: np.void, c: np.void, ctx: np.void) -
 
 
 @numba.njit(**LEAF)
-def safety(x: Array, t_s: float, p: np.void, c: np.void, ctx: np.void, out: Array) -> None:
-    """The physical h of every cone into out[0 .. n_cones - 1] (context has run on x)."""
+def safety(x: Array, t_s: float, p: np.void, c: np.void, ctx: np.void, hard_only: bool, out: Array) -> None:
+    """The physical h of every cone into out[0 .. n_cones - 1] (context has run on x); with hard_only, +inf
+    for a cone that does not bind hard (`base.hard`), without computing it."""
     for j in range(c.n_cones):
-        out[j] = cone_h(j, x, t_s, p, c, ctx)
+        out[j] = math.inf if hard_only and not hard(c, j) else cone_h(j, x, t_s, p, c, ctx)
 
 
 @numba.njit(**LEAF)

@@ -78,17 +78,29 @@ def box(ctx: np.void, x: Array, c: np.void, t: np.void, lo0: Array, hi0: Array) 
         t.hi[a] = hi_a
 
 
-@numba.njit(**LEAF)
-def safety_values(x: Array, t_s: float, p: np.void, c: np.void, ctx: np.void, out: Array) -> None:
-    """Physical h of every constraint (row order, n_rows) of state x at time t_s into out; negative = violated
-    (+inf: a cone outside its windows)."""
+@numba.njit(**LEAF, inline="always")
+def _values(x: Array, t_s: float, p: np.void, c: np.void, ctx: np.void, hard_only: bool, out: Array) -> None:
     context(x, p, False, ctx)
-    cones.safety(x, t_s, p, c, ctx, out)
+    cones.safety(x, t_s, p, c, ctx, hard_only, out)
     out[c.row_temperature] = temperature.h(ctx, x, c)
     out[c.row_battery] = battery.h(ctx, x, c)
     for a in range(3):
         out[c.row_omega + a] = angular_rate.h(ctx, x, c, a)
         out[c.row_psi + a] = wheel_speed.h(ctx, x, c, a)
+
+
+@numba.njit(**LEAF)
+def safety_values(x: Array, t_s: float, p: np.void, c: np.void, ctx: np.void, out: Array) -> None:
+    """Physical h of every constraint (row order, n_rows) of state x at time t_s into out; negative = violated
+    (+inf: a cone outside its windows)."""
+    _values(x, t_s, p, c, ctx, False, out)
+
+
+@numba.njit(**LEAF)
+def hard_safety_values(x: Array, t_s: float, p: np.void, c: np.void, ctx: np.void, out: Array) -> None:
+    """`safety_values` where a cone binds hard (`base.hard`: what the gatekeeper's rollouts check); +inf for the
+    others, not computed (a slacked cone's angle is a third of a rollout substep's safety values)."""
+    _values(x, t_s, p, c, ctx, True, out)
 
 
 BODY_ANGLE_NAMES: tuple[str, ...] = ("face_sun", "face_earth", "panel_sun")
@@ -110,4 +122,4 @@ def pointing_angles(x: Array, p: np.void, c: np.void, ctx: np.void, out: Array) 
     out[k + 2] = angle(e[0], e[1], e[2], ctx.sun)
 
 
-__all__ = ["BODY_ANGLE_NAMES", "box", "pointing_angles", "rows", "safety_values"]
+__all__ = ["BODY_ANGLE_NAMES", "box", "hard_safety_values", "pointing_angles", "rows", "safety_values"]

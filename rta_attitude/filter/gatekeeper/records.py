@@ -115,6 +115,9 @@ GATE_DTYPE = np.dtype([
     ("us", np.float64, (3,)),            # the command across the torque interface, saturated
     ("u_backup", np.float64, (3,)),      # the backup law's command at the filter's state
     ("h", np.float64, (M,)),
+    ("hard_rows", np.int64, (M,)),       # the rows a rollout's sample checks (`rows.hard`), n_hard of them,
+    ("hard_margin", np.float64, (M,)),   # and what each must keep (`rollout.rollout_margin`)
+    ("n_hard", np.int64),
     ("subs", np.float64, (MAX_BACKUP_SUBSTEPS, STATE_SIZE)),
     ("work", np.float64, (RK4_WORK_ROWS, STATE_SIZE)),
     ("ctx", CONTEXT_DTYPE),

@@ -3,7 +3,7 @@
 `rollout` of a candidate u0 at state x: hold u0 for one sample, then the backup law (its command at each
 sample, held), `integrator.substeps` RK4 steps per sample (the plant's own derivative, saturation, torque
 interface and RK4: `dynamics.spacecraft`), for `backup_horizon_s`; every enabled, non-slacked constraint must
-have h >= its margin at every substep (`constraints.rows.safety_values` at the substep's time: a cone's windows
+have h >= its margin at every substep (`constraints.rows.hard_safety_values` at the substep's time: a cone's windows
 apply when the rollout reaches them), until the state is in the law's terminal set (`law.settled`). With a
 large momentum a rollout may end safe at its horizon, with the battery's reserve for the orbit after it
 (`energy_reserve`). The margins (`check_margins`) are 0 without sensor errors; with them, the bounds on what
@@ -21,8 +21,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from rta_attitude.config.schema import Config
-from rta_attitude.constraints.base import MAX_ROWS
-from rta_attitude.constraints.rows import safety_values
+from rta_attitude.constraints.base import MAX_ROWS, hard
+from rta_attitude.constraints.rows import hard_safety_values
 from rta_attitude.constraints.wheel_speed import wheel_speed_error
 from rta_attitude.dynamics.environment import sun_hill
 from rta_attitude.dynamics.sensors import (
@@ -140,15 +140,20 @@ def hold_sample(u: Array, f: np.void, g: np.void, traj: Array, record: bool) -> 
     torque_round_trip(u, p, g.us)
     saturate(g.us, p, g.us)
     rk4_hold(x, g.us, c.dt_s, S, p, subs, g.work)
+    n = 0
+    for i in range(c.n_rows):  # the rows to check, once a sample
+        if hard(c, i):
+            g.hard_rows[n] = i
+            g.hard_margin[n] = rollout_margin(b, g, i)
+            n += 1
     for j in range(S):
         if record:
             for i in range(STATE_SIZE):
                 traj[g.checked, i] = subs[j, i]
         g.checked += 1
-        safety_values(subs[j], g.t + c.dt_s * (j + 1) / S, p, c, g.ctx, g.h)
-        for i in range(c.n_rows):
-            gi = c.gains[i]
-            if gi.enabled != 0 and gi.slack_weight == 0.0 and not g.h[i] >= rollout_margin(b, g, i):
+        hard_safety_values(subs[j], g.t + c.dt_s * (j + 1) / S, p, c, g.ctx, g.h)
+        for k in range(n):
+            if not g.h[g.hard_rows[k]] >= g.hard_margin[k]:
                 return False
     for i in range(STATE_SIZE):
         x[i] = subs[S - 1, i]
