@@ -192,6 +192,41 @@ def test_h_is_the_angle_to_the_target_by_definition(sample) -> None:
         assert np.all(np.isinf(h[~inside, i]) & (h[~inside, i] > 0))
 
 
+def test_rollouts_keep_the_ramped_barrier_ahead_of_a_window(sample) -> None:
+    """What the gatekeeper's rollouts keep: inside a window (or without windows) the physical h; on the ramp
+    ahead of a window h + rho with rho = r (t0 - t) by hand (r = f ((1 - m) w_max - (n + |n_f|)), t0 the
+    window's start), so a plan that leaves the ramp fails its rollout as the filter's barrier would stop it;
+    +inf before the ramp and after the window; +inf for a slacked cone whatever the time."""
+    x, t, _ = sample
+    cs = ConstraintSet(CFG)
+    h, kept = cs.safety_values(x, t), cs.rollout_values(x, t)
+    A = quat.attitude_matrices(x[:, 0:4])
+    n = CFG.environment.mean_motion_rad_s
+    r = CFG.filter.window_slew_fraction * ((1.0 - CFG.filter.zoh_margin) * CFG.limits.omega_max_rad_s
+                                           - (n + (n if CFG.environment.rotating_hill else 0.0)))
+    seen = set()
+    for i, c in enumerate(CFG.pointing):
+        b_hill = np.einsum("nij,i->nj", A, np.array(c.boresight_body))
+        theta = np.arccos(np.clip(np.sum(b_hill * target_hill(c, x[:, 12], CFG.environment.sun_beta_rad), axis=1),
+                                  -1.0, 1.0))
+        physical = (c.half_angle_rad - theta) if c.kind == "keep_in" else (theta - c.half_angle_rad)
+        for k, tk in enumerate(t):
+            phase = window_phase(c, CFG, float(tk))
+            seen.add(phase)
+            if phase == "inside":
+                assert kept[k, i] == h[k, i]
+            elif phase == "ramp":
+                t0 = min(s for s, _ in c.windows_s if s > tk)
+                assert kept[k, i] == pytest.approx(physical[k] + r * (t0 - tk), abs=1e-9), c.name
+            else:
+                assert np.isposinf(kept[k, i])
+    assert seen == {"off", "ramp", "inside"}
+    np.testing.assert_array_equal(kept[:, len(CFG.pointing):], h[:, len(CFG.pointing):])  # the other rows as they are
+    slacked = dataclasses.replace(CFG, pointing=(dataclasses.replace(
+        CFG.pointing[0], gains=dataclasses.replace(CFG.pointing[0].gains, slack_weight=1.0)), *CFG.pointing[1:]))
+    assert np.all(np.isposinf(ConstraintSet(slacked).rollout_values(x[:50], t[:50])[:, 0]))
+
+
 def test_compiled_rows_equal_the_numpy_oracle(sample) -> None:
     x, t, _ = sample
     for preset in ("robust", "paper"):

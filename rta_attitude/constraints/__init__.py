@@ -37,7 +37,7 @@ from rta_attitude.constraints.base import (
 )
 from rta_attitude.constraints.geometry import CONTEXT_DTYPE
 from rta_attitude.constraints.registry import Registry, angle_names, registry
-from rta_attitude.constraints.rows import pointing_angles, rows, safety_values
+from rta_attitude.constraints.rows import pointing_angles, rollout_safety_values, rows, safety_values
 from rta_attitude.dynamics.spacecraft import plant_record
 from rta_attitude.dynamics.state import STATE_SIZE
 from rta_attitude.jit import JIT
@@ -66,11 +66,15 @@ def rows_many(X: Array, t_s: Array, p: NDArray[np.void], c: NDArray[np.void], T:
 
 
 @numba.njit(**JIT)
-def safety_many(X: Array, t_s: Array, p: NDArray[np.void], c: NDArray[np.void], H: Array) -> None:
-    """`safety_values` of states X (N, 19) at times t_s (N,) into H (N, n_rows)."""
+def safety_many(X: Array, t_s: Array, p: NDArray[np.void], c: NDArray[np.void], rollout: bool, H: Array) -> None:
+    """`safety_values` (with rollout, `rollout_safety_values`) of states X (N, 19) at times t_s (N,) into H (N,
+    n_rows)."""
     ctx = np.zeros(1, CONTEXT_DTYPE)
     for k in range(X.shape[0]):
-        safety_values(X[k], t_s[k], p[0], c[0], ctx[0], H[k])
+        if rollout:
+            rollout_safety_values(X[k], t_s[k], p[0], c[0], ctx[0], H[k])
+        else:
+            safety_values(X[k], t_s[k], p[0], c[0], ctx[0], H[k])
 
 
 @numba.njit(**JIT)
@@ -131,9 +135,18 @@ class ConstraintSet:
 
     def safety_values(self, x: Array, t_s: float | Array = 0.0) -> Array:
         """Physical h of every constraint (..., m) of states x (..., 19) at times t_s (s); negative = violated."""
+        return self._values(x, t_s, False)
+
+    def rollout_values(self, x: Array, t_s: float | Array = 0.0) -> Array:
+        """What the gatekeeper's rollouts keep >= their margins (..., m), at states x (..., 19) and times t_s:
+        `safety_values` for the hard constraints, +inf for the slacked ones, and ahead of a window (its ramp)
+        the cone's barrier h + rho(t) (`constraints.cones.cone_h`)."""
+        return self._values(x, t_s, True)
+
+    def _values(self, x: Array, t_s: float | Array, rollout: bool) -> Array:
         X = _as_states(x)
         H = np.empty((X.shape[0], MAX_ROWS))
-        safety_many(X, _times(t_s, x), self.plant, self.record, H)
+        safety_many(X, _times(t_s, x), self.plant, self.record, rollout, H)
         return H[:, : len(self)].reshape((*np.shape(x)[:-1], len(self)))
 
     @property

@@ -224,7 +224,7 @@ def measurement_errors(cfg: Config) -> dict[str, float | NDArray[np.float64]]:
 @numba.njit(**LEAF, inline="always")
 def hard(c: np.void, i: int) -> bool:
     """Row i of constraint record c binds hard: enabled and not slacked. A slacked row may be given up by the
-    QP, so the gatekeeper's rollouts neither check it nor compute it (`rows.hard_safety_values`)."""
+    QP, so the gatekeeper's rollouts neither check it nor compute it (`rows.rollout_safety_values`)."""
     g = c.gains[i]
     return g.enabled != 0 and g.slack_weight == 0.0
 

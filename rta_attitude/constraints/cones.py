@@ -31,30 +31,38 @@ from numpy.typing import NDArray
 
 from rta_attitude.constraints.base import angle_rate_error, hard, second_order
 from rta_attitude.constraints.geometry import angle, pointing, target
-from rta_attitude.constraints.windows import INSIDE, OFF, window_at
+from rta_attitude.constraints.windows import INSIDE, OFF, RAMP, window_at
 from rta_attitude.jit import LEAF
 
 Array = NDArray[np.float64]
 
 
 @numba.njit(**LEAF, inline="always")
-def cone_h(j: int, x: Array, t_s: float, p: np.void, c: np.void, ctx: np.void) -> float:
-    """The physical h of cone j at state x and time t_s (rad; +inf outside its windows; negative = violated).
-    ctx: `geometry.context(x, p, False, ctx)` has run."""
+def cone_h(j: int, x: Array, t_s: float, p: np.void, c: np.void, ctx: np.void, ramped: bool) -> float:
+    """The physical h of cone j at state x and time t_s (rad; +inf outside its windows; negative = violated);
+    with ramped, ahead of a window its time-varying barrier h + rho(t) instead (`windows`: what the filter
+    keeps from the ramp's start, so that h >= 0 when the window opens). ctx: `geometry.context(x, p, False,
+    ctx)` has run."""
     e = c.cones[j]
-    if e.n_windows > 0 and window_at(e, t_s)[0] != INSIDE:
-        return math.inf
+    rho = 0.0
+    if e.n_windows > 0:
+        phase, rho, _ = window_at(e, t_s)
+        if phase != INSIDE and not (ramped and phase == RAMP):
+            return math.inf
     r, _, _ = target(e.target, e.vector, x, p, False, ctx)
     th = angle(e.axis[0], e.axis[1], e.axis[2], r)
-    return e.angle_rad - th if e.keep_in else th - e.angle_rad
+    h = e.angle_rad - th if e.keep_in else th - e.angle_rad
+    return h + rho if e.n_windows > 0 else h
 
 
 @numba.njit(**LEAF)
-def safety(x: Array, t_s: float, p: np.void, c: np.void, ctx: np.void, hard_only: bool, out: Array) -> None:
-    """The physical h of every cone into out[0 .. n_cones - 1] (context has run on x); with hard_only, +inf
-    for a cone that does not bind hard (`base.hard`), without computing it."""
+def safety(x: Array, t_s: float, p: np.void, c: np.void, ctx: np.void, rollout: bool, out: Array) -> None:
+    """The physical h of every cone into out[0 .. n_cones - 1] (context has run on x). With rollout, what the
+    gatekeeper's rollouts keep: +inf for a cone that does not bind hard (`base.hard`), without computing it,
+    and ahead of a window the ramped barrier (`cone_h`): a plan that leaves the ramp is one the filter's
+    barrier would stop, and it would reach the window outside the cone."""
     for j in range(c.n_cones):
-        out[j] = math.inf if hard_only and not hard(c, j) else cone_h(j, x, t_s, p, c, ctx)
+        out[j] = math.inf if rollout and not hard(c, j) else cone_h(j, x, t_s, p, c, ctx, rollout)
 
 
 @numba.njit(**LEAF)

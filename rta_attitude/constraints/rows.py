@@ -79,9 +79,9 @@ def box(ctx: np.void, x: Array, c: np.void, t: np.void, lo0: Array, hi0: Array) 
 
 
 @numba.njit(**LEAF, inline="always")
-def _values(x: Array, t_s: float, p: np.void, c: np.void, ctx: np.void, hard_only: bool, out: Array) -> None:
+def _values(x: Array, t_s: float, p: np.void, c: np.void, ctx: np.void, rollout: bool, out: Array) -> None:
     context(x, p, False, ctx)
-    cones.safety(x, t_s, p, c, ctx, hard_only, out)
+    cones.safety(x, t_s, p, c, ctx, rollout, out)
     out[c.row_temperature] = temperature.h(ctx, x, c)
     out[c.row_battery] = battery.h(ctx, x, c)
     for a in range(3):
@@ -97,9 +97,10 @@ def safety_values(x: Array, t_s: float, p: np.void, c: np.void, ctx: np.void, ou
 
 
 @numba.njit(**LEAF)
-def hard_safety_values(x: Array, t_s: float, p: np.void, c: np.void, ctx: np.void, out: Array) -> None:
-    """`safety_values` where a cone binds hard (`base.hard`: what the gatekeeper's rollouts check); +inf for the
-    others, not computed (a slacked cone's angle is a third of a rollout substep's safety values)."""
+def rollout_safety_values(x: Array, t_s: float, p: np.void, c: np.void, ctx: np.void, out: Array) -> None:
+    """What the gatekeeper's rollouts keep: `safety_values` where a cone binds hard (`base.hard`), +inf for the
+    others, not computed (a slacked cone's angle costs a rollout's substep more than the other rows); ahead of a
+    window, the cone's ramped barrier h + rho(t) (`cones.cone_h`)."""
     _values(x, t_s, p, c, ctx, True, out)
 
 
@@ -122,4 +123,4 @@ def pointing_angles(x: Array, p: np.void, c: np.void, ctx: np.void, out: Array) 
     out[k + 2] = angle(e[0], e[1], e[2], ctx.sun)
 
 
-__all__ = ["BODY_ANGLE_NAMES", "box", "hard_safety_values", "pointing_angles", "rows", "safety_values"]
+__all__ = ["BODY_ANGLE_NAMES", "box", "rollout_safety_values", "pointing_angles", "rows", "safety_values"]

@@ -3,11 +3,11 @@
 `rollout` of a candidate u0 at state x: hold u0 for one sample, then the backup law (its command at each
 sample, held), `integrator.substeps` RK4 steps per sample (the plant's own derivative, saturation, torque
 interface and RK4: `dynamics.spacecraft`), for `backup_horizon_s`; every enabled, non-slacked constraint must
-have h >= its margin at every substep (`constraints.rows.hard_safety_values` at the substep's time: a cone's windows
-apply when the rollout reaches them), until the state is in the law's terminal set (`law.settled`). With a
-large momentum a rollout may end safe at its horizon, with the battery's reserve for the orbit after it
-(`energy_reserve`). The margins (`check_margins`) are 0 without sensor errors; with them, the bounds on what
-the filter reads (docs/noise.md).
+have h >= its margin at every substep (`constraints.rows.rollout_safety_values` at the substep's time: a
+cone's windows apply when the rollout reaches them, and ahead of a window its ramped barrier), until the
+state is in the law's terminal set (`law.settled`). With a large momentum a rollout may end safe at its
+horizon, with the battery's reserve for the orbit after it (`energy_reserve`). The margins (`check_margins`)
+are 0 without sensor errors; with them, the bounds on what the filter reads (docs/noise.md).
 
 Python faces for tests and benches: `backup_command`, `is_settled`, `backup_rollout`.
 """
@@ -22,7 +22,7 @@ from numpy.typing import NDArray
 
 from rta_attitude.config.schema import Config
 from rta_attitude.constraints.base import MAX_ROWS, hard
-from rta_attitude.constraints.rows import hard_safety_values
+from rta_attitude.constraints.rows import rollout_safety_values
 from rta_attitude.constraints.wheel_speed import wheel_speed_error
 from rta_attitude.dynamics.environment import sun_hill
 from rta_attitude.dynamics.sensors import (
@@ -151,7 +151,7 @@ def hold_sample(u: Array, f: np.void, g: np.void, traj: Array, record: bool) -> 
             for i in range(STATE_SIZE):
                 traj[g.checked, i] = subs[j, i]
         g.checked += 1
-        hard_safety_values(subs[j], g.t + c.dt_s * (j + 1) / S, p, c, g.ctx, g.h)
+        rollout_safety_values(subs[j], g.t + c.dt_s * (j + 1) / S, p, c, g.ctx, g.h)
         for k in range(n):
             if not g.h[g.hard_rows[k]] >= g.hard_margin[k]:
                 return False
