@@ -38,6 +38,12 @@ Array = NDArray[np.float64]
 
 
 @numba.njit(**LEAF, inline="always")
+def signed_h(e: np.void, theta: float) -> float:
+    """h of cone e (CONE_DTYPE) at the boresight's angle theta to its target: s (theta - alpha), rad."""
+    return e.angle_rad - theta if e.keep_in else theta - e.angle_rad
+
+
+@numba.njit(**LEAF, inline="always")
 def cone_h(j: int, x: Array, t_s: float, p: np.void, c: np.void, ctx: np.void, ramped: bool) -> float:
     """The physical h of cone j at state x and time t_s (rad; +inf outside its windows; negative = violated);
     with ramped, ahead of a window its time-varying barrier h + rho(t) instead (`windows`: what the filter
@@ -50,9 +56,8 @@ def cone_h(j: int, x: Array, t_s: float, p: np.void, c: np.void, ctx: np.void, r
         if phase != INSIDE and not (ramped and phase == RAMP):
             return math.inf
     r, _, _ = target(e.target, e.vector, x, p, False, ctx)
-    th = angle(e.axis[0], e.axis[1], e.axis[2], r)
-    h = e.angle_rad - th if e.keep_in else th - e.angle_rad
-    return h + rho if e.n_windows > 0 else h
+    h = signed_h(e, angle(e.axis[0], e.axis[1], e.axis[2], r))
+    return h + rho if e.n_windows > 0 else h  # (h itself without windows: h + 0.0 would turn -0.0 into 0.0)
 
 
 @numba.njit(**LEAF)
@@ -112,4 +117,4 @@ def angles(x: Array, p: np.void, c: np.void, ctx: np.void, out: Array) -> None:
         out[j] = angle(e.axis[0], e.axis[1], e.axis[2], r)
 
 
-__all__ = ["angles", "cone_h", "rows", "safety"]
+__all__ = ["angles", "cone_h", "rows", "safety", "signed_h"]

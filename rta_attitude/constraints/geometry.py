@@ -121,14 +121,20 @@ def target(kind: int, v: Array, x: Array, p: np.void, rates: bool, ctx: np.void)
     return ctx.tgt, ctx.tgt_rate, ctx.tgt_acc
 
 
+@numba.njit(**LEAF, inline="always")
+def angle_between(ex: float, ey: float, ez: float, r0: float, r1: float, r2: float) -> float:
+    """theta = atan2(|e x r|, e . r) between a unit vector e and a unit vector r in the same axes, rad."""
+    m0 = ey * r2 - ez * r1
+    m1 = ez * r0 - ex * r2
+    m2 = ex * r1 - ey * r0
+    c = ex * r0 + ey * r1 + ez * r2
+    return math.atan2(math.sqrt(m0 * m0 + m1 * m1 + m2 * m2), c)
+
+
 @numba.njit(**LEAF)
 def angle(ex: float, ey: float, ez: float, r: Array) -> float:
-    """theta = atan2(|e x r|, e . r) between a unit body axis e and a body-frame direction r, rad."""
-    m0 = ey * r[2] - ez * r[1]
-    m1 = ez * r[0] - ex * r[2]
-    m2 = ex * r[1] - ey * r[0]
-    c = ex * r[0] + ey * r[1] + ez * r[2]
-    return math.atan2(math.sqrt(m0 * m0 + m1 * m1 + m2 * m2), c)
+    """`angle_between` a unit body axis e and a body-frame direction r (3,), rad."""
+    return angle_between(ex, ey, ez, r[0], r[1], r[2])
 
 
 @numba.njit(**LEAF)
@@ -168,4 +174,4 @@ def new_context() -> NDArray[np.void]:
     return np.zeros(1, CONTEXT_DTYPE)
 
 
-__all__ = ["CONTEXT_DTYPE", "angle", "context", "new_context", "pointing", "target", "to_body"]
+__all__ = ["CONTEXT_DTYPE", "angle", "angle_between", "context", "new_context", "pointing", "target", "to_body"]

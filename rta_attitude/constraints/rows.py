@@ -123,4 +123,4 @@ def pointing_angles(x: Array, p: np.void, c: np.void, ctx: np.void, out: Array) 
     out[k + 2] = angle(e[0], e[1], e[2], ctx.sun)
 
 
-__all__ = ["BODY_ANGLE_NAMES", "box", "rollout_safety_values", "pointing_angles", "rows", "safety_values"]
+__all__ = ["BODY_ANGLE_NAMES", "box", "pointing_angles", "rollout_safety_values", "rows", "safety_values"]

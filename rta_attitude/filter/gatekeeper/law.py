@@ -31,6 +31,8 @@ from numpy.typing import NDArray
 
 from rta_attitude.config.schema import Config
 from rta_attitude.constraints.base import MAX_ROWS
+from rta_attitude.constraints.cones import signed_h
+from rta_attitude.constraints.geometry import angle_between
 from rta_attitude.constraints.windows import INSIDE, window_at
 from rta_attitude.dynamics.environment import sun_hill, target_hill
 from rta_attitude.dynamics.quaternion import attitude_matrix, error_vector, from_matrix, product
@@ -579,10 +581,7 @@ def _cone_margin(x: Array, p: np.void, b: np.void, g: np.void, T: Array) -> floa
         bx = a[0] * T[0, 0] + a[1] * T[1, 0] + a[2] * T[2, 0]
         by = a[0] * T[0, 1] + a[1] * T[1, 1] + a[2] * T[2, 1]
         bz = a[0] * T[0, 2] + a[1] * T[1, 2] + a[2] * T[2, 2]
-        m0, m1, m2 = by * r2 - bz * r1, bz * r0 - bx * r2, bx * r1 - by * r0
-        th = math.atan2(math.sqrt(m0 * m0 + m1 * m1 + m2 * m2), bx * r0 + by * r1 + bz * r2)
-        h = e.angle_rad - th if e.keep_in else th - e.angle_rad
-        worst = min(worst, h)
+        worst = min(worst, signed_h(e, angle_between(bx, by, bz, r0, r1, r2)))
     return worst
 
 
