@@ -23,6 +23,7 @@ def run(args: argparse.Namespace) -> int:
     import numpy as np
 
     from rta_attitude.cli.options import load
+    from rta_attitude.config.schema import EARTH_RADIUS_M
     from rta_attitude.constraints import ConstraintSet
     from rta_attitude.constraints.margins import derived_margin, sampled_data_margin
     from rta_attitude.constraints.windows import ramp_start
@@ -33,6 +34,10 @@ def run(args: argparse.Namespace) -> int:
           f"{cfg.substeps} RK4 substeps")
     print(f"  plant model {cfg.spacecraft.model}, filter model {cfg.filter.model}, gatekeeper {cfg.filter.backup_law}")
     print(f"  admissible |u| <= {np.array2string(cfg.u_max_rad_s2, precision=2)} rad/s^2 (x, y, z)")
+    L = cfg.limits
+    if L.wheel_speed_relative_to_body:
+        print(f"  wheel speed: |psi + omega| <= {L.psi_max_rad_s:g} rad/s (relative to the body); the filter keeps "
+              f"|psi| <= {L.psi_keep_rad_s:.6g} rad/s")
     print(f"  pointing constraints ({len(cfg.pointing)}):")
     for c in cfg.pointing:
         b = ", ".join(f"{v:g}" for v in c.boresight_body)
@@ -49,6 +54,17 @@ def run(args: argparse.Namespace) -> int:
         for start, end in c.windows_s:
             t_on = ramp_start(cfg, c, start)
             print(f"      window [{start:g}, {end:g}] s: the barrier tightens from t = {t_on:.1f} s")
+    env = cfg.environment
+    if env.eclipse:
+        if env.eclipse_s > 0.0:
+            peak, need = cfg.power.peak_W, cfg.power.load_W + cfg.eclipse_ramp_W
+            print(f"  eclipse: {env.eclipse_s:.0f} s of the {env.orbit_period_s:.0f} s orbit (altitude "
+                  f"{(env.orbit_radius_m - EARTH_RADIUS_M) / 1e3:.0f} km, beta {math.degrees(env.sun_beta_rad):g} "
+                  f"deg): the battery needs {cfg.eclipse_energy_J:.0f} J above E_min where the shadow begins, "
+                  f"charged at {cfg.eclipse_ramp_W:.3g} W over the sunlit arc (the panel within "
+                  f"{math.degrees(math.acos(need / peak)):.1f} deg of the sun)")
+        else:
+            print(f"  eclipse: none at beta {math.degrees(env.sun_beta_rad):g} deg (the orbit stays in sunlight)")
     print(f"  priority levels: {' > '.join('+'.join(level) for level in cfg.priority_levels)}")
     print(f"  slacked: {', '.join(cfg.slacked_constraints) or 'none'}")
     print(f"  scenarios: {', '.join(s.replace('_', '-') for s in cfg.scenarios)}")

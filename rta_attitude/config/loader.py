@@ -354,7 +354,7 @@ def from_parameters(params: Mapping[str, Any], source: str = "<memory>") -> Conf
         ev.number("mean_motion_rad_s"), ev.number("solar_constant_W_m2"), ev.number("albedo_factor"),
         ev.number("earth_temperature_K"), ev.number("stefan_boltzmann_W_m2K4"), ev.number("earth_view_factor"),
         ev.flag("rotating_hill", False), ev.flag("gravity_gradient", False),
-        math.radians(ev.number("sun_beta_deg", 0.0)))
+        math.radians(ev.number("sun_beta_deg", 0.0)), ev.flag("eclipse", False))
     ev.done()
     th = root.section("thermal")
     thermal = Thermal(th.number("mass_kg"), th.number("area_m2"), th.number("specific_heat_J_kgK"),
@@ -376,6 +376,7 @@ def from_parameters(params: Mapping[str, Any], source: str = "<memory>") -> Conf
         psi_max_rad_s=li.number("psi_max_rad_s"),
         temperature_max_K=li.number("temperature_max_degC") + CELSIUS_OFFSET_K,
         energy_min_J=li.number("energy_min_J"),
+        wheel_speed_relative_to_body=li.flag("wheel_speed_relative_to_body", False),
     )
     li.done()
     co = root.section("constraints")

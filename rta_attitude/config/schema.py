@@ -197,6 +197,12 @@ class Sensors:
             _nonneg(f"sensors.{name}", getattr(self, name))
 
 
+EARTH_RADIUS_M = 6_378_137.0
+"""The Earth's equatorial radius (WGS-84), m: the shadow cylinder's radius."""
+EARTH_MU_M3_S2 = 3.986004418e14
+"""The Earth's gravitational parameter, m^3/s^2: the orbit's radius from its mean motion."""
+
+
 @dataclass(frozen=True)
 class Environment:
     """Orbit, sun and Earth radiation constants."""
@@ -214,6 +220,46 @@ class Environment:
     sun_beta_rad: float = 0.0
     """The sun's angle out of the orbit plane (the orbit's beta angle), rad: r_S = [cos beta cos theta_S,
     cos beta sin theta_S, sin beta] in Hill (`dynamics.environment`; 0 in the paper)."""
+    eclipse: bool = False
+    """The Earth's cylindrical shadow on the orbit (its radius from the mean motion, the sun from the beta angle):
+    the panel charges nothing and the sun heats nothing there (`dynamics.environment.sunlit`); False: sunlight
+    all orbit, as the paper."""
+
+    @property
+    def orbit_radius_m(self) -> float:
+        """The circular orbit's radius from its mean motion, a = (mu / n^2)^(1/3), m."""
+        return float((EARTH_MU_M3_S2 / (self.mean_motion_rad_s * self.mean_motion_rad_s)) ** (1.0 / 3.0))
+
+    @property
+    def shadow_sx(self) -> float:
+        """The sun's radial component r_S . x_Hill below which the spacecraft is in the shadow
+        (`dynamics.environment.sunlit`): -cos rho, sin rho = R_E / a; -inf with the eclipse off.
+
+        The spacecraft sits at a x_Hill; it is in the cylinder behind the Earth where r_S . x_Hill < 0 and its
+        distance from the Earth-sun line, a sqrt(1 - (r_S . x_Hill)^2), is below R_E: r_S . x_Hill < -cos rho."""
+        if not self.eclipse:
+            return -math.inf
+        sin_rho = min(1.0, EARTH_RADIUS_M / self.orbit_radius_m)
+        return -math.sqrt(1.0 - sin_rho * sin_rho)
+
+    @property
+    def eclipse_half_arc_rad(self) -> float:
+        """Half the theta_S arc in the shadow, rad: r_S . x_Hill = cos beta cos theta_S < -cos rho within
+        arccos(cos rho / cos beta) of theta_S = pi; 0 with the eclipse off or none at this beta (|beta| >= rho)."""
+        if not self.eclipse:
+            return 0.0
+        c = -self.shadow_sx / math.cos(self.sun_beta_rad)
+        return math.acos(c) if c < 1.0 else 0.0
+
+    @property
+    def eclipse_s(self) -> float:
+        """The eclipse's length, s (0: none)."""
+        return 2.0 * self.eclipse_half_arc_rad / self.mean_motion_rad_s
+
+    @property
+    def orbit_period_s(self) -> float:
+        """2 pi / n, s."""
+        return 2.0 * math.pi / self.mean_motion_rad_s
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.sun_beta_rad) and abs(self.sun_beta_rad) <= math.pi / 2):
@@ -288,6 +334,16 @@ class Limits:
     psi_max_rad_s: float
     temperature_max_K: float
     energy_min_J: float
+    wheel_speed_relative_to_body: bool = False
+    """True: psi_max bounds each rotor's speed relative to the body, |psi_i + omega_i| (a drive's limit: back-EMF,
+    bearings); False: psi_i itself, the rotor's inertial rate about its axis (the paper's reading)."""
+
+    @property
+    def psi_keep_rad_s(self) -> float:
+        """The wheel speed psi (the rotor's inertial rate) the filter's rows and the backup law keep within: psi_max,
+        or with the limit relative to the body psi_max - omega_max (|psi_i + omega_i| <= |psi_i| + omega_max, and
+        the rates are kept within omega_max: docs/conventions.md)."""
+        return self.psi_max_rad_s - self.omega_max_rad_s if self.wheel_speed_relative_to_body else self.psi_max_rad_s
 
     def __post_init__(self) -> None:
         for name in ("wheel_accel_max_rad_s2", "omega_dot_max_rad_s2", "omega_max_rad_s",
@@ -673,9 +729,30 @@ class Config:
                        else "an empty level")
                 raise ConfigError(f"filter.priorities must name every constraint group once, in non-empty levels "
                                   f"({why})")
+        env = self.environment
+        if env.eclipse_s > 0.0 and not self.power.peak_W > self.power.load_W + self.eclipse_ramp_W:
+            raise ConfigError(
+                f"environment.eclipse: the panel ({self.power.peak_W:.3g} W on the sun) cannot recharge the "
+                f"{env.eclipse_s:.0f} s eclipse at power.load_W {self.power.load_W:.3g} W: it must give "
+                f"{self.power.load_W + self.eclipse_ramp_W:.3g} W over the {env.orbit_period_s - env.eclipse_s:.0f} "
+                f"s of sunlight")
         for scenario in self.scenarios.values():
             for name, _ in scenario.slack_weights or ():
                 _choice(f"scenarios.{scenario.name}.slack_weights", name, self.slackable)
+
+    @property
+    def eclipse_energy_J(self) -> float:
+        """What the load draws over the eclipse, J: the battery must hold it above E_min when the shadow begins."""
+        return self.power.load_W * self.environment.eclipse_s
+
+    @property
+    def eclipse_ramp_W(self) -> float:
+        """The rate at which the battery's floor rises over the sunlit arc, W: from E_min where the shadow ends to
+        E_min + `eclipse_energy_J` where it begins (docs/eclipse.md). The panel must give the load plus this."""
+        env = self.environment
+        if env.eclipse_s <= 0.0:
+            return 0.0
+        return self.eclipse_energy_J / (env.orbit_period_s - env.eclipse_s)
 
     @property
     def constraint_names(self) -> tuple[str, ...]:

@@ -80,7 +80,9 @@ CONSTRAINT_DTYPE = np.dtype([
     ("temperature_max_K", np.float64),
     ("energy_min_J", np.float64),
     ("omega_max_rad_s", np.float64),
-    ("psi_max_rad_s", np.float64),
+    ("psi_max_rad_s", np.float64),         # the wheel speed psi the rows keep within (`Limits.psi_keep_rad_s`)
+    ("psi_limit_rad_s", np.float64),       # the wheel-speed limit h judges (psi_max)
+    ("wheel_speed_relative", np.uint8),    # 1: h judges |psi_i + omega_i|, the speed relative to the body
     ("delta0_K_rad", np.float64),          # temperature: sun-incidence augmentation
     ("delta1_K_rad", np.float64),          # temperature: Earth-incidence augmentation
     ("delta2_J_rad", np.float64),          # battery: panel-angle augmentation
@@ -153,7 +155,9 @@ def constraint_record(cfg: Config) -> NDArray[np.void]:
             e["window_on_s"][w] = ramp_start(cfg, cone, start)
             e["window_start_s"][w], e["window_end_s"][w] = start, end
     c["temperature_max_K"], c["energy_min_J"] = L.temperature_max_K, L.energy_min_J
-    c["omega_max_rad_s"], c["psi_max_rad_s"] = L.omega_max_rad_s, L.psi_max_rad_s
+    c["omega_max_rad_s"], c["psi_max_rad_s"] = L.omega_max_rad_s, L.psi_keep_rad_s
+    c["psi_limit_rad_s"] = L.psi_max_rad_s
+    c["wheel_speed_relative"] = L.wheel_speed_relative_to_body
     c["delta0_K_rad"], c["delta1_K_rad"], c["delta2_J_rad"] = aug.delta0_K_rad, aug.delta1_K_rad, aug.delta2_J_rad
     c["sin_pole_guard"] = math.sin(cfg.filter.pole_guard_rad)
     c["robust"] = robust

@@ -13,7 +13,9 @@ the paper mentions when the face sees neither sun nor Earth. With c_S, c_E the i
     T_ddot = (alpha A S [c_S > 0] c_S_dot + (alpha A S A_f + sigma eps A T_E^4) F [c_E > 0] c_E_dot
               - 4 sigma eps A T^3 T_dot) / (m c_p)                  (no u: T has relative degree 3)
 
-([c_E > 0] is 1 when the view factor is not clamped.)
+([c_E > 0] is 1 when the view factor is not clamped.) With an eclipse (`environment.eclipse`) the rows keep
+the sunlit law: in the shadow the face only cools (the plant drops the sun's and the albedo's heat), and where
+the shadow ends the heat returns at once, a jump in T_dot that the sunlit law has held all along.
 """
 
 from __future__ import annotations
@@ -48,7 +50,7 @@ def row(ctx: np.void, x: NDArray[np.float64], c: np.void, p: np.void, t: np.void
     ce, ce_dot, th_e, th_e_dot, th_e_dd, ge0, ge1, ge2 = pointing(f0, f1, f2, ctx.earth, ctx.earth_rate,
                                                                   ctx.earth_acc, ctx, guard)
     T = x[10]
-    T_dot = thermal_rate(cs, ce, T, p)
+    T_dot = thermal_rate(cs, ce, T, 1.0, p)  # the sun always (an eclipse only cools: module docstring)
     earth_coeff = p.albedo_W + p.sigma_eps_A_W_K4 * p.earth_T4_K4
     earth_on = (1.0 if ce > 0 else 0.0) if p.clamp_view_factor else 1.0
     sun_lit = 1.0 if cs > 0 else 0.0

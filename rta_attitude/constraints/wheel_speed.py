@@ -1,5 +1,11 @@
 """Wheel speed, per wheel i: |psi_i| <= psi_max.
 
+With `limits.wheel_speed_relative_to_body` the limit is on the rotor's speed relative to the body, |psi_i +
+omega_i| <= psi_max (psi is the rotor's inertial rate: docs/conventions.md). h judges that speed; the rows
+below keep |psi_i| <= psi_max - omega_max (c.psi_max_rad_s, `Limits.psi_keep_rad_s`), which implies it while
+the rate rows keep |omega_i| <= omega_max: a 3e-5 share of the wheels' range here, for rows that stay exact
+(psi is linear over a hold; omega is not).
+
     h  = psi_max^2 - psi_i^2                (rad^2/s^2; relative degree 1, CBF)
     BC = -2 psi_i u_i + k1 h + bias >= 0
 
@@ -20,8 +26,12 @@ from rta_attitude.jit import LEAF
 
 @numba.njit(**LEAF)
 def h(ctx: np.void, x: NDArray[np.float64], c: np.void, axis: int) -> float:
-    """psi_max^2 - psi_axis^2 (rad^2/s^2); negative = the wheel is too fast."""
-    return c.psi_max_rad_s**2 - x[7 + axis] ** 2
+    """psi_max^2 - v^2 (rad^2/s^2), v = psi_axis, or with the limit relative to the body the rotor's speed
+    relative to it, psi_axis + omega_axis; negative = the wheel is too fast."""
+    if c.wheel_speed_relative:
+        v = x[7 + axis] + x[4 + axis]
+        return c.psi_limit_rad_s**2 - v * v
+    return c.psi_limit_rad_s**2 - x[7 + axis] ** 2
 
 
 @numba.njit(**LEAF)

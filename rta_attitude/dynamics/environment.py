@@ -101,6 +101,19 @@ def target_direction(kind: int, vector: Array, theta_S_rad: float | Array, beta_
 
 
 @numba.njit(**LEAF, inline="always")
+def sunlit(sx: float, shadow: float) -> float:
+    """1.0 in sunlight, 0.0 in the Earth's cylindrical shadow: sx = r_S . x_Hill (the sun's radial component in
+    Hill), shadow = `config.schema.Environment.shadow_sx` (-cos rho; -inf without the eclipse)."""
+    return 0.0 if sx < shadow else 1.0
+
+
+def sunlit_fraction(theta_S_rad: float | Array, beta_rad: float, shadow: float) -> Array:
+    """`sunlit` of theta_S (...) (the numpy face)."""
+    sx = math.cos(beta_rad) * np.cos(np.asarray(theta_S_rad, dtype=float))
+    return np.where(sx < shadow, 0.0, 1.0)
+
+
+@numba.njit(**LEAF, inline="always")
 def target_hill(kind: int, v: Array, theta_S_rad: float, cos_beta: float, sin_beta: float, n: float,
                 ) -> tuple[float, float, float, float, float, float, float, float, float]:
     """A target's unit vector r in Hill and its Hill-frame derivatives r_dot, r_ddot (module docstring), as nine
@@ -132,6 +145,6 @@ def inertial_rates(r0: float, r1: float, rd0: float, rd1: float, rdd0: float, rd
 
 __all__ = [
     "EARTH", "EARTH_HILL", "FIXED_HILL", "HILL_FIXED", "INERTIAL_FIXED", "ORBIT_NORMAL_HILL", "SUN", "TARGETS",
-    "VELOCITY_HILL", "inertial_rates", "inertial_to_hill", "sun_direction", "sun_hill", "target_direction",
-    "target_hill", "target_kind",
+    "VELOCITY_HILL", "inertial_rates", "inertial_to_hill", "sun_direction", "sun_hill", "sunlit", "sunlit_fraction",
+    "target_direction", "target_hill", "target_kind",
 ]  # fmt: skip

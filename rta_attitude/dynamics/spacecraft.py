@@ -40,7 +40,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from rta_attitude.config.schema import Config
-from rta_attitude.dynamics.environment import EARTH_HILL, sun_hill
+from rta_attitude.dynamics.environment import EARTH_HILL, sun_hill, sunlit
 from rta_attitude.dynamics.quaternion import attitude_matrix
 from rta_attitude.dynamics.state import STATE_SIZE
 from rta_attitude.jit import LEAF
@@ -68,6 +68,9 @@ PLANT_DTYPE = np.dtype([
     ("wheel_accel_max_rad_s2", np.float64),    # actuator saturation of u
     ("sun_cos_beta", np.float64),              # the sun's beta angle (`dynamics.environment.sun_hill`)
     ("sun_sin_beta", np.float64),
+    ("shadow_sx", np.float64),                 # r_S . x_Hill below it: the Earth's shadow (-inf: no eclipse)
+    ("eclipse_half_arc_rad", np.float64),      # half the theta_S arc in the shadow (0: none)
+    ("eclipse_ramp_W", np.float64),            # the battery floor's rise over the sunlit arc (`battery`)
     ("face_normal", np.float64, (3,)),         # the thermal node's face, outward normal, body axes
     ("panel_normal", np.float64, (3,)),        # the solar panel's normal, body axes
     ("face_axis", np.int64),                   # `signed_axis` of face_normal: i if it is +-e_i, else -1
@@ -107,6 +110,9 @@ def plant_record(cfg: Config, model: str | None = None) -> NDArray[np.void]:
     p["load_W"] = pw.load_W
     p["wheel_accel_max_rad_s2"] = cfg.limits.wheel_accel_max_rad_s2
     p["sun_cos_beta"], p["sun_sin_beta"] = math.cos(env.sun_beta_rad), math.sin(env.sun_beta_rad)
+    p["shadow_sx"] = env.shadow_sx
+    p["eclipse_half_arc_rad"] = env.eclipse_half_arc_rad
+    p["eclipse_ramp_W"] = cfg.eclipse_ramp_W
     p["face_normal"] = th.face_normal_body
     p["panel_normal"] = pw.panel_normal_body
     p["face_axis"] = signed_axis(th.face_normal_body)
@@ -182,11 +188,12 @@ def omega_drift(x: Array, A: Array, p: np.void, out: Array) -> None:
 
 
 @numba.njit(**LEAF)
-def thermal_rate(cos_sun: float, cos_earth: float, T_K: float, p: np.void) -> float:
-    """T_dot (K/s) of the -j_B face node given its sun and Earth incidence cosines."""
+def thermal_rate(cos_sun: float, cos_earth: float, T_K: float, lit: float, p: np.void) -> float:
+    """T_dot (K/s) of the -j_B face node given its sun and Earth incidence cosines; lit: 1.0 in sunlight, 0.0
+    in the Earth's shadow (`environment.sunlit`: no sun, and the Earth below is on its night side)."""
     F_E = p.earth_view_factor * (positive_part(cos_earth) if p.clamp_view_factor else cos_earth)
-    q_solar = p.solar_W * positive_part(cos_sun)
-    q_albedo = p.albedo_W * F_E
+    q_solar = p.solar_W * lit * positive_part(cos_sun)
+    q_albedo = p.albedo_W * lit * F_E
     q_ir = p.sigma_eps_A_W_K4 * F_E * p.earth_T4_K4
     T2 = T_K * T_K
     q_rejected = p.sigma_eps_A_W_K4 * (T2 * T2)
@@ -194,17 +201,17 @@ def thermal_rate(cos_sun: float, cos_earth: float, T_K: float, p: np.void) -> fl
 
 
 @numba.njit(**LEAF)
-def thermal_rates(cos_sun: Array, cos_earth: Array, T_K: Array, p: np.void, out: Array) -> None:
+def thermal_rates(cos_sun: Array, cos_earth: Array, T_K: Array, lit: Array, p: np.void, out: Array) -> None:
     """`thermal_rate` of arrays (n,) into out (n,): the one thermal law for callers that bound it over many
     states at once (the Monte Carlo's temperature rule)."""
     for k in range(T_K.shape[0]):
-        out[k] = thermal_rate(cos_sun[k], cos_earth[k], T_K[k], p)
+        out[k] = thermal_rate(cos_sun[k], cos_earth[k], T_K[k], lit[k], p)
 
 
 @numba.njit(**LEAF)
-def net_power(cos_panel_sun: float, p: np.void) -> float:
-    """E_dot (W): the +k_B panel's power minus the load."""
-    return p.panel_peak_W * positive_part(cos_panel_sun) - p.load_W
+def net_power(cos_panel_sun: float, lit: float, p: np.void) -> float:
+    """E_dot (W): the panel's power minus the load; lit: 1.0 in sunlight, 0.0 in the Earth's shadow."""
+    return p.panel_peak_W * lit * positive_part(cos_panel_sun) - p.load_W
 
 
 # ----------------------------------------------------------------------------- the derivative and RK4
@@ -235,8 +242,9 @@ def derivative(x: Array, u: Array, p: np.void, A: Array, wd: Array, f: Array) ->
     f[7] = 0.0 + u[0]
     f[8] = 0.0 + u[1]
     f[9] = 0.0 + u[2]
-    f[10] = thermal_rate(cos_sun, cos_earth, x[10], p)
-    f[11] = net_power(c_panel, p)
+    lit = sunlit(sx, p.shadow_sx)
+    f[10] = thermal_rate(cos_sun, cos_earth, x[10], lit, p)
+    f[11] = net_power(c_panel, lit, p)
     f[12] = -n
     f[13], f[14], f[15] = x[16], x[17], x[18]
     f[16] = 3 * n**2 * x[13] + 2 * n * x[17]

@@ -12,8 +12,9 @@ from numpy.typing import NDArray
 
 from rta_attitude.config.schema import Config
 from rta_attitude.constraints import ConstraintSet
+from rta_attitude.dynamics.environment import sunlit_fraction
 from rta_attitude.dynamics.spacecraft import thermal_rates
-from rta_attitude.dynamics.state import ENERGY, OMEGA, PSI, TEMP
+from rta_attitude.dynamics.state import ENERGY, OMEGA, PSI, TEMP, THETA_S
 
 Array = NDArray[np.float64]
 
@@ -102,7 +103,7 @@ def unavoidable(x0: Array, cfg: Config, duration_s: float = math.inf) -> dict[st
     for k in range(math.ceil(horizon / CLASSIFY_STEP_S)):
         t = k * CLASSIFY_STEP_S
         thermal_rates(np.cos(np.minimum(th_s0 + rate * t, np.pi)), np.cos(np.minimum(th_e0 + Omega * t, np.pi)),
-                      T, plant, T_dot)
+                      T, sunlit_fraction(x0[:, THETA_S] - n_orb * t, env.sun_beta_rad, env.shadow_sx), plant, T_dot)
         T = T + CLASSIFY_STEP_S * T_dot
         np.maximum(T_peak, T, out=T_peak)
     out["temperature_heating"][:, col["temperature"]] = T_peak > L.temperature_max_K + CLASSIFY_MARGIN_K

@@ -17,6 +17,8 @@ from numpy.typing import NDArray
 from rta_attitude.config import CELSIUS_OFFSET_K
 from rta_attitude.config.schema import PRESETS, Config
 from rta_attitude.constraints import ConstraintSet
+from rta_attitude.constraints.battery import eclipse_floors
+from rta_attitude.dynamics.spacecraft import plant_record
 from rta_attitude.dynamics.state import ENERGY, OMEGA, PSI, STATE_SIZE, TEMP, THETA_S, Q
 from rta_attitude.errors import ConfigError, RtaError
 from rta_attitude.kernel_cache import drop_stale_caches
@@ -34,7 +36,8 @@ TEMPERATURE_RANGE_DEGC = (-10.0, 9.5)
 ENERGY_MIN_FACTOR = 1.05
 """E from ENERGY_MIN_FACTOR E_min ..."""
 ENERGY_MAX_J = 10_000.0
-"""... to this, J."""
+"""... to this, J; with an eclipse, both above the eclipse's floor at the state's theta_S
+(`constraints.battery.eclipse_floor`: what the load needs through the shadow ahead)."""
 THETA_S_RANGE_RAD = (0.0, 2.0 * math.pi)
 """theta_S uniform in [0, 2 pi)."""
 SAMPLE_DIMENSIONS = 12
@@ -62,6 +65,8 @@ def _to_states(u: Array, cfg: Config) -> Array:
     x[:, ENERGY] = e_lo + (ENERGY_MAX_J - e_lo) * u[:, 10]
     th_lo, th_hi = THETA_S_RANGE_RAD
     x[:, THETA_S] = th_lo + (th_hi - th_lo) * u[:, 11]
+    if cfg.environment.eclipse_s > 0.0:  # E above what the eclipse ahead needs (`battery.eclipse_floor`)
+        x[:, ENERGY] += eclipse_floors(x[:, THETA_S], plant_record(cfg)[0])
     return x
 
 

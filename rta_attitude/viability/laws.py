@@ -121,7 +121,7 @@ def law_command(x: Array, law: str, m: OracleModel, rate_limit_fraction: float =
     else:
         raise ValueError(f"unknown law {law!r}; known: {', '.join(LAWS)}")
     psi = x[7:10]
-    top = (1.0 - WHEEL_SPEED_RTOL) * m.psi_max_rad_s
+    top = (1.0 - WHEEL_SPEED_RTOL) * m.psi_keep_rad_s
 
     def held(w_d: Array, psi_d: Array) -> Array:  # the command cancelling the drift of state (w_d, psi_d)
         h = J * w_d - D * psi_d if m.gyrostat else J * w_d

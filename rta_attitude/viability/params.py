@@ -104,6 +104,8 @@ class OracleModel:
     load_W: float
     sun_beta_rad: float
     """The sun's angle out of the orbit plane (`environment.sun_beta_rad`)."""
+    shadow_sx: float
+    """The Earth's shadow: r_S . x_Hill below it (`environment.shadow_sx`; -inf without an eclipse)."""
     face_normal_body: tuple[float, float, float]
     """The thermal node's face, outward unit normal, body axes (`thermal.face_normal_body`)."""
     panel_normal_body: tuple[float, float, float]
@@ -116,6 +118,12 @@ class OracleModel:
     energy_min_J: float
     omega_max_rad_s: float
     psi_max_rad_s: float
+    wheel_speed_relative: bool
+    """psi_max bounds |psi_i + omega_i|, the rotor's speed relative to the body
+    (`limits.wheel_speed_relative_to_body`)."""
+    psi_keep_rad_s: float
+    """The |psi_i| the transcription and the laws keep (`Limits.psi_keep_rad_s`: psi_max, less omega_max if
+    relative)."""
     u_max_rad_s2: tuple[float, float, float]
     """The box U (`Config.u_max_rad_s2`)."""
     dt_s: float
@@ -224,6 +232,7 @@ def from_config(cfg: Config) -> OracleModel:
         panel_peak_W=float(p["panel_peak_W"]),
         load_W=float(p["load_W"]),
         sun_beta_rad=float(cfg.environment.sun_beta_rad),
+        shadow_sx=float(p["shadow_sx"]),
         face_normal_body=unit_vector("thermal.face_normal_body", cfg.thermal.face_normal_body),
         panel_normal_body=unit_vector("power.panel_normal_body", cfg.power.panel_normal_body),
         cones=oracle_cones(cfg),
@@ -232,6 +241,8 @@ def from_config(cfg: Config) -> OracleModel:
         energy_min_J=L.energy_min_J,
         omega_max_rad_s=L.omega_max_rad_s,
         psi_max_rad_s=L.psi_max_rad_s,
+        wheel_speed_relative=L.wheel_speed_relative_to_body,
+        psi_keep_rad_s=L.psi_keep_rad_s,
         u_max_rad_s2=tuple(float(v) for v in cfg.u_max_rad_s2),  # type: ignore[arg-type]
         dt_s=cfg.filter.sample_time_s,
         substeps=cfg.substeps,

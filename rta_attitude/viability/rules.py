@@ -146,7 +146,8 @@ def momentum_bands(h_body: Array, m: OracleModel) -> list[tuple[float, float]]:
     h_norm = float(np.linalg.norm(h_body))
     if h_norm == 0.0:
         return [(0.0, math.pi)]
-    c = m.J * m.omega_max_rad_s + m.wheel_inertia_kgm2 * m.psi_max_rad_s
+    psi_top = m.psi_max_rad_s + (m.omega_max_rad_s if m.wheel_speed_relative else 0.0)  # |psi| <= |psi + w| + |w|
+    c = m.J * m.omega_max_rad_s + m.wheel_inertia_kgm2 * psi_top
     p = np.abs(np.array(m.panel_normal_body))
     c_along = float(along(p, c))
     c_perp = math.hypot(float(c[1] * p[2] + c[2] * p[1]), float(c[2] * p[0] + c[0] * p[2]),

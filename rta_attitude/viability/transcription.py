@@ -149,7 +149,7 @@ def row_bounds(names: tuple[str, ...], enforce: tuple[str, ...], margin: float, 
         elif kind == RATE:
             lo[j], hi[j] = -(m.omega_max_rad_s - d) / xs[4], (m.omega_max_rad_s - d) / xs[4]
         elif kind == WHEEL_SPEED:
-            lo[j], hi[j] = -(m.psi_max_rad_s - d) / xs[7], (m.psi_max_rad_s - d) / xs[7]
+            lo[j], hi[j] = -(m.psi_keep_rad_s - d) / xs[7], (m.psi_keep_rad_s - d) / xs[7]
     return lo, hi
 
 

@@ -31,6 +31,7 @@ from numpy.typing import NDArray
 
 from rta_attitude.config.schema import Config
 from rta_attitude.constraints.base import MAX_ROWS
+from rta_attitude.constraints.battery import eclipse_floor
 from rta_attitude.constraints.cones import signed_h
 from rta_attitude.constraints.geometry import angle_between
 from rta_attitude.constraints.windows import INSIDE, window_at
@@ -39,7 +40,7 @@ from rta_attitude.dynamics.quaternion import attitude_matrix, error_vector, from
 from rta_attitude.dynamics.spacecraft import (
     omega_drift,
 )
-from rta_attitude.dynamics.state import OMEGA, STATE_SIZE, THETA_S
+from rta_attitude.dynamics.state import ENERGY, OMEGA, STATE_SIZE, THETA_S
 from rta_attitude.jit import LEAF
 
 Array = NDArray[np.float64]
@@ -543,7 +544,9 @@ def at_rest(x: Array, b: np.void) -> bool:
 def _terminal(x: Array, p: np.void, b: np.void, g: np.void) -> bool:
     """x (19, the law's frame) is in the backup law's terminal set: within SETTLED_ANGLE_RAD of the sun-safe
     attitude, every body rate within SETTLED_RATE_FRACTION w_max, and the wheels can hold the momentum at rest
-    there (`_wheel_load` <= 0); and the law's targets keep every hard pointing constraint clear over the
+    there (`_wheel_load` <= 0); with an eclipse, E - E_min at or above the floor for the shadow ahead
+    (`constraints.battery.eclipse_floor`: held at the sun-safe attitude, E gains on it in sunlight and keeps
+    its distance in the shadow); and the law's targets keep every hard pointing constraint clear over the
     horizon ahead as the sun moves on (`_clear_ahead`). Never in the momentum mode, at the large-momentum
     targets (the tilted and the EARTH_SIDE one: g.momentum_mode 2, 3) or in the TIGHT and CROSS variants (the
     panel may not charge enough and the sun moves on: their rollouts run the whole horizon)."""
@@ -559,6 +562,8 @@ def _terminal(x: Array, p: np.void, b: np.void, g: np.void) -> bool:
         return False
     if not g.load <= 0.0:
         return False
+    if p.eclipse_half_arc_rad > 0.0 and not x[ENERGY] - b.energy_min_J >= eclipse_floor(x[THETA_S], p)[0]:
+        return False  # short of the shadow ahead: the panel on the sun gains on the floor only above it
     if b.n_keep == 0 or _clear_ahead(x, p, b, g):
         return True
     sun_safe_error(x, p, b, g)  # (g.dq, g.A and the target are x's again for `continue_command`)

@@ -58,6 +58,7 @@ BACKUP_DTYPE = np.dtype([
     ("momentum_variant_rad_s", np.float64),  # the MOMENTUM variant only where |J w - s D psi| / D exceeds this
     ("nominal_steps", np.int64),         # samples of the filter's own answers before the backup law (>= 1)
     ("reserve_steps", np.int64),         # steps of `energy_reserve`'s projection (0: off)
+    ("energy_min_J", np.float64),        # E_min: the terminal set keeps the eclipse's floor above it
     ("horizon_at_rest", np.uint8),       # a horizon-only plan must end at rest (filter.backup_horizon_at_rest)
     ("reserve_step_s", np.float64),      # ... each this long
     ("margin", np.float64, (M,)),        # what each h must keep in a rollout (`check_margins`; 0 without sensor errors)
@@ -163,13 +164,14 @@ def backup_record(cfg: Config) -> NDArray[np.void]:
     b["settled_sin_half_angle"] = math.sin(0.5 * SETTLED_ANGLE_RAD)
     b["settled_rate_rad_s"] = SETTLED_RATE_FRACTION * L.omega_max_rad_s
     b["omega_max_rad_s"], b["psi_max_rad_s"] = L.omega_max_rad_s, L.psi_max_rad_s
-    b["psi_limit_rad_s"] = L.psi_max_rad_s
-    b["psi_hold_rad_s"] = L.psi_max_rad_s
+    b["psi_limit_rad_s"] = L.psi_keep_rad_s
+    b["psi_hold_rad_s"] = L.psi_keep_rad_s
     sc = cfg.spacecraft
-    b["momentum_variant_rad_s"] = L.psi_max_rad_s - float(np.max(sc.J)) * L.omega_max_rad_s / sc.wheel_inertia_kgm2
+    b["momentum_variant_rad_s"] = L.psi_keep_rad_s - float(np.max(sc.J)) * L.omega_max_rad_s / sc.wheel_inertia_kgm2
     b["nominal_steps"] = max(1, round(o.backup_nominal_s / o.sample_time_s))
     b["reserve_step_s"] = RESERVE_STEP_S
     b["reserve_steps"] = round(o.backup_energy_lookahead_s / RESERVE_STEP_S)
+    b["energy_min_J"] = L.energy_min_J
     b["horizon_at_rest"] = o.backup_horizon_at_rest
     b["interface"] = sensors_record(cfg)[0]
     b["dt_s"] = o.sample_time_s

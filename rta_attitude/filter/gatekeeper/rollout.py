@@ -24,7 +24,7 @@ from rta_attitude.config.schema import Config
 from rta_attitude.constraints.base import MAX_ROWS, hard
 from rta_attitude.constraints.rows import rollout_safety_values
 from rta_attitude.constraints.wheel_speed import wheel_speed_error
-from rta_attitude.dynamics.environment import sun_hill
+from rta_attitude.dynamics.environment import sun_hill, sunlit
 from rta_attitude.dynamics.sensors import (
     interface_energy_error,
 )
@@ -74,7 +74,7 @@ def check_margins(p: np.void, c: np.void, out: Array) -> None:
         e = c.err_omega_axis_rad_s + abs(p.control_gain[a]) * c.err_u_rad_s2[a] * c.dt_s
         out[c.row_omega + a] = 2.0 * c.omega_max_rad_s * e + e * e
         e = wheel_speed_error(c, a)
-        out[c.row_psi + a] = 2.0 * c.psi_max_rad_s * e + e * e
+        out[c.row_psi + a] = 2.0 * c.psi_limit_rad_s * e + e * e
 
 
 @numba.njit(**LEAF)
@@ -91,7 +91,8 @@ def energy_reserve(x: Array, p: np.void, c: np.void, b: np.void, g: np.void) -> 
     the battery margin of the rollout it ends: a candidate's if g.candidate, else the backup law's) for
     b.reserve_steps steps of b.reserve_step_s with the panel held at the tilted target's angle to the sun
     (`_tilt`: as near the sun as the wheels can hold the momentum at rest)
-    while the sun moves on: E_dot = `net_power` at that angle (midpoint rule). H is conserved in an inertial
+    while the sun moves on (through the Earth's shadow, with the eclipse on): E_dot = `net_power` at that
+    angle (midpoint rule). H is conserved in an inertial
     frame (no gravity gradient: its torque changes H by ~2 % an orbit), so in Hill it turns at -frame_rate
     about z_Hill as the sun turns at -n. A projection of what the backup law could keep, not a check of it:
     it makes the gate switch to the backup law while the battery can still afford the dark part of the
@@ -119,7 +120,7 @@ def energy_reserve(x: Array, p: np.void, c: np.void, b: np.void, g: np.void) -> 
             cos_phi = ca * cb + math.sqrt(max(0.0, 1.0 - ca * ca)) * math.sqrt(max(0.0, 1.0 - cb * cb))
         else:
             return False
-        E += dt * net_power(cos_phi, p)
+        E += dt * net_power(cos_phi, sunlit(sx, p.shadow_sx), p)
         if not E >= floor:
             return False
     return True
@@ -244,7 +245,8 @@ def apply_measurement_margins(rec: NDArray[np.void], cfg: Config) -> None:
         w_left = math.sqrt(max(0.0, w_max * w_max - rate_margin))
         b["rate_limit_rad_s"] = min(float(b["rate_limit_rad_s"][0]), RATE_LIMIT_FRACTION * w_left)
     if speed_margin > 0.0:
-        b["psi_limit_rad_s"] = math.sqrt(max(0.0, psi_max * psi_max - speed_margin))
+        top = math.sqrt(max(0.0, psi_max * psi_max - speed_margin))  # |v| within it keeps h's margin
+        b["psi_limit_rad_s"] = max(0.0, top - w_max) if c["wheel_speed_relative"] else top  # v = psi + omega
         e = max(wheel_speed_error(c, a) for a in range(3))
         b["psi_hold_rad_s"] = max(0.0, float(b["psi_limit_rad_s"][0]) - e)
 
