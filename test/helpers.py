@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from rta_attitude.config.schema import Config
+from rta_attitude.dynamics.quaternion import from_matrix
 from rta_attitude.dynamics.state import STATE_SIZE
 
 
@@ -90,3 +91,18 @@ def starting_peer(role: str, namespace: str, context: object) -> object:
     node.create_subscription(interface.msg_class(clock.type_name), clock.name, lambda m: None,
                              interface.qos_profile(clock.qos))
     return node
+
+
+def sun_safe_state(theta_S: float, E: float, T_K: float = 280.0) -> np.ndarray:
+    """A state at rest at the paper's sun-safe attitude (+k_B on the sun, +j_B toward the Earth's side of it), no
+    wheel momentum, the sun in the orbit plane at theta_S."""
+    s = np.array([np.cos(theta_S), np.sin(theta_S), 0.0])
+    e = np.array([-1.0, 0.0, 0.0])
+    j = e - (e @ s) * s
+    j /= np.linalg.norm(j)
+    A = np.array([np.cross(j, s), j, s])  # rows: the body axes in Hill
+    q = np.zeros(4)
+    from_matrix(A, q)
+    x = np.zeros(19)
+    x[0:4], x[10], x[11], x[12] = q, T_K, E, theta_S
+    return x

@@ -10,13 +10,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from helpers import random_states
+from helpers import random_states, sun_safe_state
 
 from rta_attitude import config
 from rta_attitude.constraints import ConstraintSet
 from rta_attitude.constraints.battery import eclipse_floors
 from rta_attitude.dynamics import spacecraft
-from rta_attitude.dynamics.quaternion import attitude_matrices, from_matrix
+from rta_attitude.dynamics.quaternion import attitude_matrices
 from rta_attitude.dynamics.state import ENERGY, TEMP, THETA_S
 from rta_attitude.errors import ConfigError
 from rta_attitude.filter.gatekeeper.rollout import is_settled
@@ -172,20 +172,6 @@ def test_the_example_slews_into_the_shadow_with_the_energy_it_needs() -> None:
     assert off.x[entry, ENERGY] - E_min < CFG.eclipse_energy_J
 
 
-def _sun_safe_state(theta_S: float, E: float) -> np.ndarray:
-    """At rest at the sun-safe attitude (+k_B on the sun, +j_B toward the Earth's side), no wheel momentum."""
-    s = np.array([math.cos(theta_S), math.sin(theta_S), 0.0])
-    e = np.array([-1.0, 0.0, 0.0])
-    j = e - (e @ s) * s
-    j /= np.linalg.norm(j)
-    A = np.array([np.cross(j, s), j, s])  # rows: the body axes in Hill
-    q = np.zeros(4)
-    from_matrix(A, q)
-    x = np.zeros(19)
-    x[0:4], x[TEMP], x[ENERGY], x[THETA_S] = q, 280.0, E, theta_S
-    return x
-
-
 def test_the_backup_laws_terminal_set_keeps_the_energy_for_the_shadow_ahead() -> None:
     """At rest on the sun just before the shadow, the sun-safe attitude is a terminal set only with the eclipse's
     energy in the battery: with less, the panel on the sun cannot charge it in time and the shadow drains it."""
@@ -195,9 +181,9 @@ def test_the_backup_laws_terminal_set_keeps_the_energy_for_the_shadow_ahead() ->
     before = math.pi + a + 0.02  # 19 s of sunlight left
     floor = float(eclipse_floors(np.array([before]), spacecraft.plant_record(CFG)[0])[0])
     assert need - 60.0 < floor < need
-    assert is_settled(_sun_safe_state(before, E_min + floor + 1.0), f)
-    assert not is_settled(_sun_safe_state(before, E_min + floor - 1.0), f)
+    assert is_settled(sun_safe_state(before, E_min + floor + 1.0), f)
+    assert not is_settled(sun_safe_state(before, E_min + floor - 1.0), f)
     # the same state without the eclipse is in the terminal set; and far from the shadow, little is needed
     sunlit_all_orbit = config.load(EXAMPLE, overrides={"environment.eclipse": False})
-    assert is_settled(_sun_safe_state(before, E_min + 100.0), filter_record(sunlit_all_orbit))
-    assert is_settled(_sun_safe_state(math.pi - a - 0.1, E_min + 300.0), f)  # 97 s after the shadow: 255 J
+    assert is_settled(sun_safe_state(before, E_min + 100.0), filter_record(sunlit_all_orbit))
+    assert is_settled(sun_safe_state(math.pi - a - 0.1, E_min + 300.0), f)  # 97 s after the shadow: 255 J

@@ -89,3 +89,22 @@ def test_a_plan_that_holds_for_its_horizon_only_must_end_at_rest_where_the_examp
     hard = [i for i, n in enumerate(cfg.constraint_names) if n not in cfg.slacked_constraints]
     assert not on.violated_substeps[0, hard].any(), on.violated_substeps
     assert off.violated_substeps[0, tracker]
+
+
+@pytest.mark.parametrize("sun_at_pass_deg", [20.0, 160.0, 195.0])
+def test_the_backup_law_turns_the_antenna_to_the_station_ahead_of_a_pass(sun_at_pass_deg: float) -> None:
+    """From rest at the sun-safe attitude (u_des = 0, the gatekeeper's to keep), with the sun where that attitude
+    puts the antenna outside its cone when the first pass opens (theta_S within 30 deg of the zenith or the
+    nadir at t = 500 s): the backup law's target keeps the window's ramped barrier (h + rho(t), what the
+    filter and the rollouts keep ahead of it), so the plan turns the antenna toward the station before the
+    pass, and both passes and every other hard constraint hold. A law that kept a windowed cone only inside
+    its window broke all three at a pass's opening (its terminal set stayed where the window would open)."""
+    from helpers import sun_safe_state
+
+    from rta_attitude.montecarlo.runner import run_runs
+
+    cfg = config.load(ROOT / "config" / "examples" / "ground_passes.yaml")
+    theta0 = np.radians(sun_at_pass_deg) + 500.0 * cfg.environment.mean_motion_rad_s
+    out = run_runs(cfg, sun_safe_state(theta0, 6000.0)[None], 1700.0)
+    hard = [i for i, n in enumerate(cfg.constraint_names) if n not in cfg.slacked_constraints]
+    assert not out.violated_substeps[0, hard].any(), out.violated_substeps

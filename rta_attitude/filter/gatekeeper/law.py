@@ -34,7 +34,7 @@ from rta_attitude.constraints.base import MAX_ROWS
 from rta_attitude.constraints.battery import eclipse_floor
 from rta_attitude.constraints.cones import signed_h
 from rta_attitude.constraints.geometry import angle_between
-from rta_attitude.constraints.windows import INSIDE, window_at
+from rta_attitude.constraints.windows import OFF, window_at
 from rta_attitude.dynamics.environment import sun_hill, target_hill
 from rta_attitude.dynamics.quaternion import attitude_matrix, error_vector, from_matrix, product
 from rta_attitude.dynamics.spacecraft import (
@@ -572,21 +572,26 @@ def _terminal(x: Array, p: np.void, b: np.void, g: np.void) -> bool:
 
 @numba.njit(**LEAF)
 def _cone_margin(x: Array, p: np.void, b: np.void, g: np.void, T: Array) -> float:
-    """The smallest h (rad) of the hard pointing constraints in force at g.t (a windowed one inside its
-    windows) with the body at the attitude T (rows: the law frame's axes in Hill), the targets where x (the
-    law's frame) has them; +inf with none."""
+    """The smallest h (rad) of the hard pointing constraints in force at g.t with the body at the attitude T
+    (rows: the law frame's axes in Hill), the targets where x (the law's frame) has them; +inf with none. A
+    windowed one counts inside its windows, and ahead of one its ramped barrier h + rho(t) (what the filter and
+    the rollouts keep there, `cones.cone_h`): the target turns into the cone as the window nears."""
     worst = math.inf
     for k in range(b.n_keep):
         e = b.cones[b.keep[k]]
-        if e.n_windows > 0 and window_at(e, g.t)[0] != INSIDE:
-            continue
+        rho = 0.0
+        if e.n_windows > 0:
+            phase, rho, _ = window_at(e, g.t)
+            if phase == OFF:
+                continue
         r0, r1, r2, _, _, _, _, _, _ = target_hill(e.target, e.vector, x[THETA_S], p.sun_cos_beta, p.sun_sin_beta,
                                                    p.mean_motion_rad_s)
         a = b.keep_axes[k]  # the boresight in the law's frame
         bx = a[0] * T[0, 0] + a[1] * T[1, 0] + a[2] * T[2, 0]
         by = a[0] * T[0, 1] + a[1] * T[1, 1] + a[2] * T[2, 1]
         bz = a[0] * T[0, 2] + a[1] * T[1, 2] + a[2] * T[2, 2]
-        worst = min(worst, signed_h(e, angle_between(bx, by, bz, r0, r1, r2)))
+        h = signed_h(e, angle_between(bx, by, bz, r0, r1, r2))
+        worst = min(worst, h + rho if e.n_windows > 0 else h)
     return worst
 
 
