@@ -5,6 +5,8 @@ differences, a configuration that cannot recharge refused, and the example's sle
 from __future__ import annotations
 
 import math
+import subprocess
+import sys
 from dataclasses import replace
 from pathlib import Path
 
@@ -187,3 +189,16 @@ def test_the_backup_laws_terminal_set_keeps_the_energy_for_the_shadow_ahead() ->
     sunlit_all_orbit = config.load(EXAMPLE, overrides={"environment.eclipse": False})
     assert is_settled(sun_safe_state(before, E_min + 100.0), filter_record(sunlit_all_orbit))
     assert is_settled(sun_safe_state(math.pi - a - 0.1, E_min + 300.0), f)  # 97 s after the shadow: 255 J
+
+
+def test_check_config_states_what_the_eclipse_needs() -> None:
+    r = subprocess.run([sys.executable, "-m", "rta_attitude.cli", "check-config", "--config", str(EXAMPLE), "-p",
+                        "environment.sun_beta_deg=30"], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    env = config.load(EXAMPLE, overrides={"environment.sun_beta_deg": 30.0}).environment
+    assert f"  eclipse: {env.eclipse_s:.0f} s of the 6118 s orbit (altitude 852 km, beta 30 deg)" in r.stdout
+    assert "    the longest eclipse of this orbit (beta 0): 2104 s, 10521 J above E_min" in r.stdout
+    r = subprocess.run([sys.executable, "-m", "rta_attitude.cli", "check-config", "-p", "environment.eclipse=true"],
+                       capture_output=True, text=True, timeout=300)
+    assert r.returncode == 1 and r.stdout == "" and len(r.stderr.strip().splitlines()) == 1
+    assert r.stderr.startswith("ERROR: environment.eclipse: the panel (22.7 W on the sun) cannot recharge")

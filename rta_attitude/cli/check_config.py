@@ -63,6 +63,10 @@ def run(args: argparse.Namespace) -> int:
                   f"deg): the battery needs {cfg.eclipse_energy_J:.0f} J above E_min where the shadow begins, "
                   f"charged at {cfg.eclipse_ramp_W:.3g} W over the sunlit arc (the panel within "
                   f"{math.degrees(math.acos(need / peak)):.1f} deg of the sun)")
+            if env.sun_beta_rad != 0.0:  # the longest eclipse of this orbit is at beta 0
+                longest = 2.0 * math.acos(-env.shadow_sx) / env.mean_motion_rad_s
+                print(f"    the longest eclipse of this orbit (beta 0): {longest:.0f} s, "
+                      f"{cfg.power.load_W * longest:.0f} J above E_min")
         else:
             print(f"  eclipse: none at beta {math.degrees(env.sun_beta_rad):g} deg (the orbit stays in sunlight)")
     print(f"  priority levels: {' > '.join('+'.join(level) for level in cfg.priority_levels)}")
