@@ -47,22 +47,22 @@ def test_the_rows_keep_psi_within_psi_max_less_omega_max() -> None:
     assert ConstraintSet(RELATIVE).evaluate(x)["hi"][0, 0] <= 1e-9
 
 
+def _relative_overshoot(cfg: config.Config) -> tuple[float, np.ndarray]:
+    """Seed 7's runs 8 and 72 (u_des = 0) on cfg's plant: the most any rotor's speed relative to the body,
+    |psi + omega|, passes psi_max (rad/s), and the hard constraints each run violated at a substep."""
+    out = run_runs(cfg, sample_initial_states(5000, 7, cfg)[0][[8, 72]], 2000.0, record=True)
+    X = out.trajectory
+    over = float(np.max(np.abs(X[..., PSI] + X[..., OMEGA])) - cfg.limits.psi_max_rad_s)
+    hard = [i for i, n in enumerate(cfg.constraint_names) if n not in cfg.slacked_constraints]
+    return over, out.violated_substeps[:, hard]
+
+
 def test_runs_that_ride_the_wheel_limit_keep_the_relative_speed_with_the_option() -> None:
     """Seed 7's runs 8 and 72 (u_des = 0) hold a wheel at psi_max under the default: read relative to the body
     (the drive's limit) the rotor then runs over it by up to omega_max. With the option the relative speed
     stays within psi_max at every substep, and every other hard constraint holds."""
-    x0 = sample_initial_states(5000, 7, CFG)[0][[8, 72]]
-    psi_max = CFG.limits.psi_max_rad_s
-
-    def worst(cfg: config.Config) -> tuple[float, np.ndarray]:
-        out = run_runs(cfg, x0, 2000.0, record=True)
-        X = out.trajectory
-        over = float(np.max(np.abs(X[..., PSI] + X[..., OMEGA])) - psi_max)
-        hard = [i for i, n in enumerate(cfg.constraint_names) if n not in cfg.slacked_constraints]
-        return over, out.violated_substeps[:, hard]
-
-    over_default, _ = worst(CFG)
-    over_relative, violated = worst(RELATIVE)
+    over_default, _ = _relative_overshoot(CFG)
+    over_relative, violated = _relative_overshoot(RELATIVE)
     assert over_default > 1e-3  # the default's psi at psi_max, the rotor relative to the body over it
     assert over_relative <= 0.0 and not violated.any()
 
@@ -79,12 +79,7 @@ def test_on_basilisk_the_drives_limit_holds_with_the_option() -> None:
     """The same two runs on Basilisk (an independent plant whose wheel states are rates relative to the body,
     docs/basilisk.md): its rotors' relative speed passes psi_max without the option and stays within it with."""
     pytest.importorskip("Basilisk")
-    psi_max = CFG.limits.psi_max_rad_s
     for cfg, over_limit in ((CFG, True), (RELATIVE, False)):
-        bsk = cfg.with_simulator("basilisk")
-        out = run_runs(bsk, sample_initial_states(5000, 7, bsk)[0][[8, 72]], 2000.0, record=True)
-        X = out.trajectory
-        over = float(np.max(np.abs(X[..., PSI] + X[..., OMEGA])) - psi_max)
+        over, violated = _relative_overshoot(cfg.with_simulator("basilisk"))
         assert (over > 1e-3) if over_limit else (over <= 0.0)
-        hard = [i for i, n in enumerate(cfg.constraint_names) if n not in cfg.slacked_constraints]
-        assert not out.violated_substeps[:, hard].any()
+        assert not violated.any()

@@ -20,6 +20,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """`rta-attitude check-config`."""
+    from dataclasses import replace
+
     import numpy as np
 
     from rta_attitude.cli.options import load
@@ -57,14 +59,14 @@ def run(args: argparse.Namespace) -> int:
     env = cfg.environment
     if env.eclipse:
         if env.eclipse_s > 0.0:
-            peak, need = cfg.power.peak_W, cfg.power.load_W + cfg.eclipse_ramp_W
+            peak, need = cfg.power.peak_W, cfg.eclipse_power_W
             print(f"  eclipse: {env.eclipse_s:.0f} s of the {env.orbit_period_s:.0f} s orbit (altitude "
                   f"{(env.orbit_radius_m - EARTH_RADIUS_M) / 1e3:.0f} km, beta {math.degrees(env.sun_beta_rad):g} "
                   f"deg): the battery needs {cfg.eclipse_energy_J:.0f} J above E_min where the shadow begins, "
                   f"charged at {cfg.eclipse_ramp_W:.3g} W over the sunlit arc (the panel within "
                   f"{math.degrees(math.acos(need / peak)):.1f} deg of the sun)")
             if env.sun_beta_rad != 0.0:  # the longest eclipse of this orbit is at beta 0
-                longest = 2.0 * math.acos(-env.shadow_sx) / env.mean_motion_rad_s
+                longest = replace(env, sun_beta_rad=0.0).eclipse_s
                 print(f"    the longest eclipse of this orbit (beta 0): {longest:.0f} s, "
                       f"{cfg.power.load_W * longest:.0f} J above E_min")
         else:

@@ -730,12 +730,11 @@ class Config:
                 raise ConfigError(f"filter.priorities must name every constraint group once, in non-empty levels "
                                   f"({why})")
         env = self.environment
-        if env.eclipse_s > 0.0 and not self.power.peak_W > self.power.load_W + self.eclipse_ramp_W:
+        if env.eclipse_s > 0.0 and not self.power.peak_W > self.eclipse_power_W:
             raise ConfigError(
                 f"environment.eclipse: the panel ({self.power.peak_W:.3g} W on the sun) cannot recharge the "
                 f"{env.eclipse_s:.0f} s eclipse at power.load_W {self.power.load_W:.3g} W: it must give "
-                f"{self.power.load_W + self.eclipse_ramp_W:.3g} W over the {env.orbit_period_s - env.eclipse_s:.0f} "
-                f"s of sunlight")
+                f"{self.eclipse_power_W:.3g} W over the {env.orbit_period_s - env.eclipse_s:.0f} s of sunlight")
         for scenario in self.scenarios.values():
             for name, _ in scenario.slack_weights or ():
                 _choice(f"scenarios.{scenario.name}.slack_weights", name, self.slackable)
@@ -753,6 +752,12 @@ class Config:
         if env.eclipse_s <= 0.0:
             return 0.0
         return self.eclipse_energy_J / (env.orbit_period_s - env.eclipse_s)
+
+    @property
+    def eclipse_power_W(self) -> float:
+        """What the panel must give where the battery is at its eclipse floor in sunlight, W: the load plus
+        `eclipse_ramp_W` (the panel's peak must exceed it, or the configuration is refused)."""
+        return self.power.load_W + self.eclipse_ramp_W
 
     @property
     def constraint_names(self) -> tuple[str, ...]:

@@ -222,16 +222,12 @@ def ca_dynamics(m: OracleModel, exact: bool) -> ca.Function:
     under = (lambda z: ca.fmax(0.0, z)) if exact else smooth_under
     c_earth = ca_along(m.face_normal_body, e_b)
     view = m.earth_view_factor * (over(c_earth) if m.clamp_view_factor else c_earth)
-    if math.isfinite(m.shadow_sx):  # the Earth's shadow (`environment.sunlit`): a function of theta_S, i.e. of time
-        lit = ca.if_else(m.sun_cos_beta * ca.cos(x[12]) < m.shadow_sx, 0.0, 1.0)
-        t_dot = (lit * (m.solar_W * over(ca_along(m.face_normal_body, s_b)) + m.albedo_W * view)
-                 + m.sigma_eps_A_W_K4 * m.earth_T4_K4 * view - m.sigma_eps_A_W_K4 * temp**4) / m.heat_capacity_J_K
-        e_dot = lit * m.panel_peak_W * under(ca_along(m.panel_normal_body, s_b)) - m.load_W
-    else:
-        t_dot = (m.solar_W * over(ca_along(m.face_normal_body, s_b))
-                 + (m.albedo_W + m.sigma_eps_A_W_K4 * m.earth_T4_K4) * view
-                 - m.sigma_eps_A_W_K4 * temp**4) / m.heat_capacity_J_K
-        e_dot = m.panel_peak_W * under(ca_along(m.panel_normal_body, s_b)) - m.load_W
+    # the Earth's shadow (`environment.sunlit`): a function of theta_S, i.e. of time; 1.0 without an eclipse
+    lit = ca.if_else(m.sun_cos_beta * ca.cos(x[12]) < m.shadow_sx, 0.0, 1.0) if math.isfinite(m.shadow_sx) else 1.0
+    t_dot = (lit * m.solar_W * over(ca_along(m.face_normal_body, s_b))
+             + (lit * m.albedo_W + m.sigma_eps_A_W_K4 * m.earth_T4_K4) * view
+             - m.sigma_eps_A_W_K4 * temp**4) / m.heat_capacity_J_K
+    e_dot = lit * m.panel_peak_W * under(ca_along(m.panel_normal_body, s_b)) - m.load_W
     xdot = ca.vertcat(0.5 * (xi @ w_rel), torque / jd, u, t_dot, e_dot, -m.mean_motion_rad_s)
     return ca.Function("f", [x, u], [xdot])
 
