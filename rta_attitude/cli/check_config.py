@@ -36,6 +36,9 @@ def run(args: argparse.Namespace) -> int:
           f"{cfg.substeps} RK4 substeps")
     print(f"  plant model {cfg.spacecraft.model}, filter model {cfg.filter.model}, gatekeeper {cfg.filter.backup_law}")
     print(f"  admissible |u| <= {np.array2string(cfg.u_max_rad_s2, precision=2)} rad/s^2 (x, y, z)")
+    if cfg.delay_substeps:
+        print(f"  transport delay {cfg.spacecraft.transport_delay_s:g} s ({cfg.delay_substeps} of {cfg.substeps} "
+              f"substeps): the filter plans from the state {cfg.spacecraft.transport_delay_s:g} s after each sample")
     L = cfg.limits
     if L.wheel_speed_relative_to_body:
         print(f"  wheel speed: |psi + omega| <= {L.psi_max_rad_s:g} rad/s (relative to the body); the filter keeps "

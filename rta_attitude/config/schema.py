@@ -127,9 +127,16 @@ class Spacecraft:
     model: str = "gyrostat"
     """The simulated plant (PLANT_MODELS): `gyrostat` (the wheels' gyroscopic torque included) or `paper`
     (dropped). The filter's own model is `filter.model`."""
+    transport_delay_s: float = 0.0
+    """From a command to the wheels (the flight computer's compute and bus), s: the wheels hold sample k's
+    command over [t_k + delay, t_k+1 + delay), the previous command before. Part of the plant and of the
+    filter's model (docs/delay.md); 0 to less than one sample, a whole number of RK4 substeps
+    (`Config.delay_substeps`)."""
 
     def __post_init__(self) -> None:
         _choice("spacecraft.model", self.model, PLANT_MODELS)
+        if not (math.isfinite(self.transport_delay_s) and self.transport_delay_s >= 0.0):
+            raise ConfigError(f"spacecraft.transport_delay_s must be >= 0 s, got {self.transport_delay_s!r}")
         for i, j in enumerate(self.inertia_kgm2):
             _positive(f"spacecraft.inertia_kgm2[{i}]", j)
         _positive("spacecraft.wheel_inertia_kgm2", self.wheel_inertia_kgm2)
@@ -701,6 +708,7 @@ class Config:
         if self.filter.backup_law != "none" and self.substeps > MAX_BACKUP_SUBSTEPS:
             raise ConfigError(f"integrator.substeps must be <= {MAX_BACKUP_SUBSTEPS} with filter.backup_law "
                               f"{self.filter.backup_law!r}, got {self.substeps!r}")
+        self._check_delay()
         for group in FIXED_GROUPS:
             if group not in self.barriers:
                 raise ConfigError(f"constraints.{group} is missing")
@@ -738,6 +746,27 @@ class Config:
         for scenario in self.scenarios.values():
             for name, _ in scenario.slack_weights or ():
                 _choice(f"scenarios.{scenario.name}.slack_weights", name, self.slackable)
+
+    def _check_delay(self) -> None:
+        """spacecraft.transport_delay_s: shorter than a sample, and a whole number of RK4 substeps (the plant
+        switches commands at a substep's end, so the substep grid and its safety values stay where they are)."""
+        delay, dt = self.spacecraft.transport_delay_s, self.filter.sample_time_s
+        h = dt / self.substeps
+        if delay >= dt:
+            raise ConfigError(f"spacecraft.transport_delay_s must be shorter than filter.sample_time_s ({dt:g} s), "
+                              f"got {delay:g}")
+        if round(delay / h) > MAX_BACKUP_SUBSTEPS:
+            raise ConfigError(f"spacecraft.transport_delay_s must be at most {MAX_BACKUP_SUBSTEPS} RK4 substeps "
+                              f"({MAX_BACKUP_SUBSTEPS * h:g} s here), got {delay:g}")
+        if abs(delay / h - round(delay / h)) > 1e-9:
+            raise ConfigError(f"spacecraft.transport_delay_s must be a whole number of RK4 substeps "
+                              f"(filter.sample_time_s / integrator.substeps = {h:g} s; raise integrator.substeps "
+                              f"to refine it), got {delay:g}")
+
+    @property
+    def delay_substeps(self) -> int:
+        """The RK4 substeps of a sample the previous command still holds (`spacecraft.transport_delay_s`)."""
+        return round(self.spacecraft.transport_delay_s * self.substeps / self.filter.sample_time_s)
 
     @property
     def eclipse_energy_J(self) -> float:

@@ -28,6 +28,7 @@ Records (structured NumPy arrays, read by name in compiled code):
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numba
 import numpy as np
@@ -36,6 +37,7 @@ from numpy.typing import NDArray
 from rta_attitude.config.schema import FIXED_NAMES, MAX_POINTING, MAX_WINDOWS, Config
 from rta_attitude.dynamics.environment import target_kind
 from rta_attitude.dynamics.sensors import interface_energy_error
+from rta_attitude.dynamics.spacecraft import plant_record
 from rta_attitude.jit import LEAF
 
 Array = NDArray[np.float64]
@@ -213,7 +215,7 @@ def measurement_errors(cfg: Config) -> dict[str, float | NDArray[np.float64]]:
     gyro = b * math.sqrt(s.gyro_noise_rad_s**2 + s.gyro_bias_rad_s**2
                          + s.gyro_bias_walk_rad_s_sqrt_s**2 * s.bias_horizon_s)
     drift = float(np.linalg.norm(cfg.spacecraft.control_gain * err_u)) * dt * dt / 2
-    return {
+    errors: dict[str, float | NDArray[np.float64]] = {
         "err_att_rad": math.sqrt(3.0) * b * s.attitude_noise_rad + drift,
         "err_omega_rad_s": math.sqrt(3.0) * gyro,
         "err_omega_axis_rad_s": gyro,
@@ -222,6 +224,52 @@ def measurement_errors(cfg: Config) -> dict[str, float | NDArray[np.float64]]:
         "err_T_K": b * s.temperature_noise_K,
         "err_E_J": b * s.energy_noise_J,
         "target_rate_rad_s": cfg.environment.mean_motion_rad_s,
+    }
+    if cfg.spacecraft.transport_delay_s > 0.0:
+        errors.update(predicted_errors(cfg, errors))
+    return errors
+
+
+def predicted_errors(cfg: Config, e: dict[str, Any]) -> dict[str, float]:
+    """The reading's errors (`measurement_errors`) carried over a transport delay d by the filter's prediction
+    (`filter.drive.delayed_state`: the measured state held under the command in flight), docs/delay.md. The
+    prediction's error grows as the dynamics' sensitivity to the state allows, plus the drive's error err_u
+    on the command in flight; bounds with every rate at omega_max and wheel at psi_max:
+
+    - omega: |d omega_dot / d omega| <= (2 J_max |omega| + D |psi|) / J_min, |d omega_dot / d psi| <= D |omega| /
+      J_min (the gyrostat's wheel terms; the paper's model has neither D term), so e_omega grows to
+      e_omega e^(K d) + (D |omega| / J_min) e_psi d + |G err_u| d, and each axis' error by the same amount;
+    - the attitude: + (e_omega + |G err_u| d / 2) d;  psi: + err_u d;
+    - E: + P_peak e_att d (the panel's cosine);  T: + ((alpha A S + alpha A S A_f F + sigma eps A T_E^4 F) e_att
+      + 4 sigma eps A T_max^3 e_T) d / (m c_p) (the face's cosines and the radiation).
+
+    Each with e_att and e_omega the larger, predicted values over the delay (the bound is first order in d,
+    taken at the delay's end)."""
+    sc, L = cfg.spacecraft, cfg.limits
+    d = sc.transport_delay_s
+    J, D = sc.J, sc.wheel_inertia_kgm2
+    gyrostat = cfg.filter.model == "gyrostat"
+    w = math.sqrt(3.0) * L.omega_max_rad_s
+    psi = math.sqrt(3.0) * L.psi_max_rad_s if gyrostat else 0.0
+    K = (2.0 * float(J.max()) * w + D * psi) / float(J.min())
+    coupling = D * w / float(J.min()) if gyrostat else 0.0
+    err_u = np.asarray(e["err_u_rad_s2"], dtype=float)
+    accel = float(np.linalg.norm(sc.control_gain * err_u))
+    e_psi = float(e["err_psi_rad_s"])
+    grow = float(e["err_omega_rad_s"]) * math.expm1(K * d) + coupling * math.sqrt(3.0) * e_psi * d + accel * d
+    e_omega = float(e["err_omega_rad_s"]) + grow
+    e_att = float(e["err_att_rad"]) + (e_omega + accel * d / 2.0) * d
+    p = plant_record(cfg, cfg.filter.model)[0]
+    heat = (float(p["solar_W"]) + (float(p["albedo_W"]) + float(p["sigma_eps_A_W_K4"] * p["earth_T4_K4"]))
+            * cfg.environment.earth_view_factor) * e_att
+    radiation = 4.0 * float(p["sigma_eps_A_W_K4"]) * L.temperature_max_K**3 * float(e["err_T_K"])
+    return {
+        "err_att_rad": e_att,
+        "err_omega_rad_s": e_omega,
+        "err_omega_axis_rad_s": float(e["err_omega_axis_rad_s"]) + grow,
+        "err_psi_rad_s": e_psi + float(err_u.max()) * d,
+        "err_T_K": float(e["err_T_K"]) + (heat + radiation) * d / float(p["heat_capacity_J_K"]),
+        "err_E_J": float(e["err_E_J"]) + float(p["panel_peak_W"]) * e_att * d,
     }
 
 
@@ -303,5 +351,5 @@ def nan_min(a: float, b: float) -> float:
 __all__ = [
     "CONE_DTYPE", "CONSTRAINT_DTYPE", "GAIN_DTYPE", "MAX_CONES", "MAX_ROWS", "TABLE_DTYPE", "ZOH_CHECKS", "ZOH_ROWS",
     "angle_rate_error", "constraint_record", "drive_lag", "hard", "lag_response", "measurement_errors", "nan_max",
-    "nan_min", "second_order", "speed_limit_row",
+    "nan_min", "predicted_errors", "second_order", "speed_limit_row",
 ]  # fmt: skip

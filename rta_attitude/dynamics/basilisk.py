@@ -16,7 +16,9 @@ Mapping (each line checked in test/test_basilisk.py):
     rates      omega_BN_B is the state's omega
     hub        Basilisk's hub inertia is the whole spacecraft's (balanced wheels add none): J + D I
     wheels     motor torque u_s = -D u (held over the step, clipped by Basilisk at D psi_dot_max, as the
-               actuator clips u); psi = -(Omega + omega_i), Omega the wheel rate relative to the body
+               actuator clips u; with spacecraft.transport_delay_s, written when the delay's substeps are
+               over, the previous step's torque held before); psi = -(Omega + omega_i), Omega the wheel
+               rate relative to the body
 
 With these readings Basilisk's equations are the gyrostat model exactly: H_B = (J + D) w + D Omega =
 J w - D psi, the rotor equation D (Omega_dot + w_dot_i) = u_s gives psi_dot = u, and H_B_dot + w x H_B
@@ -179,7 +181,8 @@ class BasiliskPlant:
         self.x = x
         self.x[0:4] /= np.linalg.norm(self.x[0:4])
         self.t_ns = 0
-        self._us = np.empty(3)
+        self.delay_substeps = cfg.delay_substeps
+        self._us = np.zeros(3)  # the command the wheels hold (over the next step's delay too)
         self._one = np.empty((1, STATE_SIZE))
         self._quats = np.empty((2, 4))
         self._work = np.zeros((RK4_WORK_ROWS, STATE_SIZE))
@@ -284,12 +287,14 @@ class BasiliskPlant:
         u = np.ascontiguousarray(u, dtype=float)
         if u.shape != (3,) or not np.all(np.isfinite(u)):
             raise ValueError(f"u must be 3 finite wheel accelerations, got {u!r}")
-        self._us[:] = saturated(u, self.record)  # the actuator
-        self._write_torque(self._us)
         t0_ns = self.t_ns
-        self.t_ns = t0_ns + self.h_ns * self.substeps
         # StepUntilStop is ConfigureStopTime + ExecuteSimulation without the Python event loop (the same
         # states, less time per step)
+        if self.delay_substeps > 0:  # the previous command (in the message already) until the delay is over
+            self._sim.TotalSim.StepUntilStop(t0_ns + self.h_ns * self.delay_substeps, -1)
+        self._us[:] = saturated(u, self.record)  # the actuator
+        self._write_torque(self._us)
+        self.t_ns = t0_ns + self.h_ns * self.substeps
         self._sim.TotalSim.StepUntilStop(self.t_ns, -1)
         times = np.asarray(self._states.times(), dtype=np.int64)
         new = times > t0_ns  # the recorder also holds the t = 0 record once

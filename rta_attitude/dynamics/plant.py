@@ -19,7 +19,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from rta_attitude.config.schema import Config
-from rta_attitude.dynamics.spacecraft import integrate, plant_record
+from rta_attitude.dynamics.spacecraft import integrate, plant_record, saturated
 from rta_attitude.dynamics.state import STATE_SIZE
 
 Array = NDArray[np.float64]
@@ -39,7 +39,8 @@ class Plant(Protocol):
         ...
 
     def step(self, u: Array) -> tuple[Array, Array]:
-        """Saturate u (3,) and hold it over dt_s; returns (x(t + dt) (19,), substep states (substeps, 19))."""
+        """Saturate u (3,) and hold it over dt_s (with `spacecraft.transport_delay_s`, from the delay on: the
+        previous step's command holds before); returns (x(t + dt) (19,), substep states (substeps, 19))."""
         ...
 
     def close(self) -> None:
@@ -66,10 +67,12 @@ class CompiledPlant:
         self.dt_s = float(cfg.filter.sample_time_s if dt_s is None else dt_s)
         self.x = _initial_state(x0)
         self.t_s = 0.0
+        self.u_inflight = np.zeros(3)  # the last command as the wheels hold it: over the next step's delay
 
     def step(self, u: Array) -> tuple[Array, Array]:
         """`spacecraft.integrate` from the current state; see `Plant.step`."""
-        x_next, subs = integrate(self.x, u, self.dt_s, self.record, self.substeps)
+        x_next, subs = integrate(self.x, u, self.dt_s, self.record, self.substeps, self.u_inflight)
+        self.u_inflight = saturated(u, self.record)
         self.x = x_next
         self.t_s += self.dt_s
         return x_next, subs

@@ -71,6 +71,8 @@ FIELD_SIZE = 21
 INSTRUMENT_DTYPE = np.dtype([
     ("bias", np.float64, (3,)),            # the gyro bias now, rad/s
     ("u_end", np.float64, (3,)),           # the actuator's output at the end of the last hold, rad/s^2
+    ("u_inflight", np.float64, (3,)),      # what the wheels held over the last hold (saturated): over the
+                                           # next one's transport delay (`spacecraft.rk4_delayed`), rad/s^2
     ("started", np.uint8),                 # bias drawn
     ("dq", np.float64, (4,)),              # scratch: the attitude error's quaternion
     ("A", np.float64, (3, 3)),             # scratch: A(q) of `deliver`
@@ -110,11 +112,12 @@ def new_instruments() -> NDArray[np.void]:
 @numba.njit(**LEAF)
 def reset_instruments(ins: np.void) -> None:
     """Back to a fresh INSTRUMENT_DTYPE record (a new run): the bias is drawn again at the first
-    measurement, the lag starts from rest."""
+    measurement, the lag and the transport delay start from rest."""
     ins.started = 0
     for a in range(3):
         ins.bias[a] = 0.0
         ins.u_end[a] = 0.0
+        ins.u_inflight[a] = 0.0
 
 
 @numba.njit(**LEAF)

@@ -75,6 +75,7 @@ PLANT_DTYPE = np.dtype([
     ("panel_normal", np.float64, (3,)),        # the solar panel's normal, body axes
     ("face_axis", np.int64),                   # `signed_axis` of face_normal: i if it is +-e_i, else -1
     ("panel_axis", np.int64),                  # the same of panel_normal
+    ("delay_substeps", np.int64),              # substeps of a sample the previous command still holds
 ])  # fmt: skip
 """The plant's parameters, in model units, as the compiled code reads them."""
 
@@ -117,6 +118,7 @@ def plant_record(cfg: Config, model: str | None = None) -> NDArray[np.void]:
     p["panel_normal"] = pw.panel_normal_body
     p["face_axis"] = signed_axis(th.face_normal_body)
     p["panel_axis"] = signed_axis(pw.panel_normal_body)
+    p["delay_substeps"] = cfg.delay_substeps
     return rec
 
 
@@ -305,6 +307,29 @@ def rk4_hold(x0: Array, u: Array, dt_s: float, substeps: int, p: np.void, out: A
             out[j, i] = x[i]
 
 
+@numba.njit(**LEAF)
+def rk4_delayed(x0: Array, u_prev: Array, u: Array, dt_s: float, substeps: int, p: np.void, out: Array,
+                work: Array) -> None:
+    """`rk4_hold` of a sample whose command reaches the wheels late (`spacecraft.transport_delay_s`): the
+    previous command u_prev (3,) over the first p.delay_substeps substeps, then u (3,); both saturated
+    already. out (substeps, 19): the state after each substep, on the same grid as without a delay. Exactly
+    `rk4_hold` of u without one."""
+    m = p.delay_substeps
+    if m == 0:
+        rk4_hold(x0, u, dt_s, substeps, p, out, work)
+        return
+    delay = delay_time(dt_s, substeps, m)
+    rk4_hold(x0, u_prev, delay, m, p, out[:m], work)
+    rk4_hold(out[m - 1], u, dt_s - delay, substeps - m, p, out[m:], work)
+
+
+@numba.njit(**LEAF, inline="always")
+def delay_time(dt_s: float, substeps: int, m: int) -> float:
+    """The transport delay of m of a sample's substeps, s: the one formula the plant (`rk4_delayed`) and the
+    filter's prediction (`filter.drive.delayed_state`) use, so they hold the same intervals to the bit."""
+    return dt_s * m / substeps
+
+
 @numba.vectorize(["float64(float64, float64)"], cache=True)
 def wheel_accel_to_torque(u_rad_s2: float, D_kgm2: float) -> float:
     """The body torque of a wheel command, tau = D u (N m): what crosses DDS (a ufunc: scalars, arrays,
@@ -348,10 +373,10 @@ def _omega_dots(X: Array, U: Array, pa: NDArray[np.void], W: Array, work: Array)
 
 
 @numba.njit(**LEAF)
-def _integrate(x: Array, u: Array, dt_s: float, substeps: int, pa: NDArray[np.void], us: Array, out: Array,
-               work: Array) -> None:
+def _integrate(x: Array, u: Array, u_prev: Array, dt_s: float, substeps: int, pa: NDArray[np.void], us: Array,
+               out: Array, work: Array) -> None:
     saturate(u, pa[0], us)
-    rk4_hold(x, us, dt_s, substeps, pa[0], out, work)
+    rk4_delayed(x, u_prev, us, dt_s, substeps, pa[0], out, work)
 
 
 @numba.njit(**LEAF)
@@ -390,8 +415,9 @@ def state_derivative(x: Array, u: Array, p: NDArray[np.void]) -> Array:
     return F.reshape(x.shape)
 
 
-def integrate(x: Array, u: Array, dt_s: float, p: NDArray[np.void], substeps: int) -> tuple[Array, Array]:
-    """Saturate u and hold it over dt_s from one state (Python face of `saturate` + `rk4_hold`).
+def integrate(x: Array, u: Array, dt_s: float, p: NDArray[np.void], substeps: int,
+              u_prev: Array | None = None) -> tuple[Array, Array]:
+    """Saturate u and hold it over dt_s from one state (Python face of `saturate` + `rk4_delayed`).
 
     Args:
         x: state (19,).
@@ -399,6 +425,8 @@ def integrate(x: Array, u: Array, dt_s: float, p: NDArray[np.void], substeps: in
         dt_s: hold time, s.
         p: the PLANT_DTYPE record array (1,) of `plant_record`.
         substeps: RK4 substeps.
+        u_prev: with a transport delay (p's delay_substeps > 0), the previous command as the wheels held it
+            (saturated), which holds over the delay; None: zero.
 
     Returns:
         (x at t + dt (19,), the substep states (substeps, 19)).
@@ -408,14 +436,16 @@ def integrate(x: Array, u: Array, dt_s: float, p: NDArray[np.void], substeps: in
         raise ValueError(f"integrate takes one state ({STATE_SIZE},), got {x.shape}")
     us = np.empty(3)
     out = np.empty((substeps, STATE_SIZE))
+    prev = np.zeros(3) if u_prev is None else np.ascontiguousarray(u_prev, dtype=float)
     # record arrays, not record scalars, cross into compiled code (numba types a scalar at every call)
-    _integrate(x, np.ascontiguousarray(u, dtype=float), float(dt_s), substeps, p, us, out, rk4_work())
+    _integrate(x, np.ascontiguousarray(u, dtype=float), prev, float(dt_s), substeps, p, us, out, rk4_work())
     return out[-1].copy(), out
 
 
 __all__ = [
-    "PLANT_DTYPE", "RK4_WORK_ROWS", "axis_along", "derivative", "integrate", "net_power", "omega_dot",
-    "omega_drift", "plant_record", "positive_part", "rk4_hold", "rk4_work", "saturate", "saturated", "state_derivative",
+    "PLANT_DTYPE", "RK4_WORK_ROWS", "axis_along", "delay_time", "derivative", "integrate", "net_power", "omega_dot",
+    "omega_drift", "plant_record", "positive_part", "rk4_delayed", "rk4_hold", "rk4_work", "saturate", "saturated",
+    "state_derivative",
     "thermal_rate",
     "torque_round_trip", "torque_to_wheel_accel", "wheel_accel_to_torque",
 ]  # fmt: skip

@@ -1,8 +1,16 @@
-"""The wheel drive's first-order lag, compensated (robust preset with sensor errors on,
-`filter.actuator_lag: compensate`): the box the filter's answer keeps to (`drive_box`) and the command whose
-held mean is the answer (`drive_command`); docs/noise.md."""
+"""What the wheels do with the filter's commands, in the filter's model:
+
+- the drive's first-order lag, compensated (robust preset with sensor errors on, `filter.actuator_lag:
+  compensate`): the box the filter's answer keeps to (`drive_box`) and the command whose held mean is the
+  answer (`drive_command`); docs/noise.md;
+- the transport delay (`spacecraft.transport_delay_s`): the wheels hold the previous answer until the delay is
+  over, so the call plans from the state at that time (`delayed_state`), which it predicts with its model from
+  the state it receives and the answer in flight (`remember_inflight`); docs/delay.md.
+"""
 
 from __future__ import annotations
+
+import math
 
 import numba
 import numpy as np
@@ -11,6 +19,8 @@ from numpy.typing import NDArray
 from rta_attitude.constraints.base import (
     MAX_ROWS,
 )
+from rta_attitude.dynamics.spacecraft import delay_time, rk4_hold, torque_round_trip
+from rta_attitude.dynamics.state import STATE_SIZE
 from rta_attitude.jit import LEAF
 
 Array = NDArray[np.float64]
@@ -50,3 +60,36 @@ def drive_command(f: np.void, g: np.void, r: np.void) -> None:
             g.drive[a] = cmd + (v - cmd) * e
         else:
             r.u[a] = r.u_held[a]
+
+
+@numba.njit(**LEAF)
+def delayed_state(x: Array, f: np.void, g: np.void) -> bool:
+    """With a transport delay (the filter's plant model has delay_substeps m > 0): the state the wheels'
+    next command starts from, x held under the answer in flight (g.inflight) for the delay's m RK4 substeps of
+    the filter's model, into g.x_delay. The plant switches commands on the same substep grid
+    (`spacecraft.rk4_delayed`), so where the model is the plant's and the state exact the prediction is the
+    plant's state. Returns False (nothing written) without a delay, or for a state the filter will refuse
+    (non-finite, or a quaternion far from unit: `qp.prepare` answers it)."""
+    m = f.plant.delay_substeps
+    if m == 0:
+        return False
+    n2 = 0.0
+    for i in range(STATE_SIZE):
+        if not math.isfinite(x[i]):
+            return False
+    for i in range(4):
+        n2 += x[i] * x[i]
+    if not 0.25 < n2 < 2.25:
+        return False
+    b = f.backup
+    rk4_hold(x, g.inflight, delay_time(b.dt_s, b.substeps, m), m, f.plant, g.subs[:m], g.work)
+    for i in range(STATE_SIZE):
+        g.x_delay[i] = g.subs[m - 1, i]
+    return True
+
+
+@numba.njit(**LEAF)
+def remember_inflight(f: np.void, g: np.void, r: np.void) -> None:
+    """The answer r.u_held as the wheels will hold it over the next call's delay (across the torque
+    interface, as the plant receives it): g.inflight."""
+    torque_round_trip(r.u_held, f.plant, g.inflight)

@@ -1,13 +1,14 @@
 """One filter call, compiled: the one pipeline every path runs (simulate, the filter node, the Monte
 Carlo).
 
+    delayed_state  with a transport delay, the state at the delay's end, where the answer takes over (`drive`)
     drive_box    what the wheel drive can hold this call (`drive`)
     answer       the ASIF's QP (`qp`)
     gate_call    with a backup law (`filter.backup_law`), the gatekeeper (`gatekeeper`): u is applied only if
                  it, held for a sample, then the backup law, is safe over the horizon on the filter's model;
                  else the backup law of its committed plan (the workspace keeps the plan)
     finish       BC_i at the final u, which box bounds clipped u
-    drive_command  the command whose held mean is the answer (`drive`)
+    drive_command  the command whose held mean is the answer (`drive`); the answer in flight remembered
 
 Parameters travel as one FILTER_DTYPE record, scratch as WORKSPACE_DTYPE records, the result is one
 RESULT_DTYPE record (`records`; `filter.asif` reads it). `filter_many` runs the same call over a batch.
@@ -22,7 +23,8 @@ from numpy.typing import NDArray
 from rta_attitude.constraints.base import (
     MAX_ROWS,
 )
-from rta_attitude.filter.drive import drive_box, drive_command
+from rta_attitude.dynamics.spacecraft import delay_time
+from rta_attitude.filter.drive import delayed_state, drive_box, drive_command, remember_inflight
 from rta_attitude.filter.gatekeeper.plans import gate_call
 from rta_attitude.filter.outcome import (
     GATE_TOWARD_BACKUP,
@@ -38,7 +40,21 @@ M = MAX_ROWS
 def filter_state(x: Array, u_des: Array, t_s: float, f: np.void, wsa: NDArray[np.void], r: np.void) -> None:
     """One whole filter call: state x (19,) at time t_s (s from the run's start), desired wheel accelerations
     u_des (3,) -> result record r (its answer u_held, the command u that makes the drive hold it:
-    `drive_command`); wsa: the filter's workspaces (`new_workspace`)."""
+    `drive_command`); wsa: the filter's workspaces (`new_workspace`). With a transport delay the call plans
+    from the state at t_s + delay (`drive.delayed_state`): consecutive calls are consecutive samples."""
+    g = wsa[0].gate
+    if delayed_state(x, f, g):  # a transport delay: plan from the state where the answer takes over
+        _plan(g.x_delay, u_des, t_s + delay_time(f.backup.dt_s, f.backup.substeps, f.plant.delay_substeps), f,
+              wsa, r)
+    else:
+        _plan(x, u_des, t_s, f, wsa, r)
+    remember_inflight(f, g, r)
+
+
+@numba.njit(**JIT)
+def _plan(x: Array, u_des: Array, t_s: float, f: np.void, wsa: NDArray[np.void], r: np.void) -> None:
+    """`filter_state` from the state its answer takes over at: the drive's box, the answer, the gate, the
+    drive's command."""
     ws = wsa[0]
     drive_box(f, wsa)
     if answer(x, u_des, t_s, f, ws, r):

@@ -94,7 +94,7 @@ class PlantNode(RtaNode):
         t0 = self.wall_now_s()
         drop_stale_caches()
         with spin.interruptible():
-            spacecraft.integrate(self.x, np.zeros(3), self.dt_s, self.plant, 1)  # compile (or load) it now
+            spacecraft.integrate(self.x, np.zeros(3), self.dt_s, self.plant, self.cfg.substeps)  # compile it now
             spacecraft.saturated(np.zeros(3), self.plant)  # and the actuator's clip
         self.simulator = make_plant(self.cfg, self.x, self.dt_s)
         self.instruments = Instruments(self.cfg)  # measured state, actuated command (exact when sensors: off)

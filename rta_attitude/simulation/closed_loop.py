@@ -5,7 +5,8 @@ D u -> u), as over DDS; u = filter(x_k, u_des) (or u_des without RTA), across th
 the sensors and the actuator (`dynamics.sensors`: exact unless `sensors.enabled`) give the controller
 and the filter the measured state y_k and the plant the actuated command; the actuator saturates u at
 psi_dot_max; the plant holds it over [t_k, t_k + dt] with `substeps` RK4
-steps (`dynamics.spacecraft.rk4_hold`); the safety values of every substep are kept, so violations
+steps (`dynamics.spacecraft.rk4_delayed`: with a transport delay, the previous command over its first
+substeps); the safety values of every substep are kept, so violations
 between samples are seen. `advance` is that step (filter, actuator, plant, checks) for one state:
 `simulate` and the Monte Carlo (`montecarlo.runner`) both run it, so a Monte Carlo run equals
 `simulate` of its initial state bit for bit, and the nodes run its parts (the filter node
@@ -52,7 +53,7 @@ from rta_attitude.dynamics.spacecraft import (
     omega_dot,
     omega_drift,
     plant_record,
-    rk4_hold,
+    rk4_delayed,
     saturate,
     saturated,
     torque_round_trip,
@@ -111,7 +112,9 @@ def advance(x: Array, y: Array, u_des: Array, k: int, lp: np.void, ins: np.void,
             u[a] = u_des[a]
     actuate(u, k, lp.sensors, ins, u)
     saturate(u, p, u)
-    rk4_hold(x, u, lp.dt_s, lp.substeps, p, subs, work)
+    rk4_delayed(x, ins.u_inflight, u, lp.dt_s, lp.substeps, p, subs, work)
+    for a in range(3):
+        ins.u_inflight[a] = u[a]
     for j in range(lp.substeps):
         safety_values(subs[j], t + lp.dt_s * (j + 1) / lp.substeps, p, lp.filter.constraints, ctx, hs[j])
 

@@ -34,11 +34,12 @@ M = MAX_ROWS
 
 @numba.njit(**LEAF)
 def reset(g: np.void) -> None:
-    """Forget the committed plan and the drive's state (a new run starts: the wheels' drive at rest): the
-    filter's only memory."""
+    """Forget the committed plan, the drive's state and the command in flight (a new run starts: the wheels'
+    drive at rest): the filter's only memory."""
     g.plan_steps = 0
     for a in range(3):
         g.drive[a] = 0.0
+        g.inflight[a] = 0.0
     g.plan_law = SUN_SAFE_VARIANT
     g.plan_n = g.plan_at = 0
     g.nominal_wait = 0

@@ -87,6 +87,8 @@ GATE_DTYPE = np.dtype([
     ("plan_steps", np.int64),            # samples the committed plan is still verified for (0: none)
     ("drive", np.float64, (3,)),         # the wheel drive's state as the filter's commands left it, rad/s^2
     # (`pipeline.drive_command`; 0 at rest, and where the lag is not compensated)
+    ("inflight", np.float64, (3,)),      # the last answer as the wheels hold it: over the transport delay
+    ("x_delay", np.float64, (STATE_SIZE,)),  # the state at the delay's end the call plans from (`drive`)
     ("plan_n", np.int64),                # samples of the committed nominal plan (0: none) ...
     ("plan_at", np.int64),               # ... the one the next call should be at
     ("plan_x", np.float64, (MAX_NOMINAL_STEPS, STATE_SIZE)),  # its states at the samples (as received)
