@@ -348,7 +348,7 @@ def from_parameters(params: Mapping[str, Any], source: str = "<memory>") -> Conf
     sc = root.section("spacecraft")
     spacecraft = Spacecraft(sc.vector("inertia_kgm2", 3), sc.number("wheel_inertia_kgm2"),  # type: ignore[arg-type]
                             sc.number("torque_sign", 1.0), sc.text("model", "gyrostat"),
-                            sc.number("transport_delay_s", 0.0))
+                            sc.number("inertia_uncertainty", 0.0), sc.number("transport_delay_s", 0.0))
     sc.done()
     ev = root.section("environment")
     environment = Environment(

@@ -127,6 +127,9 @@ class Spacecraft:
     model: str = "gyrostat"
     """The simulated plant (PLANT_MODELS): `gyrostat` (the wheels' gyroscopic torque included) or `paper`
     (dropped). The filter's own model is `filter.model`."""
+    inertia_uncertainty: float = 0.0
+    """How far each principal moment of the vehicle may be from inertia_kgm2, a fraction (0.01: +-1 %): the
+    robust preset's rows stay safe for any inertia within it (docs/conventions.md, "Inertia")."""
     transport_delay_s: float = 0.0
     """From a command to the wheels (the flight computer's compute and bus), s: the wheels hold sample k's
     command over [t_k + delay, t_k+1 + delay), the previous command before. Part of the plant and of the
@@ -135,6 +138,9 @@ class Spacecraft:
 
     def __post_init__(self) -> None:
         _choice("spacecraft.model", self.model, PLANT_MODELS)
+        if not (math.isfinite(self.inertia_uncertainty) and 0.0 <= self.inertia_uncertainty < 0.5):
+            raise ConfigError(f"spacecraft.inertia_uncertainty must be a fraction in [0, 0.5), got "
+                              f"{self.inertia_uncertainty!r}")
         if not (math.isfinite(self.transport_delay_s) and self.transport_delay_s >= 0.0):
             raise ConfigError(f"spacecraft.transport_delay_s must be >= 0 s, got {self.transport_delay_s!r}")
         for i, j in enumerate(self.inertia_kgm2):

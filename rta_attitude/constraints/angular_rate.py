@@ -58,6 +58,7 @@ def zoh_interval(ctx: np.void, x: NDArray[np.float64], c: np.void, axis: int) ->
     cg = ctx.control_gain[axis]
     # measurement-robust (0 without sensor errors): the gyro's error now, the actuator's over the hold
     limit = (1.0 - c.zoh_margin) * c.omega_max_rad_s - c.err_omega_axis_rad_s - abs(cg) * dt * c.err_u_rad_s2[axis]
+    limit -= dt * ctx.inertia_err[axis]  # the inertia's uncertainty over the hold (0 without one)
     w_free = x[4 + axis] + ctx.omega_drift[axis] * dt
     ua = (limit - w_free) / (cg * dt)
     ub = (-limit - w_free) / (cg * dt)
@@ -145,11 +146,14 @@ def zoh_rows(ctx: np.void, x: NDArray[np.float64], c: np.void, p: np.void, t: np
         for i in range(3):
             # E = I + Omega tau S, Phi = tau S
             ew = w[i]
-            robust = 0.0  # measurement-robust: |E delta_omega|_i + |Phi G delta_u|_i (0 without sensor errors)
+            # measurement-robust: |E delta_omega|_i + |Phi G delta_u|_i (0 without sensor errors), and |Phi e|_i of
+            # the inertia's error e (`base.inertia_error`, 0 without an uncertainty)
+            robust = 0.0
             for a in range(3):
                 oms = tau * (Om[i, 0] * S[0, a] + Om[i, 1] * S[1, a] + Om[i, 2] * S[2, a])
                 ew += oms * w[a]
                 robust += abs((1.0 if a == i else 0.0) + oms) * ew_axis + abs(tau * S[i, a] * G[a]) * eu[a]
+                robust += abs(tau * S[i, a]) * ctx.inertia_err[a]  # the inertia's (0 without an uncertainty)
             free = ew + tau * (S[i, 0] * e0_0 + S[i, 1] * e0_1 + S[i, 2] * e0_2)
             B = B0 if i == 0 else (B1 if i == 1 else B2)
             slack = limit - math.sqrt(energy / J[i]) * 0.5 * tau * tau - B * h * h / 8.0 - robust

@@ -104,6 +104,9 @@ CONSTRAINT_DTYPE = np.dtype([
     ("err_T_K", np.float64),
     ("err_E_J", np.float64),
     ("target_rate_rad_s", np.float64),     # sun and Earth directions turn at the mean motion
+    # the vehicle's inertia within +-delta of the model's (robust preset; 0 otherwise, `inertia_errors`)
+    ("inertia_error_gain", np.float64),    # delta / (1 - delta)
+    ("inertia_accel_rad_s2", np.float64, (3,)),  # its bound on |omega_dot(true) - omega_dot(model)|, any state
 ])  # fmt: skip
 
 ZOH_CHECKS = 5
@@ -171,6 +174,12 @@ def constraint_record(cfg: Config) -> NDArray[np.void]:
     if robust and cfg.sensors.enabled:
         for key, value in measurement_errors(cfg).items():
             c[key] = value
+    if robust and cfg.spacecraft.inertia_uncertainty > 0.0:
+        from rta_attitude.constraints.margins import inertia_accel_bound
+
+        delta = cfg.spacecraft.inertia_uncertainty
+        c["inertia_error_gain"] = delta / (1.0 - delta)
+        c["inertia_accel_rad_s2"] = inertia_accel_bound(cfg, cfg.filter.model)
     if robust:  # the battery's reading crosses the interface as a float32 (`dynamics.sensors.encode`)
         c["err_E_J"] += interface_energy_error(cfg)
     return rec
@@ -273,6 +282,29 @@ def predicted_errors(cfg: Config, e: dict[str, Any]) -> dict[str, float]:
     }
 
 
+@numba.njit(**LEAF)
+def inertia_error(c: np.void, p: np.void, w: Array, drift: Array, a: int) -> float:
+    """Bound on |omega_dot_a(true) - omega_dot_a(model)| (rad/s^2) at body rate w (3,) and the model's
+    omega_dot at u = 0, drift (3,), for any vehicle whose principal moments are within +-delta of the model's
+    J (k = c.inertia_error_gain = delta / (1 - delta); 0: none). With J' = J + dJ, |dJ_i| <= delta J_i, the
+    truth's J' omega_dot' = N - omega x (dJ omega) (+ the gravity gradient's dJ part), N the model's right-hand
+    side (J omega_dot = N), so
+
+        |omega_dot'_a - omega_dot_a| <= |N_a| |1/J'_a - 1/J_a| + |(omega x dJ omega)_a| / J'_a
+                                     <= k (|omega_dot_a| + |w_b w_c| (J_b + J_c) / J_a + 3 n^2 (J_b + J_c) / (2 J_a))
+
+    with |omega_dot_a| <= |drift_a| + |G_a| U_a (any u in the box) and the gravity gradient's term only where it
+    is modelled (|r_b r_c| <= 1/2). docs/conventions.md, "Inertia"."""
+    k = c.inertia_error_gain
+    if k == 0.0:
+        return 0.0
+    J = p.inertia_kgm2
+    b, d = (a + 1) % 3, (a + 2) % 3
+    gg = 1.5 * 3.0 * p.mean_motion_rad_s * p.mean_motion_rad_s if p.gravity_gradient else 0.0
+    return k * (abs(drift[a]) + abs(p.control_gain[a]) * c.u_max_rad_s2[a]
+                + (abs(w[b] * w[d]) + gg) * (J[b] + J[d]) / J[a])
+
+
 @numba.njit(**LEAF, inline="always")
 def hard(c: np.void, i: int) -> bool:
     """Row i of constraint record c binds hard: enabled and not slacked. A slacked row may be given up by the
@@ -351,5 +383,5 @@ def nan_min(a: float, b: float) -> float:
 __all__ = [
     "CONE_DTYPE", "CONSTRAINT_DTYPE", "GAIN_DTYPE", "MAX_CONES", "MAX_ROWS", "TABLE_DTYPE", "ZOH_CHECKS", "ZOH_ROWS",
     "angle_rate_error", "constraint_record", "drive_lag", "hard", "lag_response", "measurement_errors", "nan_max",
-    "nan_min", "predicted_errors", "second_order", "speed_limit_row",
+    "inertia_error", "nan_min", "predicted_errors", "second_order", "speed_limit_row",
 ]  # fmt: skip

@@ -56,6 +56,7 @@ CONTEXT_DTYPE = np.dtype([
     ("zoh_sum", np.float64, (3, 3)),     # sum of (Omega tau)^n / (n + 1)!
     ("zoh_term", np.float64, (3, 3)),
     ("zoh_next", np.float64, (3, 3)),
+    ("inertia_err", np.float64, (3,)),  # bound on omega_dot's error from the inertia's (`base.inertia_error`)
 ])  # fmt: skip
 """Per-state quantities shared by the barriers (one record)."""
 

@@ -28,22 +28,26 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numpy.typing import NDArray
 
 from rta_attitude.config.schema import Config, PointingConstraint
 
 
-def rate_bounds(cfg: Config, model: str) -> tuple[float, float]:
-    """(|A|, |B|): bounds on the norms of omega_dot and omega_ddot (held u) with every rate at omega_max and
-    every wheel at psi_max, for the plant model (PLANT_MODELS: the gyrostat has the wheels' gyroscopic torque),
-    rad/s^2 and rad/s^3."""
+def axis_rate_bounds(cfg: Config, model: str, delta: float = 0.0) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """(A, B) (3,): bounds on |omega_dot_i| and |omega_ddot_i| (held u) with every rate at omega_max and every
+    wheel at psi_max, for the plant model (PLANT_MODELS: the gyrostat has the wheels' gyroscopic torque), rad/s^2
+    and rad/s^3; for every inertia within +-delta of the configured one (each bound grows with |J_j - J_k|, D /
+    J_i and G_i, so the worst case takes |J_j - J_k| + delta (J_j + J_k), (1 - delta) J_i and G_i / (1 - delta))."""
     sc, L = cfg.spacecraft, cfg.limits
-    J = sc.J
+    J = sc.J * (1.0 - delta)
     D = sc.wheel_inertia_kgm2
-    G = np.abs(sc.control_gain)
+    G = np.abs(sc.control_gain) / (1.0 - delta)
     U = cfg.u_max_rad_s2
     W = np.full(3, L.omega_max_rad_s)
     P = np.full(3, L.psi_max_rad_s if model == "gyrostat" else 0.0)
-    d = np.abs([J[1] - J[2], J[2] - J[0], J[0] - J[1]])
+    J0 = sc.J
+    d = np.abs([J0[1] - J0[2], J0[2] - J0[0], J0[0] - J0[1]]) + delta * np.array([J0[1] + J0[2], J0[2] + J0[0],
+                                                                                   J0[0] + J0[1]])
     A = np.empty(3)
     B = np.empty(3)
     for i in range(3):
@@ -52,7 +56,35 @@ def rate_bounds(cfg: Config, model: str) -> tuple[float, float]:
     for i in range(3):
         j, k = (i + 1) % 3, (i + 2) % 3
         B[i] = (d[i] * (A[j] * W[k] + W[j] * A[k]) + D * (A[j] * P[k] + W[j] * U[k] + A[k] * P[j] + W[k] * U[j])) / J[i]
+    return A, B
+
+
+def rate_bounds(cfg: Config, model: str) -> tuple[float, float]:
+    """(|A|, |B|): the norms of `axis_rate_bounds`, for every inertia the robust preset allows
+    (`spacecraft.inertia_uncertainty`), rad/s^2 and rad/s^3."""
+    A, B = axis_rate_bounds(cfg, model, robust_inertia_uncertainty(cfg))
     return float(np.linalg.norm(A)), float(np.linalg.norm(B))
+
+
+def robust_inertia_uncertainty(cfg: Config) -> float:
+    """`spacecraft.inertia_uncertainty` where the filter keeps it (the robust preset), else 0."""
+    return cfg.spacecraft.inertia_uncertainty if cfg.filter.preset == "robust" else 0.0
+
+
+def inertia_accel_bound(cfg: Config, model: str) -> NDArray[np.float64]:
+    """`constraints.base.inertia_error` at its worst over the states the rows allow (every rate at omega_max and
+    wheel at psi_max: |omega_dot_a| <= A_a of `axis_rate_bounds` of the model, |w_b w_c| <= omega_max^2), per
+    axis, rad/s^2: what the gatekeeper's rollouts allow for over a sample."""
+    delta = robust_inertia_uncertainty(cfg)
+    J, env = cfg.spacecraft.J, cfg.environment
+    A, _ = axis_rate_bounds(cfg, model)
+    gg = 1.5 * 3.0 * env.mean_motion_rad_s**2 if env.gravity_gradient else 0.0
+    w2 = cfg.limits.omega_max_rad_s**2
+    out = np.empty(3)
+    for a in range(3):
+        b, c = (a + 1) % 3, (a + 2) % 3
+        out[a] = delta / (1.0 - delta) * (A[a] + (w2 + gg) * (J[b] + J[c]) / J[a])
+    return out
 
 
 def derived_margin(cfg: Config, cone: PointingConstraint, model: str) -> float:
@@ -77,4 +109,5 @@ def sampled_data_margin(cfg: Config, name: str) -> float:
     return derived_margin(cfg, cfg.pointing_constraint(name), cfg.filter.model)
 
 
-__all__ = ["derived_margin", "rate_bounds", "sampled_data_margin"]
+__all__ = ["axis_rate_bounds", "derived_margin", "inertia_accel_bound", "rate_bounds", "robust_inertia_uncertainty",
+           "sampled_data_margin"]

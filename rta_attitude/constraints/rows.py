@@ -21,7 +21,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from rta_attitude.constraints import angular_rate, battery, cones, temperature, wheel_speed
-from rta_attitude.constraints.base import nan_max, nan_min
+from rta_attitude.constraints.base import inertia_error, nan_max, nan_min
 from rta_attitude.constraints.geometry import angle, context
 from rta_attitude.jit import LEAF
 
@@ -43,14 +43,35 @@ def rows(x: Array, t_s: float, p: np.void, c: np.void, ctx: np.void, t: np.void,
             compensates its drive's lag, the part of U its state reaches (`filter.drive.drive_box`).
     """
     context(x, p, True, ctx)
+    for a in range(3):
+        ctx.inertia_err[a] = inertia_error(c, p, ctx.omega, ctx.omega_drift, a)
     cones.rows(x, t_s, p, c, ctx, t)
     temperature.row(ctx, x, c, p, t)
     battery.row(ctx, x, c, p, t)
     for a in range(3):
         angular_rate.row(ctx, x, c, a, t)
         wheel_speed.row(ctx, x, c, a, t)
+    robust_to_inertia(ctx, c, t)
     angular_rate.zoh_rows(ctx, x, c, p, t)
     box(ctx, x, c, t, lo0, hi0)
+
+
+@numba.njit(**LEAF)
+def robust_to_inertia(ctx: np.void, c: np.void, t: np.void) -> None:
+    """With an inertia uncertainty (`base.inertia_error`): each row that u reaches through omega_dot (all but
+    the wheel speeds', psi_dot = u whatever J is) keeps its condition for every omega_dot within ctx.inertia_err
+    of the model's: its drift less sum_a |dBC/d omega_dot_a| e_a = sum_a |gain_a / G_a| e_a (a robust CBF
+    for a bounded disturbance of the highest derivative)."""
+    if c.inertia_error_gain == 0.0:
+        return
+    e, G = ctx.inertia_err, ctx.control_gain
+    for i in range(c.n_rows):
+        if c.row_psi <= i < c.row_psi + 3:
+            continue
+        worst = 0.0
+        for a in range(3):
+            worst += abs(t.gain[i, a] / G[a]) * e[a]
+        t.drift[i] -= worst
 @numba.njit(**LEAF)
 def box(ctx: np.void, x: Array, c: np.void, t: np.void, lo0: Array, hi0: Array) -> None:
     """t.lo, t.hi (3,), rad/s^2: what the drive can hold (lo0, hi0: `rows`), and in the robust preset the
@@ -123,4 +144,5 @@ def pointing_angles(x: Array, p: np.void, c: np.void, ctx: np.void, out: Array) 
     out[k + 2] = angle(e[0], e[1], e[2], ctx.sun)
 
 
-__all__ = ["BODY_ANGLE_NAMES", "box", "pointing_angles", "rollout_safety_values", "rows", "safety_values"]
+__all__ = ["BODY_ANGLE_NAMES", "box", "pointing_angles", "robust_to_inertia", "rollout_safety_values", "rows",
+           "safety_values"]

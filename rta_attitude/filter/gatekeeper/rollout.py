@@ -65,13 +65,18 @@ def check_margins(p: np.void, c: np.void, out: Array) -> None:
     measured state that keeps them keeps the true h >= 0 over the first sample, where the gate checks
     again. Angles: the attitude error (err_att, with the actuator's drift over a hold); T and E: their
     errors; a rate (or wheel speed) with error e: w_max^2 - (|w| + e)^2 >= 0 needs h >= 2 w_max e + e^2,
-    e = the gyro's (tachometer's) error plus the actuator's (|G_a| err_u,a dt; err_u,a dt)."""
+    e = the gyro's (tachometer's) error plus the actuator's (|G_a| err_u,a dt; err_u,a dt). With an inertia
+    uncertainty the truth departs from the rollout's model over the sample by at most e_a dt in a rate and
+    |e| dt^2 / 2 in the attitude (`inertia_accel_rad_s2`), which the rates' and the cones' margins add."""
+    dt = c.dt_s
+    ia = c.inertia_accel_rad_s2
+    inertia_turn = math.sqrt(ia[0] * ia[0] + ia[1] * ia[1] + ia[2] * ia[2]) * dt * dt / 2.0
     for j in range(c.n_cones):
-        out[j] = c.err_att_rad
+        out[j] = c.err_att_rad + inertia_turn
     out[c.row_temperature] = c.err_T_K
     out[c.row_battery] = c.err_E_J
     for a in range(3):
-        e = c.err_omega_axis_rad_s + abs(p.control_gain[a]) * c.err_u_rad_s2[a] * c.dt_s
+        e = c.err_omega_axis_rad_s + abs(p.control_gain[a]) * c.err_u_rad_s2[a] * dt + ia[a] * dt
         out[c.row_omega + a] = 2.0 * c.omega_max_rad_s * e + e * e
         e = wheel_speed_error(c, a)
         out[c.row_psi + a] = 2.0 * c.psi_limit_rad_s * e + e * e
