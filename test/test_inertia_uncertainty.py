@@ -36,7 +36,7 @@ def _true_inertias(rng: np.random.Generator, n: int) -> np.ndarray:
 
 def test_the_uncertainty_is_checked_at_load() -> None:
     for bad in (-0.01, 0.5, float("nan")):
-        with pytest.raises(ConfigError, match="spacecraft.inertia_uncertainty"):
+        with pytest.raises(ConfigError, match=r"spacecraft\.inertia_uncertainty"):
             config.load(overrides={"spacecraft.inertia_uncertainty": bad})
 
 

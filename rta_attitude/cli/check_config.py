@@ -27,7 +27,12 @@ def run(args: argparse.Namespace) -> int:
     from rta_attitude.cli.options import load
     from rta_attitude.config.schema import EARTH_RADIUS_M
     from rta_attitude.constraints import ConstraintSet
-    from rta_attitude.constraints.margins import derived_margin, sampled_data_margin
+    from rta_attitude.constraints.margins import (
+        derived_margin,
+        inertia_accel_bound,
+        robust_inertia_uncertainty,
+        sampled_data_margin,
+    )
     from rta_attitude.constraints.windows import ramp_start
 
     cfg = load(args)
@@ -36,6 +41,12 @@ def run(args: argparse.Namespace) -> int:
           f"{cfg.substeps} RK4 substeps")
     print(f"  plant model {cfg.spacecraft.model}, filter model {cfg.filter.model}, gatekeeper {cfg.filter.backup_law}")
     print(f"  admissible |u| <= {np.array2string(cfg.u_max_rad_s2, precision=2)} rad/s^2 (x, y, z)")
+    delta = robust_inertia_uncertainty(cfg)
+    if delta > 0.0:
+        worst = inertia_accel_bound(cfg, cfg.filter.model)
+        print(f"  inertia within +-{100 * delta:g} % of the configured: the rows allow up to "
+              f"{', '.join(f'{v:.2g}' for v in worst)} rad/s^2 of angular acceleration error (x, y, z; at the "
+              f"rate and wheel limits)")
     if cfg.delay_substeps:
         print(f"  transport delay {cfg.spacecraft.transport_delay_s:g} s ({cfg.delay_substeps} of {cfg.substeps} "
               f"substeps): the filter plans from the state {cfg.spacecraft.transport_delay_s:g} s after each sample")
