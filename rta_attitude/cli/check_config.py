@@ -47,6 +47,11 @@ def run(args: argparse.Namespace) -> int:
         print(f"  inertia within +-{100 * delta:g} % of the configured: the rows allow up to "
               f"{', '.join(f'{v:.2g}' for v in worst)} rad/s^2 of angular acceleration error (x, y, z; at the "
               f"rate and wheel limits)")
+    if cfg.plant.inertia_kgm2 is not None:
+        off = 100.0 * (np.array(cfg.plant.inertia_kgm2) / cfg.spacecraft.J - 1.0)
+        outside = " (outside it)" if np.max(np.abs(off)) > 100.0 * delta else ""
+        print(f"  the simulated vehicle's inertia (plant.inertia_kgm2) is {', '.join(f'{v:+.3g}' for v in off)} % off "
+              f"the filter's model (x, y, z); the filter allows +-{100 * delta:g} %{outside}")
     if cfg.delay_substeps:
         print(f"  transport delay {cfg.spacecraft.transport_delay_s:g} s ({cfg.delay_substeps} of {cfg.substeps} "
               f"substeps): the filter plans from the state {cfg.spacecraft.transport_delay_s:g} s after each sample")

@@ -434,7 +434,9 @@ def from_parameters(params: Mapping[str, Any], source: str = "<memory>") -> Conf
     root.used.add("plant")
     if "plant" in root.data:  # optional section: the compiled simulator without it
         pl = root.section("plant")
-        plant = PlantOptions(pl.text("simulator", "compiled"))
+        plant = PlantOptions(pl.text("simulator", "compiled"),
+                             pl.vector("inertia_kgm2", 3) if "inertia_kgm2" in pl.data else None)  # type: ignore[arg-type]
+        pl.used.add("inertia_kgm2")
         pl.done()
     sensors = Sensors()
     root.used.add("sensors")

@@ -167,9 +167,15 @@ class PlantOptions:
 
     simulator: str = "compiled"
     """SIMULATORS: `compiled` or `basilisk` (needs `pip install rta_attitude[basilisk]`)."""
+    inertia_kgm2: tuple[float, float, float] | None = None
+    """The simulated vehicle's principal moments where they differ from the filter's model
+    (`spacecraft.inertia_kgm2`, in the same reading: docs/conventions.md), kg m^2; None: the model's. To test
+    the filter against a vehicle it does not know exactly (`spacecraft.inertia_uncertainty`)."""
 
     def __post_init__(self) -> None:
         _choice("plant.simulator", self.simulator, SIMULATORS)
+        for i, j in enumerate(self.inertia_kgm2 or ()):
+            _positive(f"plant.inertia_kgm2[{i}]", j)
         if self.simulator == "basilisk" and importlib.util.find_spec("Basilisk") is None:
             raise ConfigError(BASILISK_MISSING)
 
@@ -883,7 +889,7 @@ class Config:
         Raises:
             ConfigError: unknown simulator, or basilisk without the optional extra.
         """
-        return replace(self, plant=PlantOptions(simulator))
+        return replace(self, plant=replace(self.plant, simulator=simulator))
 
     def with_noise(self, enabled: bool = True, seed: int | None = None) -> Config:
         """A copy with the `sensors:` errors on (or off), optionally with another seed."""

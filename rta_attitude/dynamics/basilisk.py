@@ -169,7 +169,6 @@ class BasiliskPlant:
                               f"{dt!r} s / {self.substeps}")
         self.dt_s = self.h_ns * self.substeps / NS_PER_S
         self.h_s = self.h_ns / NS_PER_S
-        self.J = cfg.spacecraft.J
         self.D = cfg.spacecraft.wheel_inertia_kgm2
         self.u_max = cfg.limits.wheel_accel_max_rad_s2
         env = cfg.environment
@@ -178,6 +177,7 @@ class BasiliskPlant:
         self.frame_rate_rad_s = self.n_rad_s if self.rotating_hill else 0.0
         self.r_orbit_m = (MU_EARTH_M3_S2 / self.n_rad_s**2) ** (1.0 / 3.0)
         self.record = truth_record(cfg)
+        self.J = self.record[0]["inertia_kgm2"].copy()  # the simulated vehicle's (`plant.inertia_kgm2`)
         self.x = x
         self.x[0:4] /= np.linalg.norm(self.x[0:4])
         self.t_ns = 0

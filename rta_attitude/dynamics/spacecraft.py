@@ -34,6 +34,7 @@ paper model's arithmetic is kept operation for operation from the first implemen
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numba
 import numpy as np
@@ -86,16 +87,17 @@ def plant_record(cfg: Config, model: str | None = None) -> NDArray[np.void]:
 
     Args:
         cfg: the configuration.
-        model: PLANT_MODELS name; None: `spacecraft.model` (the simulated plant). The filter's model
-            of the plant is `plant_record(cfg, cfg.filter.model)`.
+        model: PLANT_MODELS name; None: `spacecraft.model` (the simulated plant, with `plant.inertia_kgm2`
+            where set). The filter's model of the plant is `plant_record(cfg, cfg.filter.model)`.
     """
     sc, th, env, pw = cfg.spacecraft, cfg.thermal, cfg.environment, cfg.power
     rec = np.zeros(1, PLANT_DTYPE)
     p = rec[0]
-    p["inertia_kgm2"] = sc.inertia_kgm2
+    true_J = cfg.plant.inertia_kgm2 if model is None else None  # the simulated vehicle's, where it differs
+    p["inertia_kgm2"] = sc.inertia_kgm2 if true_J is None else true_J
     p["wheel_inertia_kgm2"] = sc.wheel_inertia_kgm2
     p["torque_sign"] = sc.torque_sign
-    p["control_gain"] = sc.control_gain
+    p["control_gain"] = sc.control_gain if true_J is None else replace(sc, inertia_kgm2=true_J).control_gain
     p["wheel_gyroscopic"] = 1 if (sc.model if model is None else model) == "gyrostat" else 0
     p["frame_rate_rad_s"] = env.mean_motion_rad_s if env.rotating_hill else 0.0
     p["gravity_gradient"] = 1 if env.gravity_gradient else 0
