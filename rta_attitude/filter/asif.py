@@ -230,7 +230,8 @@ class AsifFilter:
         compile_kernels(cfg)
 
     def reset(self) -> None:
-        """Forget the gatekeeper's committed plan (a new run starts; nothing else carries over)."""
+        """Forget the gatekeeper's committed plan, the drive's state and the answer in flight (a new run starts;
+        nothing else carries over)."""
         _reset_gate(self._ws)
 
     def filter(self, x: Array, u_des: Array, t_s: float = 0.0) -> FilterResult:
@@ -272,6 +273,8 @@ class AsifFilter:
     def filter_batch(self, x: Array, u_des: Array, t_s: float | Array = 0.0) -> FilterResult:
         """Filter a batch: x (N, 19), u_des (N, 3) at times t_s (s; one for all, or (N,)); every state through
         the same compiled call as `filter`, so a run inside a batch and a single run compute the same numbers.
+        The filter's memory (the gatekeeper's plan; with a transport delay, the answer in flight) carries from
+        each state to the next, as from one sample to the next: `reset()` between unrelated batches.
 
         Raises:
             SolverError: a QP failed and the fallback policy is 'raise' (the first such state named).
