@@ -222,6 +222,29 @@ def test_lockstep_with_sensor_errors_publishes_measured_and_true_states(tmp_path
     assert np.allclose(run.h_substep_min, ref.h_substep_min, rtol=1e-9, atol=1e-12)  # re-integrated: D u / D rounds
 
 
+@pytest.mark.slow
+def test_lockstep_with_a_transport_delay_equals_the_in_process_run(tmp_path: Path) -> None:
+    """spacecraft.transport_delay_s:=0.1: the plant node holds the previous command over the delay and the
+    filter node plans from the state at its end, as `simulate` does: the run over DDS equals it bit for bit, and
+    the bag's analysis re-integrates it (the previous command over the delay) to the recorded states."""
+    from rosbags.highlevel import AnyReader
+
+    from rta_attitude.recording.analysis import load_run
+    from rta_attitude.simulation.closed_loop import simulate
+
+    delayed = config.load(overrides={"spacecraft.transport_delay_s": 0.1})
+    ref = simulate(delayed, "paper-example")
+    out = run_nodes(tmp_path, params={"spacecraft.transport_delay_s": 0.1})
+    assert out["plant"].exit_code == 0 and out["plant"].k == ref.steps
+    with AnyReader([out["bag"]]) as reader:
+        states = [np.array(reader.deserialize(raw, c.msgtype).position) for c, _, raw in reader.messages()
+                  if c.topic == _topic(topics.STATE)]
+    assert np.array_equal(np.array(states), ref.x)
+    assert not np.array_equal(ref.x, simulate(CFG, "paper-example").x)  # the delay changed the run
+    run = load_run(out["bag"], delayed)
+    assert np.array_equal(run.x, ref.x) and run.reintegration_residual < 1e-9
+
+
 # ----------------------------------------------------------------------------- real time
 
 

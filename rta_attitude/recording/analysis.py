@@ -486,12 +486,14 @@ def load_run(
         else:
             notes.append(f"{STATE_TRUE_TOPIC} does not cover every step: safety judged on {STATE_TOPIC} (measured)")
 
-    # re-integrate every step with the plant's own integrator: its substeps, exactly
+    # re-integrate every step with the plant's own integrator: its substeps, exactly (with a transport delay,
+    # the previous step's command over the delay, as the plant held it)
     constraints = ConstraintSet(run_cfg)
     x_end = np.empty((n, STATE_SIZE))
     subs = np.empty((run_cfg.substeps, n, STATE_SIZE))
     for k in range(n):
-        x_end[k], subs[:, k] = spacecraft.integrate(x[k], u[k], float(dt_steps[k]), plant, run_cfg.substeps)
+        x_end[k], subs[:, k] = spacecraft.integrate(x[k], u[k], float(dt_steps[k]), plant, run_cfg.substeps,
+                                                    u[k - 1] if k > 0 else None)
     residual = float(np.max(np.abs(x_end - x[1:]) / np.maximum(1.0, np.abs(x[1:]))))
     if residual > RESIDUAL_TOLERANCE:
         notes.append(f"re-integrating the recorded commands does not reproduce the recorded states (largest "
