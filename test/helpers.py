@@ -106,3 +106,19 @@ def sun_safe_state(theta_S: float, E: float, T_K: float = 280.0) -> np.ndarray:
     x = np.zeros(19)
     x[0:4], x[10], x[11], x[12] = q, T_K, E, theta_S
     return x
+
+
+def hard_minimum(plant_cfg: Config, filter_cfg: Config, x0: np.ndarray, duration_s: float = 2000.0) -> float:
+    """One run from x0 (u_des = 0) on plant_cfg's plant (its simulator, inertia, delay), filtered by filter_cfg's
+    filter: the smallest h of plant_cfg's hard constraints at any substep (negative: one broke)."""
+    from rta_attitude.config.schema import Scenario
+    from rta_attitude.dynamics.plant import make_plant
+    from rta_attitude.filter.asif import AsifFilter
+    from rta_attitude.simulation.closed_loop import run_stepped
+
+    steps = round(duration_s / filter_cfg.filter.sample_time_s)
+    with make_plant(plant_cfg, x0) as plant:
+        out = run_stepped(filter_cfg, Scenario("run", "", duration_s, x0, controller="none"), steps, plant,
+                          AsifFilter(filter_cfg))
+    hard = [i for i, n in enumerate(plant_cfg.constraint_names) if n not in plant_cfg.slacked_constraints]
+    return float(out.h_sub[:, :, hard].min())

@@ -7,6 +7,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from helpers import hard_minimum
 
 from rta_attitude import config
 from rta_attitude.constraints import ConstraintSet
@@ -118,28 +119,12 @@ def test_the_simulated_vehicle_can_differ_from_the_filters_model() -> None:
     np.testing.assert_allclose(np.diag(hub), J + CFG.spacecraft.wheel_inertia_kgm2, rtol=1e-15)
 
 
-def _hard_minimum(filter_cfg: config.Config, J: np.ndarray, run: int) -> float:
-    """Run `run` of seed 7's 1,000 (u_des = 0, 2,000 s) on a compiled plant with inertia J, filtered with
-    filter_cfg's model: the smallest hard h at any substep."""
-    from rta_attitude.config.schema import Scenario
-    from rta_attitude.dynamics.plant import make_plant
-    from rta_attitude.filter.asif import AsifFilter
-    from rta_attitude.simulation.closed_loop import run_stepped
-
-    plant_cfg = config.load(overrides={"plant.inertia_kgm2": [float(v) for v in J]})
-    x0 = sample_initial_states(1000, 7, CFG)[0][run]
-    with make_plant(plant_cfg, x0) as plant:
-        out = run_stepped(filter_cfg, Scenario("j", "", 2000.0, x0, controller="none"), 2000, plant,
-                          AsifFilter(filter_cfg))
-    hard = [i for i, n in enumerate(CFG.constraint_names) if n not in CFG.slacked_constraints]
-    return float(out.h_sub[:, :, hard].min())
-
-
 def test_a_vehicle_one_percent_lighter_breaks_runs_the_robust_rows_keep() -> None:
     """The vehicle's moments are 1 % below the model's (its torques turn it 1 % faster). Runs 5 and 29 of seed 7
     (large momentum) lose the battery (~2.5 kJ under E_min) under the filter that trusts its model, and keep
     every hard constraint under the filter that allows +-1 % (docs/conventions.md, "Inertia")."""
-    J = CFG.spacecraft.J * 0.99
+    lighter = config.load(overrides={"plant.inertia_kgm2": [float(v) for v in CFG.spacecraft.J * 0.99]})
+    x0 = sample_initial_states(1000, 7, CFG)[0]
     for run in (5, 29):
-        assert _hard_minimum(CFG, J, run) < 0.0
-        assert _hard_minimum(ROBUST, J, run) >= 0.0
+        assert hard_minimum(lighter, CFG, x0[run]) < 0.0
+        assert hard_minimum(lighter, ROBUST, x0[run]) >= 0.0

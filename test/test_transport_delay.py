@@ -9,9 +9,9 @@ import sys
 
 import numpy as np
 import pytest
+from helpers import hard_minimum
 
 from rta_attitude import config
-from rta_attitude.config.schema import Scenario
 from rta_attitude.constraints.base import measurement_errors
 from rta_attitude.dynamics.plant import CompiledPlant, make_plant
 from rta_attitude.dynamics.sensors import Instruments
@@ -19,7 +19,6 @@ from rta_attitude.dynamics.state import ENERGY, OMEGA, PSI, TEMP
 from rta_attitude.errors import ConfigError
 from rta_attitude.filter.asif import AsifFilter
 from rta_attitude.montecarlo.sampling import sample_initial_states
-from rta_attitude.simulation.closed_loop import run_stepped
 
 CFG = config.load()
 DELAY_S = 0.1
@@ -94,17 +93,6 @@ def test_the_filter_predicts_the_plants_state_at_the_delays_end(simulator: str) 
     assert worst < (1e-15 if simulator == "compiled" else 1e-9), worst
 
 
-def _hard_minimum(plant_cfg: config.Config, filter_cfg: config.Config, run: int) -> float:
-    """Seed 7's run (u_des = 0) for 2,000 s on plant_cfg's plant, filtered by filter_cfg's filter: the smallest
-    hard-constraint h at any substep, each h scaled by its limit's size (rad, K / T_max, J / E_min, ...)."""
-    x0 = sample_initial_states(5000, 7, plant_cfg)[0][run]
-    scenario = Scenario("delay", "", 2000.0, x0, controller="none")
-    with make_plant(plant_cfg, x0) as plant:
-        out = run_stepped(filter_cfg, scenario, 2000, plant, AsifFilter(filter_cfg))
-    hard = [i for i, n in enumerate(plant_cfg.constraint_names) if n not in plant_cfg.slacked_constraints]
-    return float(out.h_sub[:, :, hard].min())
-
-
 @pytest.mark.parametrize("simulator", ["compiled", "basilisk"])
 def test_a_filter_that_plans_on_the_delay_keeps_runs_an_unaware_one_breaks(simulator: str) -> None:
     """The plant delays every command by 0.1 s. A filter that plans as if it did not (its rows, its
@@ -114,8 +102,9 @@ def test_a_filter_that_plans_on_the_delay_keeps_runs_an_unaware_one_breaks(simul
     if simulator == "basilisk":
         pytest.importorskip("Basilisk")
     plant_cfg = DELAYED.with_simulator(simulator)
-    unaware = [_hard_minimum(plant_cfg, CFG.with_simulator(simulator), run) for run in RUNS]
-    aware = [_hard_minimum(plant_cfg, plant_cfg, run) for run in RUNS]
+    x0 = sample_initial_states(5000, 7, plant_cfg)[0]
+    unaware = [hard_minimum(plant_cfg, CFG.with_simulator(simulator), x0[run]) for run in RUNS]
+    aware = [hard_minimum(plant_cfg, plant_cfg, x0[run]) for run in RUNS]
     assert min(unaware) < 0.0, unaware
     assert min(aware) >= 0.0, aware
 

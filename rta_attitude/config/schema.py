@@ -767,18 +767,22 @@ class Config:
         if delay >= dt:
             raise ConfigError(f"spacecraft.transport_delay_s must be shorter than filter.sample_time_s ({dt:g} s), "
                               f"got {delay:g}")
-        if round(delay / h) > MAX_BACKUP_SUBSTEPS:
+        if self.delay_substeps > MAX_BACKUP_SUBSTEPS:
             raise ConfigError(f"spacecraft.transport_delay_s must be at most {MAX_BACKUP_SUBSTEPS} RK4 substeps "
                               f"({MAX_BACKUP_SUBSTEPS * h:g} s here), got {delay:g}")
-        if abs(delay / h - round(delay / h)) > 1e-9:
+        if abs(self._delay_in_substeps - self.delay_substeps) > 1e-9:
             raise ConfigError(f"spacecraft.transport_delay_s must be a whole number of RK4 substeps "
                               f"(filter.sample_time_s / integrator.substeps = {h:g} s; raise integrator.substeps "
                               f"to refine it), got {delay:g}")
 
     @property
+    def _delay_in_substeps(self) -> float:
+        return self.spacecraft.transport_delay_s * self.substeps / self.filter.sample_time_s
+
+    @property
     def delay_substeps(self) -> int:
         """The RK4 substeps of a sample the previous command still holds (`spacecraft.transport_delay_s`)."""
-        return round(self.spacecraft.transport_delay_s * self.substeps / self.filter.sample_time_s)
+        return round(self._delay_in_substeps)
 
     @property
     def eclipse_energy_J(self) -> float:

@@ -298,11 +298,20 @@ def inertia_error(c: np.void, p: np.void, w: Array, drift: Array, a: int) -> flo
     k = c.inertia_error_gain
     if k == 0.0:
         return 0.0
-    J = p.inertia_kgm2
     b, d = (a + 1) % 3, (a + 2) % 3
-    gg = 1.5 * 3.0 * p.mean_motion_rad_s * p.mean_motion_rad_s if p.gravity_gradient else 0.0
-    return k * (abs(drift[a]) + abs(p.control_gain[a]) * c.u_max_rad_s2[a]
-                + (abs(w[b] * w[d]) + gg) * (J[b] + J[d]) / J[a])
+    return inertia_error_bound(k, abs(drift[a]) + abs(p.control_gain[a]) * c.u_max_rad_s2[a], abs(w[b] * w[d]),
+                               p.mean_motion_rad_s, p.gravity_gradient != 0, p.inertia_kgm2, a)
+
+
+@numba.njit(**LEAF)
+def inertia_error_bound(k: float, accel: float, w_bc: float, n: float, gravity_gradient: bool, J: Array,
+                        a: int) -> float:
+    """`inertia_error`'s formula, k (|omega_dot_a| + (|w_b w_c| + 3 n^2 / 2) (J_b + J_c) / J_a), from a bound
+    accel on |omega_dot_a| and one w_bc on |w_b w_c| (the gravity gradient's term where it is modelled): at a
+    state (`inertia_error`) or at the worst the rows allow (`margins.inertia_accel_bound`)."""
+    b, d = (a + 1) % 3, (a + 2) % 3
+    gg = 1.5 * 3.0 * n * n if gravity_gradient else 0.0
+    return k * (accel + (w_bc + gg) * (J[b] + J[d]) / J[a])
 
 
 @numba.njit(**LEAF, inline="always")
@@ -383,5 +392,5 @@ def nan_min(a: float, b: float) -> float:
 __all__ = [
     "CONE_DTYPE", "CONSTRAINT_DTYPE", "GAIN_DTYPE", "MAX_CONES", "MAX_ROWS", "TABLE_DTYPE", "ZOH_CHECKS", "ZOH_ROWS",
     "angle_rate_error", "constraint_record", "drive_lag", "hard", "lag_response", "measurement_errors", "nan_max",
-    "inertia_error", "nan_min", "predicted_errors", "second_order", "speed_limit_row",
+    "inertia_error", "inertia_error_bound", "nan_min", "predicted_errors", "second_order", "speed_limit_row",
 ]  # fmt: skip

@@ -31,6 +31,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from rta_attitude.config.schema import Config, PointingConstraint
+from rta_attitude.constraints.base import inertia_error_bound
 
 
 def axis_rate_bounds(cfg: Config, model: str, delta: float = 0.0) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
@@ -78,13 +79,9 @@ def inertia_accel_bound(cfg: Config, model: str) -> NDArray[np.float64]:
     delta = robust_inertia_uncertainty(cfg)
     J, env = cfg.spacecraft.J, cfg.environment
     A, _ = axis_rate_bounds(cfg, model)
-    gg = 1.5 * 3.0 * env.mean_motion_rad_s**2 if env.gravity_gradient else 0.0
     w2 = cfg.limits.omega_max_rad_s**2
-    out = np.empty(3)
-    for a in range(3):
-        b, c = (a + 1) % 3, (a + 2) % 3
-        out[a] = delta / (1.0 - delta) * (A[a] + (w2 + gg) * (J[b] + J[c]) / J[a])
-    return out
+    return np.array([inertia_error_bound(delta / (1.0 - delta), float(A[a]), w2, env.mean_motion_rad_s,
+                                         env.gravity_gradient, J, a) for a in range(3)])
 
 
 def derived_margin(cfg: Config, cone: PointingConstraint, model: str) -> float:

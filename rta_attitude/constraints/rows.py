@@ -72,6 +72,8 @@ def robust_to_inertia(ctx: np.void, c: np.void, t: np.void) -> None:
         for a in range(3):
             worst += abs(t.gain[i, a] / G[a]) * e[a]
         t.drift[i] -= worst
+
+
 @numba.njit(**LEAF)
 def box(ctx: np.void, x: Array, c: np.void, t: np.void, lo0: Array, hi0: Array) -> None:
     """t.lo, t.hi (3,), rad/s^2: what the drive can hold (lo0, hi0: `rows`), and in the robust preset the

@@ -10,8 +10,6 @@
 
 from __future__ import annotations
 
-import math
-
 import numba
 import numpy as np
 from numpy.typing import NDArray
@@ -21,6 +19,7 @@ from rta_attitude.constraints.base import (
 )
 from rta_attitude.dynamics.spacecraft import delay_time, rk4_hold, torque_round_trip
 from rta_attitude.dynamics.state import STATE_SIZE
+from rta_attitude.filter.qp import usable_quaternion_norm
 from rta_attitude.jit import LEAF
 
 Array = NDArray[np.float64]
@@ -69,17 +68,9 @@ def delayed_state(x: Array, f: np.void, g: np.void) -> bool:
     the filter's model, into g.x_delay. The plant switches commands on the same substep grid
     (`spacecraft.rk4_delayed`), so where the model is the plant's and the state exact the prediction is the
     plant's state. Returns False (nothing written) without a delay, or for a state the filter will refuse
-    (non-finite, or a quaternion far from unit: `qp.prepare` answers it)."""
+    (`qp.usable_quaternion_norm`: `qp.prepare` answers it)."""
     m = f.plant.delay_substeps
-    if m == 0:
-        return False
-    n2 = 0.0
-    for i in range(STATE_SIZE):
-        if not math.isfinite(x[i]):
-            return False
-    for i in range(4):
-        n2 += x[i] * x[i]
-    if not 0.25 < n2 < 2.25:
+    if m == 0 or usable_quaternion_norm(x) == 0.0:
         return False
     b = f.backup
     rk4_hold(x, g.inflight, delay_time(b.dt_s, b.substeps, m), m, f.plant, g.subs[:m], g.work)

@@ -78,20 +78,27 @@ NO_LEVEL = -1
 
 
 @numba.njit(**LEAF)
+def usable_quaternion_norm(x: Array) -> float:
+    """|q| of the state x (19,) where the filter can use it (every entry finite, |q| within (0.5, 1.5), so
+    normalising it is a correction, not a guess); 0 where it cannot (the call is answered as invalid)."""
+    for i in range(STATE_SIZE):
+        if not math.isfinite(x[i]):
+            return 0.0
+    q_norm = math.sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2] + x[3] * x[3])
+    return q_norm if 0.5 < q_norm < 1.5 else 0.0
+
+
+@numba.njit(**LEAF)
 def prepare(x_in: Array, u_des: Array, t_s: float, f: np.void, ws: np.void, r: np.void) -> tuple[bool, bool, bool]:
     """Validity, rows, box and the fast-path test of one state at time t_s. Returns (valid, u_des finite, QP
     needed). For an invalid state the rows are zero and the box is U."""
     x, t = ws.x, ws.table
     c = f.constraints
     n = c.n_rows
-    valid = True
     for i in range(STATE_SIZE):
         x[i] = x_in[i]
-        if not math.isfinite(x[i]):
-            valid = False
-    q_norm = math.sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2] + x[3] * x[3]) if valid else 0.0
-    if not (0.5 < q_norm < 1.5):
-        valid = False
+    q_norm = usable_quaternion_norm(x)
+    valid = q_norm > 0.0
     if valid:
         for i in range(4):
             x[i] = x[i] / q_norm
