@@ -122,3 +122,25 @@ def hard_minimum(plant_cfg: Config, filter_cfg: Config, x0: np.ndarray, duration
                           AsifFilter(filter_cfg))
     hard = [i for i, n in enumerate(plant_cfg.constraint_names) if n not in plant_cfg.slacked_constraints]
     return float(out.h_sub[:, :, hard].min())
+
+
+def rotation(angle_deg: float, axis: tuple[float, float, float]) -> np.ndarray:
+    """The rotation matrix (3, 3) of angle_deg about axis (Rodrigues' formula)."""
+    k = np.asarray(axis, dtype=float) / np.linalg.norm(axis)
+    K = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
+    a = np.radians(angle_deg)
+    return np.eye(3) + np.sin(a) * K + (1.0 - np.cos(a)) * K @ K
+
+
+def turned_vehicle(cfg: Config, angle_deg: float, axis: tuple[float, float, float] = (1.0, 2.0, 3.0)
+                   ) -> tuple[Config, np.ndarray]:
+    """cfg's vehicle with its principal axes turned by R = rotation(angle_deg, axis) away from the body axes:
+    J_body = R diag(J) R^T, given as the tensor's diagonal and products (`spacecraft.products_of_inertia_kgm2`).
+    Returns (the configuration, R)."""
+    import dataclasses
+
+    R = rotation(angle_deg, axis)
+    J = R @ np.diag(cfg.spacecraft.J) @ R.T
+    sc = dataclasses.replace(cfg.spacecraft, inertia_kgm2=(J[0, 0], J[1, 1], J[2, 2]),
+                             products_of_inertia_kgm2=(J[0, 1], J[0, 2], J[1, 2]))
+    return dataclasses.replace(cfg, spacecraft=sc), R

@@ -41,6 +41,12 @@ def run(args: argparse.Namespace) -> int:
           f"{cfg.substeps} RK4 substeps")
     print(f"  plant model {cfg.spacecraft.model}, filter model {cfg.filter.model}, gatekeeper {cfg.filter.backup_law}")
     print(f"  admissible |u| <= {np.array2string(cfg.u_max_rad_s2, precision=2)} rad/s^2 (x, y, z)")
+    sc = cfg.spacecraft
+    if not sc.principal:
+        moments, axes = np.linalg.eigh(sc.inertia_matrix)
+        off = np.degrees(np.arccos(np.minimum(1.0, np.abs(axes).max(axis=0))))  # each axis to its nearest body axis
+        print(f"  products of inertia: principal moments {', '.join(f'{m:.6g}' for m in moments)} kg m^2, their axes "
+              f"{', '.join(f'{a:.3g}' for a in off)} deg from the nearest body axes; every wheel turns every axis")
     delta = robust_inertia_uncertainty(cfg)
     if delta > 0.0:
         worst = inertia_accel_bound(cfg, cfg.filter.model)

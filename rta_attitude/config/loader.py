@@ -214,8 +214,8 @@ class _Section:
             raise ConfigError(f"{self.where}.{key} must be a string, got {value!r}")
         return value
 
-    def vector(self, key: str, size: int | None = None) -> tuple[float, ...]:
-        value = self._get(key, _REQUIRED)
+    def vector(self, key: str, size: int | None = None, default: tuple[float, ...] | None = None) -> tuple[float, ...]:
+        value = self._get(key, _REQUIRED if default is None else list(default))
         ok = isinstance(value, list) and all(
             isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in value)
         if not ok or (size is not None and len(value) != size):
@@ -348,7 +348,8 @@ def from_parameters(params: Mapping[str, Any], source: str = "<memory>") -> Conf
     sc = root.section("spacecraft")
     spacecraft = Spacecraft(sc.vector("inertia_kgm2", 3), sc.number("wheel_inertia_kgm2"),  # type: ignore[arg-type]
                             sc.number("torque_sign", 1.0), sc.text("model", "gyrostat"),
-                            sc.number("inertia_uncertainty", 0.0), sc.number("transport_delay_s", 0.0))
+                            sc.number("inertia_uncertainty", 0.0), sc.number("transport_delay_s", 0.0),
+                            sc.vector("products_of_inertia_kgm2", 3, (0.0, 0.0, 0.0)))  # type: ignore[arg-type]
     sc.done()
     ev = root.section("environment")
     environment = Environment(

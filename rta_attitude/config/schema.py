@@ -13,6 +13,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from numpy.typing import NDArray
 
+from rta_attitude.config.inertia import check_inertia, euler_bound, inertia_matrix, is_principal, principal_moments
 from rta_attitude.errors import ConfigError
 
 FIXED_GROUPS: tuple[str, ...] = ("temperature", "battery", "omega", "psi")
@@ -116,10 +117,11 @@ def _choice(where: str, value: str, allowed: tuple[str, ...]) -> None:
 
 @dataclass(frozen=True)
 class Spacecraft:
-    """Rigid body with three reaction wheels on its principal axes."""
+    """Rigid body with three reaction wheels on its body axes."""
 
     inertia_kgm2: tuple[float, float, float]
-    """Principal moments J1, J2, J3, kg m^2."""
+    """The inertia tensor's diagonal J_xx, J_yy, J_zz in body axes (the principal moments where the products are
+    zero), kg m^2."""
     wheel_inertia_kgm2: float
     """D, wheel spin-axis inertia, kg m^2."""
     torque_sign: float = 1.0
@@ -135,6 +137,9 @@ class Spacecraft:
     command over [t_k + delay, t_k+1 + delay), the previous command before. Part of the plant and of the
     filter's model (docs/delay.md); 0 to less than one sample, a whole number of RK4 substeps
     (`Config.delay_substeps`)."""
+    products_of_inertia_kgm2: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    """The tensor's off-diagonal entries J_xy, J_xz, J_yz (J_xy = -int x y dm), kg m^2 (`config.inertia`); zero:
+    the body axes are principal."""
 
     def __post_init__(self) -> None:
         _choice("spacecraft.model", self.model, PLANT_MODELS)
@@ -148,16 +153,46 @@ class Spacecraft:
         _positive("spacecraft.wheel_inertia_kgm2", self.wheel_inertia_kgm2)
         if self.torque_sign not in (1.0, -1.0):
             raise ConfigError(f"spacecraft.torque_sign must be 1.0 or -1.0, got {self.torque_sign!r}")
+        check_inertia(self.inertia_matrix, "spacecraft.inertia_kgm2 with spacecraft.products_of_inertia_kgm2")
+        if not self.principal and self.inertia_uncertainty > 0.0:
+            raise ConfigError("spacecraft.inertia_uncertainty is for principal moments: set it to 0 with "
+                              "spacecraft.products_of_inertia_kgm2 (docs/conventions.md, \"Inertia\")")
 
     @property
     def J(self) -> NDArray[np.float64]:
-        """Principal inertia as an array (3,), kg m^2."""
+        """The tensor's diagonal as an array (3,), kg m^2: the principal moments where `principal`."""
         return np.array(self.inertia_kgm2, dtype=float)
 
     @property
+    def principal(self) -> bool:
+        """The body axes are principal (no products of inertia): the kernels' principal-axis arithmetic."""
+        return is_principal(self.products_of_inertia_kgm2)
+
+    @property
+    def inertia_matrix(self) -> NDArray[np.float64]:
+        """The inertia tensor (3, 3) in body axes, kg m^2."""
+        return inertia_matrix(self.inertia_kgm2, self.products_of_inertia_kgm2)
+
+    @property
+    def principal_moments(self) -> NDArray[np.float64]:
+        """The tensor's eigenvalues (3,), kg m^2: the diagonal itself where `principal`."""
+        return self.J if self.principal else principal_moments(self.inertia_matrix)
+
+    @property
     def control_gain(self) -> NDArray[np.float64]:
-        """d omega_dot / d u = sign D / J_i (3,), 1/s^2 per rad/s^2."""
+        """d omega_dot_i / d u_i = sign D / J_i (3,), 1/s^2 per rad/s^2, where `principal`."""
         return self.torque_sign * self.wheel_inertia_kgm2 / self.J
+
+    @property
+    def control_matrix(self) -> NDArray[np.float64]:
+        """G = d omega_dot / d u = sign D J^-1 (3, 3), 1/s^2 per rad/s^2 (diag(control_gain) where `principal`)."""
+        if self.principal:
+            return np.diag(self.control_gain)
+        return self.torque_sign * self.wheel_inertia_kgm2 * np.linalg.inv(self.inertia_matrix)
+
+    def control_times(self, v: NDArray[np.float64]) -> NDArray[np.float64]:
+        """G v (3,): the body's angular acceleration of wheel accelerations v, rad/s^2."""
+        return self.control_gain * v if self.principal else self.control_matrix @ v
 
 
 @dataclass(frozen=True)
@@ -860,12 +895,20 @@ class Config:
     def u_max_rad_s2(self) -> NDArray[np.float64]:
         """Bounds of the admissible set U (3,), rad/s^2: actuator and angular-acceleration limits.
 
-        |u_i| <= min(psi_dot_max, (J_i omega_dot_max - |J_j - J_k| omega_max^2) / D).
+        |u_i| <= min(psi_dot_max, (J_i omega_dot_max - |J_j - J_k| omega_max^2) / D) on principal axes; with
+        products of inertia one bound for every wheel, |u| <= (omega_dot_max - E_i) / sum_j |G_ij| for each axis i,
+        E = |J^-1| e with e_j >= |(w x J w)_j| at |w_k| <= omega_max (`config.inertia.euler_bound`).
         """
-        J = self.spacecraft.J
-        L = self.limits
+        sc, L = self.spacecraft, self.limits
+        if not sc.principal:
+            J, w = sc.inertia_matrix, L.omega_max_rad_s
+            e = np.array([euler_bound(J, w, w, w, j) for j in range(3)])
+            E = np.abs(np.linalg.inv(J)) @ e
+            per_axis = (L.omega_dot_max_rad_s2 - E) / np.abs(sc.control_matrix).sum(axis=1)
+            return np.full(3, min(L.wheel_accel_max_rad_s2, float(per_axis.min())))
+        J = sc.J
         dJ = np.abs(np.array([J[1] - J[2], J[2] - J[0], J[0] - J[1]]))
-        accel = (J * L.omega_dot_max_rad_s2 - dJ * L.omega_max_rad_s**2) / self.spacecraft.wheel_inertia_kgm2
+        accel = (J * L.omega_dot_max_rad_s2 - dJ * L.omega_max_rad_s**2) / sc.wheel_inertia_kgm2
         return np.minimum(L.wheel_accel_max_rad_s2, accel)
 
     @property

@@ -34,6 +34,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from rta_attitude.constraints.base import ZOH_CHECKS, speed_limit_row
+from rta_attitude.dynamics.spacecraft import euler_bound, euler_rate_bound
 from rta_attitude.jit import LEAF
 
 
@@ -49,6 +50,9 @@ def row(ctx: np.void, x: NDArray[np.float64], c: np.void, axis: int, t: np.void)
     i = c.row_omega + axis
     speed_limit_row(t, i, axis, x[4 + axis], c.omega_max_rad_s, c.err_omega_axis_rad_s, ctx.control_gain[axis],
                     ctx.omega_drift[axis], c.gains[i])
+    if not ctx.principal:  # omega_dot_axis = drift + G_axis . u: every wheel turns every axis
+        for a in range(3):
+            t.gain[i, a] = -2.0 * x[4 + axis] * ctx.control_matrix[axis, a]
 
 
 @numba.njit(**LEAF)
@@ -97,7 +101,10 @@ def zoh_rows(ctx: np.void, x: NDArray[np.float64], c: np.void, p: np.void, t: np
     """The coupled zero-order-hold rate rows of state x into t (zoh_rows, zoh_axis, zoh_gain, zoh_lo,
     zoh_hi): in the robust preset, with the rate constraint on and the gyrostat model (p); else none."""
     t.zoh_rows = 0
-    if not (c.robust and p.wheel_gyroscopic and c.gains[c.row_omega].enabled):
+    if not (c.robust and (p.wheel_gyroscopic or not p.principal) and c.gains[c.row_omega].enabled):
+        return
+    if not p.principal:
+        _general_zoh_rows(ctx, x, c, p, t)
         return
     dt = c.dt_s
     J = p.inertia_kgm2
@@ -160,6 +167,98 @@ def zoh_rows(ctx: np.void, x: NDArray[np.float64], c: np.void, p: np.void, t: np
             t.zoh_axis[row] = i
             for a in range(3):
                 t.zoh_gain[row, a] = tau * S[i, a] * G[a]
+            t.zoh_lo[row] = -slack - free
+            t.zoh_hi[row] = slack - free
+            row += 1
+    t.zoh_rows = row
+
+
+@numba.njit(**LEAF)
+def _general_zoh_rows(ctx: np.void, x: NDArray[np.float64], c: np.void, p: np.void, t: np.void) -> None:
+    """`zoh_rows` with products of inertia (and with either plant model: every wheel turns every axis, so the
+    per-axis interval no longer applies). The same construction with the tensor J, J^-1 and the full G:
+
+        Omega = s D J^-1 [. x psi]   (0 in the paper's model)
+        A_i >= |omega_dot_i| = sum_j |J^-1_ij| (E_j + D |w x psi|_j + k E1_j / 2) + sum_j |G_ij| U_j
+        B_i >= |omega_ddot_i|, L_i >= |de_i/dt|: J^-1 applied the same way to the rates of those torques
+        |r_i| <= sqrt((J^-1)_ii sum_ab |J_ab| L_a L_b) tau^2 / 2   (E keeps w^T J w: J Omega is skew)
+
+    E_j, E'_j: `config.inertia.euler_bound`, `euler_rate_bound` (|w x J w|_j and its rate); the gravity
+    gradient's 3 n^2 r x J r with |r_k| <= 1 (E1: the Euler bound at unit rates), its rate 2 w_rel E1."""
+    dt = c.dt_s
+    J, Ji, G = p.inertia_matrix, p.inertia_inverse, ctx.control_matrix
+    gyro = p.wheel_gyroscopic != 0
+    D = p.wheel_inertia_kgm2 if gyro else 0.0
+    sD = p.torque_sign * D
+    U = c.u_max_rad_s2
+    w_max = c.omega_max_rad_s
+    p0, p1, p2 = (x[7], x[8], x[9]) if gyro else (0.0, 0.0, 0.0)
+    # Omega w = s D J^-1 (w x psi); w x psi = C w
+    Om = ctx.zoh_omega
+    for i in range(3):
+        Om[i, 0] = sD * (-Ji[i, 1] * p2 + Ji[i, 2] * p1)
+        Om[i, 1] = sD * (Ji[i, 0] * p2 - Ji[i, 2] * p0)
+        Om[i, 2] = sD * (-Ji[i, 0] * p1 + Ji[i, 1] * p0)
+    w = ctx.omega
+    e0 = (ctx.omega_drift[0] - (Om[0, 0] * w[0] + Om[0, 1] * w[1] + Om[0, 2] * w[2]),
+          ctx.omega_drift[1] - (Om[1, 0] * w[0] + Om[1, 1] * w[1] + Om[1, 2] * w[2]),
+          ctx.omega_drift[2] - (Om[2, 0] * w[0] + Om[2, 1] * w[1] + Om[2, 2] * w[2]))
+    ew = c.err_omega_rad_s
+    W = (max(abs(w[0]) + ew, w_max), max(abs(w[1]) + ew, w_max), max(abs(w[2]) + ew, w_max))
+    P = (abs(p0) + U[0] * dt, abs(p1) + U[1] * dt, abs(p2) + U[2] * dt) if gyro else (0.0, 0.0, 0.0)
+    k = 3.0 * p.mean_motion_rad_s * p.mean_motion_rad_s if p.gravity_gradient else 0.0
+    w_rel = math.sqrt(W[0] * W[0] + W[1] * W[1] + W[2] * W[2]) + abs(p.frame_rate_rad_s)
+    # torque bounds (body, N m) then through J^-1
+    tq = ctx.zoh_next[0]  # scratch rows (no allocation; `_hold_series` reuses them after)
+    for j in range(3):
+        b, d = (j + 1) % 3, (j + 2) % 3
+        tq[j] = euler_bound(J, W[0], W[1], W[2], j) + D * (W[b] * P[d] + W[d] * P[b]) + k * euler_bound(
+            J, 1.0, 1.0, 1.0, j)
+    A0 = A1 = A2 = 0.0
+    for j in range(3):
+        A0 += abs(Ji[0, j]) * tq[j] + abs(G[0, j]) * U[j]
+        A1 += abs(Ji[1, j]) * tq[j] + abs(G[1, j]) * U[j]
+        A2 += abs(Ji[2, j]) * tq[j] + abs(G[2, j]) * U[j]
+    rb = ctx.zoh_next[1]  # |rate of the torque| with the wheel term (B) and without its frozen part (L)
+    rl = ctx.zoh_next[2]
+    A = (A0, A1, A2)
+    for j in range(3):
+        b, d = (j + 1) % 3, (j + 2) % 3
+        eul = euler_rate_bound(J, W[0], W[1], W[2], A0, A1, A2, j) + 2.0 * k * w_rel * euler_bound(J, 1.0, 1.0, 1.0, j)
+        rb[j] = eul + D * (A[b] * P[d] + W[b] * U[d] + A[d] * P[b] + W[d] * U[b])
+        rl[j] = eul + D * (W[b] * U[d] + W[d] * U[b])
+    B0 = abs(Ji[0, 0]) * rb[0] + abs(Ji[0, 1]) * rb[1] + abs(Ji[0, 2]) * rb[2]
+    B1 = abs(Ji[1, 0]) * rb[0] + abs(Ji[1, 1]) * rb[1] + abs(Ji[1, 2]) * rb[2]
+    B2 = abs(Ji[2, 0]) * rb[0] + abs(Ji[2, 1]) * rb[1] + abs(Ji[2, 2]) * rb[2]
+    Bs = (B0, B1, B2)
+    L0 = abs(Ji[0, 0]) * rl[0] + abs(Ji[0, 1]) * rl[1] + abs(Ji[0, 2]) * rl[2]
+    L1 = abs(Ji[1, 0]) * rl[0] + abs(Ji[1, 1]) * rl[1] + abs(Ji[1, 2]) * rl[2]
+    L2 = abs(Ji[2, 0]) * rl[0] + abs(Ji[2, 1]) * rl[1] + abs(Ji[2, 2]) * rl[2]
+    Ls = (L0, L1, L2)
+    energy = 0.0
+    for a in range(3):
+        for b in range(3):
+            energy += abs(J[a, b]) * Ls[a] * Ls[b]
+    limit = (1.0 - c.zoh_margin) * w_max
+    ew_axis, eu = c.err_omega_axis_rad_s, c.err_u_rad_s2
+    S = ctx.zoh_sum
+    row = 0
+    for m in range(ZOH_CHECKS):
+        tau = ZOH_TIMES[m] * dt
+        h = ZOH_SPACING[m] * dt
+        _hold_series(ctx, tau)
+        for i in range(3):
+            ewi = w[i]
+            robust = 0.0
+            for a in range(3):
+                oms = tau * (Om[i, 0] * S[0, a] + Om[i, 1] * S[1, a] + Om[i, 2] * S[2, a])
+                ewi += oms * w[a]
+                phig = tau * (S[i, 0] * G[0, a] + S[i, 1] * G[1, a] + S[i, 2] * G[2, a])  # (Phi G)_ia
+                robust += abs((1.0 if a == i else 0.0) + oms) * ew_axis + abs(phig) * eu[a]
+                t.zoh_gain[row, a] = phig
+            free = ewi + tau * (S[i, 0] * e0[0] + S[i, 1] * e0[1] + S[i, 2] * e0[2])
+            slack = limit - math.sqrt(energy * Ji[i, i]) * 0.5 * tau * tau - Bs[i] * h * h / 8.0 - robust
+            t.zoh_axis[row] = i
             t.zoh_lo[row] = -slack - free
             t.zoh_hi[row] = slack - free
             row += 1

@@ -223,7 +223,7 @@ def measurement_errors(cfg: Config) -> dict[str, float | NDArray[np.float64]]:
     err_u = 2.0 * cfg.u_max_rad_s2 * lag + b * s.torque_noise_rad_s2
     gyro = b * math.sqrt(s.gyro_noise_rad_s**2 + s.gyro_bias_rad_s**2
                          + s.gyro_bias_walk_rad_s_sqrt_s**2 * s.bias_horizon_s)
-    drift = float(np.linalg.norm(cfg.spacecraft.control_gain * err_u)) * dt * dt / 2
+    drift = float(np.linalg.norm(cfg.spacecraft.control_times(err_u))) * dt * dt / 2
     errors: dict[str, float | NDArray[np.float64]] = {
         "err_att_rad": math.sqrt(3.0) * b * s.attitude_noise_rad + drift,
         "err_omega_rad_s": math.sqrt(3.0) * gyro,
@@ -256,14 +256,14 @@ def predicted_errors(cfg: Config, e: dict[str, Any]) -> dict[str, float]:
     taken at the delay's end)."""
     sc, L = cfg.spacecraft, cfg.limits
     d = sc.transport_delay_s
-    J, D = sc.J, sc.wheel_inertia_kgm2
+    J, D = sc.principal_moments, sc.wheel_inertia_kgm2
     gyrostat = cfg.filter.model == "gyrostat"
     w = math.sqrt(3.0) * L.omega_max_rad_s
     psi = math.sqrt(3.0) * L.psi_max_rad_s if gyrostat else 0.0
     K = (2.0 * float(J.max()) * w + D * psi) / float(J.min())
     coupling = D * w / float(J.min()) if gyrostat else 0.0
     err_u = np.asarray(e["err_u_rad_s2"], dtype=float)
-    accel = float(np.linalg.norm(sc.control_gain * err_u))
+    accel = float(np.linalg.norm(sc.control_times(err_u)))
     e_psi = float(e["err_psi_rad_s"])
     grow = float(e["err_omega_rad_s"]) * math.expm1(K * d) + coupling * math.sqrt(3.0) * e_psi * d + accel * d
     e_omega = float(e["err_omega_rad_s"]) + grow

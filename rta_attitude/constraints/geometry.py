@@ -3,7 +3,8 @@
 `context` fills a CONTEXT_DTYPE record from a state x and the filter's plant model (a PLANT_DTYPE
 record): the attitude matrix A(q) (Hill -> body), the body rate omega, the drift of omega_dot
 (`dynamics.spacecraft.omega_drift`: Euler, wheel gyroscopic term, gravity gradient as the model
-has them), the control gain G = d omega_dot / d u, and the sun and the Earth (nadir) in body axes with
+has them), the control gain G = d omega_dot / d u (a matrix with products of inertia), and the sun and the
+Earth (nadir) in body axes with
 their first two *inertial* time derivatives (`dynamics.environment`: the one place that says where a target
 is and how it moves). `target` does the same for any target of the cone table (`constraints.cones`).
 
@@ -42,7 +43,9 @@ CONTEXT_DTYPE = np.dtype([
     ("A", np.float64, (3, 3)),         # A(q), Hill -> body
     ("omega", np.float64, (3,)),       # body rate, rad/s
     ("omega_drift", np.float64, (3,)),  # omega_dot at u = 0, rad/s^2
-    ("control_gain", np.float64, (3,)),  # d omega_dot / d u
+    ("control_gain", np.float64, (3,)),  # d omega_dot_i / d u_i (principal axes)
+    ("control_matrix", np.float64, (3, 3)),  # G = d omega_dot / d u
+    ("principal", np.uint8),           # 1: G is diagonal (the principal-axis arithmetic)
     ("sun", np.float64, (3,)),         # r_S in body
     ("sun_rate", np.float64, (3,)),    # inertial first derivative of r_S, in body, 1/s
     ("sun_acc", np.float64, (3,)),     # inertial second derivative of r_S, in body, 1/s^2
@@ -107,6 +110,21 @@ def context(x: Array, p: np.void, rates: bool, ctx: np.void) -> None:
     omega_drift(x, A, p, ctx.omega_drift)
     for a in range(3):
         ctx.control_gain[a] = p.control_gain[a]
+        for b in range(3):
+            ctx.control_matrix[a, b] = p.control_matrix[a, b]
+    ctx.principal = p.principal
+
+
+@numba.njit(**LEAF, inline="always")
+def through_control(ctx: np.void, m0: float, m1: float, m2: float) -> tuple[float, float, float]:
+    """The gain on u of a quantity whose gain on omega_dot is m (3): m_a G_a per wheel on principal axes, m^T G
+    with products of inertia (ctx: `context` with rates)."""
+    if ctx.principal:
+        cg = ctx.control_gain
+        return m0 * cg[0], m1 * cg[1], m2 * cg[2]
+    G = ctx.control_matrix
+    return (m0 * G[0, 0] + m1 * G[1, 0] + m2 * G[2, 0], m0 * G[0, 1] + m1 * G[1, 1] + m2 * G[2, 1],
+            m0 * G[0, 2] + m1 * G[1, 2] + m2 * G[2, 2])
 
 
 @numba.njit(**LEAF, inline="always")
@@ -146,7 +164,7 @@ def pointing(ex: float, ey: float, ez: float, r: Array, rd: Array, rdd: Array, c
     Returns (cos, cos_dot, theta, theta_dot, theta_ddot drift, and d theta_ddot / d u as three
     floats). Within the pole guard the angle is held stationary (zero rates and gain).
     """
-    w, wd, cg = ctx.omega, ctx.omega_drift, ctx.control_gain
+    w, wd = ctx.omega, ctx.omega_drift
     # m = e x r_B, c = e . r_B
     m0 = ey * r[2] - ez * r[1]
     m1 = ez * r[0] - ex * r[2]
@@ -165,8 +183,8 @@ def pointing(ex: float, ey: float, ez: float, r: Array, rd: Array, rdd: Array, c
     theta = math.atan2(sin_raw, c)
     if sin_raw > sin_guard:
         s = sin_raw
-        return (c, c_dot, theta, -c_dot / s, -c_dd_drift / s - c * c_dot**2 / s**3,
-                -(m0 * cg[0]) / s, -(m1 * cg[1]) / s, -(m2 * cg[2]) / s)
+        g0, g1, g2 = through_control(ctx, m0, m1, m2)
+        return c, c_dot, theta, -c_dot / s, -c_dd_drift / s - c * c_dot**2 / s**3, -g0 / s, -g1 / s, -g2 / s
     return c, c_dot, theta, 0.0, 0.0, 0.0, 0.0, 0.0  # within the pole guard: held stationary
 
 
@@ -175,4 +193,5 @@ def new_context() -> NDArray[np.void]:
     return np.zeros(1, CONTEXT_DTYPE)
 
 
-__all__ = ["CONTEXT_DTYPE", "angle", "angle_between", "context", "new_context", "pointing", "target", "to_body"]
+__all__ = ["CONTEXT_DTYPE", "angle", "angle_between", "context", "new_context", "pointing", "target", "through_control",
+           "to_body"]

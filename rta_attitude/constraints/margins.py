@@ -32,6 +32,7 @@ from numpy.typing import NDArray
 
 from rta_attitude.config.schema import Config, PointingConstraint
 from rta_attitude.constraints.base import inertia_error_bound
+from rta_attitude.dynamics.spacecraft import euler_bound, euler_rate_bound
 
 
 def axis_rate_bounds(cfg: Config, model: str, delta: float = 0.0) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
@@ -40,6 +41,8 @@ def axis_rate_bounds(cfg: Config, model: str, delta: float = 0.0) -> tuple[NDArr
     and rad/s^3; for every inertia within +-delta of the configured one (each bound grows with |J_j - J_k|, D /
     J_i and G_i, so the worst case takes |J_j - J_k| + delta (J_j + J_k), (1 - delta) J_i and G_i / (1 - delta))."""
     sc, L = cfg.spacecraft, cfg.limits
+    if not sc.principal:
+        return _general_axis_rate_bounds(cfg, model)
     J = sc.J * (1.0 - delta)
     D = sc.wheel_inertia_kgm2
     G = np.abs(sc.control_gain) / (1.0 - delta)
@@ -58,6 +61,26 @@ def axis_rate_bounds(cfg: Config, model: str, delta: float = 0.0) -> tuple[NDArr
         j, k = (i + 1) % 3, (i + 2) % 3
         B[i] = (d[i] * (A[j] * W[k] + W[j] * A[k]) + D * (A[j] * P[k] + W[j] * U[k] + A[k] * P[j] + W[k] * U[j])) / J[i]
     return A, B
+
+
+def _general_axis_rate_bounds(cfg: Config, model: str) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """`axis_rate_bounds` with products of inertia (no uncertainty): the torques' bounds (Euler's,
+    `config.inertia.euler_bound` and its rate; the wheels' D |w x psi|) through |J^-1|, as
+    `angular_rate.zoh_rows` bounds them per state."""
+    sc, L = cfg.spacecraft, cfg.limits
+    J = sc.inertia_matrix
+    Ji = np.abs(np.linalg.inv(J))
+    G = np.abs(sc.control_matrix)
+    D = sc.wheel_inertia_kgm2 if model == "gyrostat" else 0.0
+    U = cfg.u_max_rad_s2
+    w = L.omega_max_rad_s
+    P = L.psi_max_rad_s if model == "gyrostat" else 0.0
+    torque = np.array([euler_bound(J, w, w, w, j) + 2.0 * D * w * P for j in range(3)])
+    A = Ji @ torque + G @ U
+    rate = np.array([euler_rate_bound(J, w, w, w, A[0], A[1], A[2], j)
+                     + D * (A[(j + 1) % 3] * P + w * U[(j + 2) % 3] + A[(j + 2) % 3] * P + w * U[(j + 1) % 3])
+                     for j in range(3)])
+    return A, Ji @ rate
 
 
 def rate_bounds(cfg: Config, model: str) -> tuple[float, float]:

@@ -177,7 +177,7 @@ class BasiliskPlant:
         self.frame_rate_rad_s = self.n_rad_s if self.rotating_hill else 0.0
         self.r_orbit_m = (MU_EARTH_M3_S2 / self.n_rad_s**2) ** (1.0 / 3.0)
         self.record = truth_record(cfg)
-        self.J = self.record[0]["inertia_kgm2"].copy()  # the simulated vehicle's (`plant.inertia_kgm2`)
+        self.J = self.record[0]["inertia_matrix"].copy()  # the simulated vehicle's tensor (`plant.inertia_kgm2`)
         self.x = x
         self.x[0:4] /= np.linalg.norm(self.x[0:4])
         self.t_ns = 0
@@ -216,7 +216,7 @@ class BasiliskPlant:
         sc.ModelTag = "cubesat"
         sc.hub.mHub = HUB_MASS_KG
         sc.hub.r_BcB_B = [[0.0], [0.0], [0.0]]
-        sc.hub.IHubPntBc_B = np.diag(self.J + self.D).tolist()  # balanced wheels add no inertia
+        sc.hub.IHubPntBc_B = (self.J + self.D * np.eye(3)).tolist()  # balanced wheels add no inertia
         sc.hub.sigma_BNInit = quaternion_to_mrp(x[0:4]).reshape(3, 1).tolist()  # N = Hill at t = 0
         w0 = x[4:7]
         sc.hub.omega_BN_BInit = w0.reshape(3, 1).tolist()

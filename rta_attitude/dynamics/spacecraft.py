@@ -40,6 +40,7 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
+from rta_attitude.config import inertia
 from rta_attitude.config.schema import Config
 from rta_attitude.dynamics.environment import EARTH_HILL, sun_hill, sunlit
 from rta_attitude.dynamics.quaternion import attitude_matrix
@@ -77,6 +78,10 @@ PLANT_DTYPE = np.dtype([
     ("face_axis", np.int64),                   # `signed_axis` of face_normal: i if it is +-e_i, else -1
     ("panel_axis", np.int64),                  # the same of panel_normal
     ("delay_substeps", np.int64),              # substeps of a sample the previous command still holds
+    ("principal", np.uint8),                   # 1: no products of inertia (the principal-axis arithmetic)
+    ("inertia_matrix", np.float64, (3, 3)),    # J, body axes (diag(inertia_kgm2) where principal)
+    ("inertia_inverse", np.float64, (3, 3)),   # J^-1
+    ("control_matrix", np.float64, (3, 3)),    # G = d omega_dot / d u = s D J^-1
 ])  # fmt: skip
 """The plant's parameters, in model units, as the compiled code reads them."""
 
@@ -121,6 +126,11 @@ def plant_record(cfg: Config, model: str | None = None) -> NDArray[np.void]:
     p["face_axis"] = signed_axis(th.face_normal_body)
     p["panel_axis"] = signed_axis(pw.panel_normal_body)
     p["delay_substeps"] = cfg.delay_substeps
+    vehicle = sc if true_J is None else replace(sc, inertia_kgm2=true_J)
+    p["principal"] = vehicle.principal
+    p["inertia_matrix"] = vehicle.inertia_matrix
+    p["inertia_inverse"] = np.linalg.inv(vehicle.inertia_matrix)
+    p["control_matrix"] = vehicle.control_matrix
     return rec
 
 
@@ -165,9 +175,8 @@ def positive_part(c: float) -> float:
 
 
 @numba.njit(**LEAF)
-def omega_drift(x: Array, A: Array, p: np.void, out: Array) -> None:
-    """omega_dot at u = 0 (3,), rad/s^2: Euler's equations, the wheels' gyroscopic term (gyrostat) and
-    the gravity-gradient torque (if on). A = A(q) of x (used only with gravity gradient)."""
+def _principal_drift(x: Array, A: Array, p: np.void, out: Array) -> None:
+    """`omega_drift` on principal axes."""
     w1, w2, w3 = x[4], x[5], x[6]
     J1, J2, J3 = p.inertia_kgm2[0], p.inertia_kgm2[1], p.inertia_kgm2[2]
     t1 = (J2 - J3) * w2 * w3
@@ -189,6 +198,84 @@ def omega_drift(x: Array, A: Array, p: np.void, out: Array) -> None:
     out[0] = t1 / J1
     out[1] = t2 / J2
     out[2] = t3 / J3
+
+
+@numba.njit(**LEAF)
+def omega_drift(x: Array, A: Array, p: np.void, out: Array) -> None:
+    """omega_dot at u = 0 (3,), rad/s^2: Euler's equations, the wheels' gyroscopic term (gyrostat) and
+    the gravity-gradient torque (if on). A = A(q) of x (used only with gravity gradient). On principal axes
+    the arithmetic of the first implementation (`_principal_drift`); with products of inertia
+    J^-1 (-w x (J w - s D psi) + 3 n^2 r x J r)."""
+    if p.principal:
+        _principal_drift(x, A, p, out)
+        return
+    J, Ji = p.inertia_matrix, p.inertia_inverse
+    w1, w2, w3 = x[4], x[5], x[6]
+    h1 = J[0, 0] * w1 + J[0, 1] * w2 + J[0, 2] * w3
+    h2 = J[1, 0] * w1 + J[1, 1] * w2 + J[1, 2] * w3
+    h3 = J[2, 0] * w1 + J[2, 1] * w2 + J[2, 2] * w3
+    if p.wheel_gyroscopic:  # the body's momentum J w - s D psi
+        D = p.torque_sign * p.wheel_inertia_kgm2
+        h1, h2, h3 = h1 - D * x[7], h2 - D * x[8], h3 - D * x[9]
+    t1 = -(w2 * h3 - w3 * h2)
+    t2 = -(w3 * h1 - w1 * h3)
+    t3 = -(w1 * h2 - w2 * h1)
+    if p.gravity_gradient:  # 3 n^2 r x (J r), r = zenith (+x_Hill) in body
+        k = 3.0 * p.mean_motion_rad_s * p.mean_motion_rad_s
+        r1, r2, r3 = A[0, 0], A[1, 0], A[2, 0]
+        g1 = J[0, 0] * r1 + J[0, 1] * r2 + J[0, 2] * r3
+        g2 = J[1, 0] * r1 + J[1, 1] * r2 + J[1, 2] * r3
+        g3 = J[2, 0] * r1 + J[2, 1] * r2 + J[2, 2] * r3
+        t1 += k * (r2 * g3 - r3 * g2)
+        t2 += k * (r3 * g1 - r1 * g3)
+        t3 += k * (r1 * g2 - r2 * g1)
+    for a in range(3):
+        out[a] = Ji[a, 0] * t1 + Ji[a, 1] * t2 + Ji[a, 2] * t3
+
+
+@numba.njit(**LEAF, inline="always")
+def control_accel(wd: Array, u: Array, p: np.void, a: int) -> float:
+    """omega_dot_a = drift_a + (G u)_a (rad/s^2) of the drift wd (3,) and wheel accelerations u (3,): G_a u_a on
+    principal axes (the first implementation's arithmetic), the row G_a . u with products of inertia."""
+    if p.principal:
+        return wd[a] + p.control_gain[a] * u[a]
+    G = p.control_matrix
+    return wd[a] + (G[a, 0] * u[0] + G[a, 1] * u[1] + G[a, 2] * u[2])
+
+
+@numba.njit(**LEAF, inline="always")
+def angular_momentum(p: np.void, x: Array, a: int) -> float:
+    """(J w)_a - s D psi_a of the state x (19,), N m s: the body's angular momentum on axis a."""
+    if p.principal:
+        Jw = p.inertia_kgm2[a] * x[4 + a]
+    else:
+        J = p.inertia_matrix
+        Jw = J[a, 0] * x[4] + J[a, 1] * x[5] + J[a, 2] * x[6]
+    return Jw - p.torque_sign * p.wheel_inertia_kgm2 * x[7 + a]
+
+
+@numba.njit(**LEAF, inline="always")
+def rate_momentum(p: np.void, a: int) -> float:
+    """The most |(J w)_a| / |w|_inf can be, kg m^2: J_a on principal axes, sum_b |J_ab| with products."""
+    if p.principal:
+        return p.inertia_kgm2[a]
+    J = p.inertia_matrix
+    return abs(J[a, 0]) + abs(J[a, 1]) + abs(J[a, 2])
+
+
+@numba.njit(**LEAF, inline="always")
+def control_error(p: np.void, e: Array, a: int) -> float:
+    """The most |(G v)_a| can be for |v_b| <= e_b (3,), rad/s^2: |G_a| e_a on principal axes, sum_b |G_ab| e_b."""
+    if p.principal:
+        return abs(p.control_gain[a]) * e[a]
+    G = p.control_matrix
+    return abs(G[a, 0]) * e[0] + abs(G[a, 1]) * e[1] + abs(G[a, 2]) * e[2]
+
+
+euler_bound = numba.njit(**LEAF)(inertia.euler_bound)
+"""`config.inertia.euler_bound`, compiled (the one formula)."""
+euler_rate_bound = numba.njit(**LEAF)(inertia.euler_rate_bound)
+"""`config.inertia.euler_rate_bound`, compiled."""
 
 
 @numba.njit(**LEAF)
@@ -235,14 +322,13 @@ def derivative(x: Array, u: Array, p: np.void, A: Array, wd: Array, f: Array) ->
     cos_earth = axis_along(p.face_normal, p.face_axis, A, EARTH_HILL[0], EARTH_HILL[1], EARTH_HILL[2])
     c_panel = axis_along(p.panel_normal, p.panel_axis, A, sx, sy, sz)
     n = p.mean_motion_rad_s
-    cg = p.control_gain
     f[0] = 0.5 * (q4 * w1 - q3 * w2 + q2 * w3)
     f[1] = 0.5 * (q3 * w1 + q4 * w2 - q1 * w3)
     f[2] = 0.5 * (-q2 * w1 + q1 * w2 + q4 * w3)
     f[3] = -0.5 * (q1 * w1 + q2 * w2 + q3 * w3)
-    f[4] = wd[0] + cg[0] * u[0]
-    f[5] = wd[1] + cg[1] * u[1]
-    f[6] = wd[2] + cg[2] * u[2]
+    f[4] = control_accel(wd, u, p, 0)
+    f[5] = control_accel(wd, u, p, 1)
+    f[6] = control_accel(wd, u, p, 2)
     f[7] = 0.0 + u[0]
     f[8] = 0.0 + u[1]
     f[9] = 0.0 + u[2]
@@ -371,7 +457,7 @@ def _omega_dots(X: Array, U: Array, pa: NDArray[np.void], W: Array, work: Array)
         attitude_matrix(X[k, 0], X[k, 1], X[k, 2], X[k, 3], A)
         omega_drift(X[k], A, p, wd)
         for a in range(3):
-            W[k, a] = wd[a] + p.control_gain[a] * U[k, a]
+            W[k, a] = control_accel(wd, U[k], p, a)
 
 
 @numba.njit(**LEAF)
@@ -445,7 +531,8 @@ def integrate(x: Array, u: Array, dt_s: float, p: NDArray[np.void], substeps: in
 
 
 __all__ = [
-    "PLANT_DTYPE", "RK4_WORK_ROWS", "axis_along", "delay_time", "derivative", "integrate", "net_power", "omega_dot",
+    "PLANT_DTYPE", "RK4_WORK_ROWS", "angular_momentum", "axis_along", "control_accel", "control_error", "euler_bound",
+    "euler_rate_bound", "rate_momentum", "delay_time", "derivative", "integrate", "net_power", "omega_dot",
     "omega_drift", "plant_record", "positive_part", "rk4_delayed", "rk4_hold", "rk4_work", "saturate", "saturated",
     "state_derivative",
     "thermal_rate",

@@ -121,11 +121,12 @@ def unavoidable(x0: Array, cfg: Config, duration_s: float = math.inf) -> dict[st
         out["pointing_escape"][:, i] = reach < 0
 
     # wheels: momentum exchanged in stopping the body about each axis
-    J = cfg.spacecraft.J
-    D = cfg.spacecraft.wheel_inertia_kgm2
-    sign = cfg.spacecraft.torque_sign
+    sc = cfg.spacecraft
+    D = sc.wheel_inertia_kgm2
+    sign = sc.torque_sign
     w0 = x0[:, OMEGA]
-    psi_stop = x0[:, PSI] - sign * J * w0 / D
+    Jw = sc.J * w0 if sc.principal else w0 @ sc.inertia_matrix.T
+    psi_stop = x0[:, PSI] - sign * Jw / D
     must_stop = np.abs(w0) > L.omega_max_rad_s
     wheels = [c.row for c in reg if c.kind == "wheel_speed"]
     for a, i in enumerate(wheels):
@@ -149,9 +150,10 @@ def classify(x0: Array, violated: NDArray[np.bool_], cfg: Config,
     from rta_attitude.viability.rules import battery_rule, rules_apply
 
     proofs = unavoidable(x0, cfg, duration_s)  # name -> (n, m) bool
-    model = from_config(cfg)
+    # the oracle's rule is derived on principal axes: with products of inertia it excuses no failure
+    model = from_config(cfg) if cfg.spacecraft.principal else None
     enforced = default_enforce(cfg)
-    momentum = (rules_apply(model) and all(g in enforced for g in ("omega", "psi", "battery"))
+    momentum = (model is not None and rules_apply(model) and all(g in enforced for g in ("omega", "psi", "battery"))
                 and math.isfinite(duration_s))
     kept = np.array([c.kind in KEPT_BY_MOMENTUM_BATTERY for c in ConstraintSet(cfg).registry])
     rules: list[str] = []
@@ -159,7 +161,7 @@ def classify(x0: Array, violated: NDArray[np.bool_], cfg: Config,
     for k in range(len(x0)):
         hit = [name for name, mask in proofs.items() if np.any(mask[k] & violated[k])]
         if (momentum and np.any(violated[k] & kept)
-                and battery_rule(as_oracle_state(x0[k]), duration_s, model, momentum=True)):
+                and battery_rule(as_oracle_state(x0[k]), duration_s, model, momentum=True)):  # type: ignore[arg-type]
             hit.append("momentum_battery")
         rules.append(";".join(hit))
         out[k] = bool(hit)

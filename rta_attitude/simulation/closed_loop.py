@@ -50,6 +50,7 @@ from rta_attitude.dynamics.spacecraft import (
     PLANT_DTYPE,
     RK4_WORK_ROWS,
     attitude_matrix,
+    control_accel,
     omega_dot,
     omega_drift,
     plant_record,
@@ -156,7 +157,7 @@ def run_scenario(x0: Array, steps: int, sched_t: Array, sched_q: Array, loop: ND
         attitude_matrix(X[k, 0], X[k, 1], X[k, 2], X[k, 3], A)
         omega_drift(X[k], A, p, wd)
         for a in range(3):
-            W_DOT[k, a] = wd[a] + p.control_gain[a] * U[k, a]
+            W_DOT[k, a] = control_accel(wd, U[k], p, a)
         X[k + 1] = subs[lp.substeps - 1]
         H[k + 1] = Hsub[k, lp.substeps - 1]
 

@@ -210,7 +210,14 @@ def oracle_cones(cfg: Config) -> tuple[OracleCone, ...]:
 
 
 def from_config(cfg: Config) -> OracleModel:
-    """The oracle's parameters of a configuration (plant constants formed as the plant forms them)."""
+    """The oracle's parameters of a configuration (plant constants formed as the plant forms them).
+
+    Raises:
+        ConfigError: products of inertia (the oracle's transcription and its rules are on principal axes).
+    """
+    if not cfg.spacecraft.principal:
+        raise ConfigError("the viability oracle models principal axes only: it cannot judge a vehicle with "
+                          "spacecraft.products_of_inertia_kgm2 (its verdicts would not be about this vehicle)")
     p = plant_record(cfg)[0]
     L = cfg.limits
     return OracleModel(

@@ -37,9 +37,7 @@ from rta_attitude.constraints.geometry import angle_between
 from rta_attitude.constraints.windows import OFF, window_at
 from rta_attitude.dynamics.environment import sun_hill, target_hill
 from rta_attitude.dynamics.quaternion import attitude_matrix, error_vector, from_matrix, product
-from rta_attitude.dynamics.spacecraft import (
-    omega_drift,
-)
+from rta_attitude.dynamics.spacecraft import angular_momentum, control_accel, omega_drift, rate_momentum
 from rta_attitude.dynamics.state import ENERGY, OMEGA, STATE_SIZE, THETA_S
 from rta_attitude.jit import LEAF
 
@@ -116,7 +114,7 @@ def large_momentum(x: Array, p: np.void, b: np.void) -> bool:
     D): a momentum the sun-safe attitude may not hold at rest (the gate's and the backup law's test)."""
     hh = 0.0
     for a in range(3):
-        ha = (p.inertia_kgm2[a] * x[4 + a] - p.torque_sign * p.wheel_inertia_kgm2 * x[7 + a]) / p.wheel_inertia_kgm2
+        ha = angular_momentum(p, x, a) / p.wheel_inertia_kgm2
         hh += ha * ha
     return math.sqrt(hh) > b.momentum_variant_rad_s
 
@@ -129,7 +127,7 @@ def _wheel_load(T: Array, Hh: Array, p: np.void, b: np.void, share: float = 1.0)
     worst = -np.inf
     for a in range(3):
         ha = abs(T[a, 0] * Hh[0] + T[a, 1] * Hh[1] + T[a, 2] * Hh[2])
-        v = (ha + p.inertia_kgm2[a] * share * b.omega_max_rad_s) / p.wheel_inertia_kgm2
+        v = (ha + rate_momentum(p, a) * share * b.omega_max_rad_s) / p.wheel_inertia_kgm2
         worst = max(worst, v)
     return worst - b.psi_limit_rad_s
 
@@ -205,7 +203,7 @@ def _wheel_caps(p: np.void, b: np.void, share: float = 1.0) -> tuple[float, floa
     or the terminal set's SETTLED_RATE_FRACTION in the TIGHT variant, `_rate_share`)."""
     top = (1.0 - TILT_WHEEL_MARGIN) * b.psi_limit_rad_s * p.wheel_inertia_kgm2
     w = share * b.omega_max_rad_s
-    return top - p.inertia_kgm2[0] * w, top - p.inertia_kgm2[1] * w, top - p.inertia_kgm2[2] * w
+    return top - rate_momentum(p, 0) * w, top - rate_momentum(p, 1) * w, top - rate_momentum(p, 2) * w
 
 
 @numba.njit(**LEAF)
@@ -248,10 +246,7 @@ def _momentum(x: Array, p: np.void, g: np.void) -> tuple[float, float, float]:
     in Hill (A^T H) into g.Hh; g.A := A(q)."""
     A = g.A
     attitude_matrix(x[0], x[1], x[2], x[3], A)
-    s, D = p.torque_sign, p.wheel_inertia_kgm2
-    Hb0 = p.inertia_kgm2[0] * x[4] - s * D * x[7]
-    Hb1 = p.inertia_kgm2[1] * x[5] - s * D * x[8]
-    Hb2 = p.inertia_kgm2[2] * x[6] - s * D * x[9]
+    Hb0, Hb1, Hb2 = angular_momentum(p, x, 0), angular_momentum(p, x, 1), angular_momentum(p, x, 2)
     for c in range(3):
         g.Hh[c] = A[0, c] * Hb0 + A[1, c] * Hb1 + A[2, c] * Hb2
     return Hb0, Hb1, Hb2
@@ -506,7 +501,9 @@ def _rate_command(x: Array, p: np.void, c: np.void, b: np.void, g: np.void, out:
         for a in range(3):
             w_ref = -(b.kp / b.kd) * g.dq[a]
             w_ref = -lim if w_ref < -lim else (lim if w_ref > lim else w_ref)
-            v = ((w_ref - x[4 + a]) / b.rate_time_constant_s - g.wd[a]) / p.control_gain[a]
+            g.ua[a] = (w_ref - x[4 + a]) / b.rate_time_constant_s - g.wd[a]  # the acceleration it asks of u
+        for a in range(3):
+            v = _wheel_for(g.ua, p, a)
             hi, lo = (top - x[7 + a]) / c.dt_s, (-top - x[7 + a]) / c.dt_s  # the wheel within psi_hold
             v = lo if v < lo else (hi if v > hi else v)
             m = b.u_reach_rad_s2[a]  # (every drive state reaches it: the rollouts do not track the drive)
@@ -517,9 +514,19 @@ def _rate_command(x: Array, p: np.void, c: np.void, b: np.void, g: np.void, out:
         for i in range(STATE_SIZE):
             g.xm[i] = x[i]
         for a in range(3):
-            g.xm[4 + a] = x[4 + a] + half * (g.wd[a] + p.control_gain[a] * out[a])
+            g.xm[4 + a] = x[4 + a] + half * control_accel(g.wd, out, p, a)
             g.xm[7 + a] = x[7 + a] + half * out[a]
         omega_drift(g.xm, g.A, p, g.wd)
+
+
+@numba.njit(**LEAF, inline="always")
+def _wheel_for(acc: Array, p: np.void, a: int) -> float:
+    """Wheel a's acceleration of u = G^-1 acc (acc (3,): the body's angular acceleration asked of u), rad/s^2:
+    acc_a / G_a on principal axes; with products of inertia G^-1 = J / (s D)."""
+    if p.principal:
+        return acc[a] / p.control_gain[a]
+    J = p.inertia_matrix
+    return (J[a, 0] * acc[0] + J[a, 1] * acc[1] + J[a, 2] * acc[2]) / (p.torque_sign * p.wheel_inertia_kgm2)
 
 
 @numba.njit(**LEAF)

@@ -136,6 +136,7 @@ GATE_DTYPE = np.dtype([
     ("q_c", np.float64, (4,)),
     ("dq", np.float64, (3,)),
     ("wd", np.float64, (3,)),
+    ("ua", np.float64, (3,)),            # the body's angular acceleration the law asks of u (`_rate_command`)
     ("candidate", np.uint8),             # the rollout checks a candidate: h >= candidate_margin (else margin)
     ("xm", np.float64, (STATE_SIZE,)),   # the law's state at the middle of its hold (`_rate_command`)
     ("answer_lasted", np.int64),         # this `gate` call: the most substeps a failed rollout of the answer checked
@@ -169,7 +170,9 @@ def backup_record(cfg: Config) -> NDArray[np.void]:
     b["psi_limit_rad_s"] = L.psi_keep_rad_s
     b["psi_hold_rad_s"] = L.psi_keep_rad_s
     sc = cfg.spacecraft
-    b["momentum_variant_rad_s"] = L.psi_keep_rad_s - float(np.max(sc.J)) * L.omega_max_rad_s / sc.wheel_inertia_kgm2
+    rate_momentum = sc.J if sc.principal else np.abs(sc.inertia_matrix).sum(axis=1)  # (`spacecraft.rate_momentum`)
+    b["momentum_variant_rad_s"] = (L.psi_keep_rad_s
+                                   - float(np.max(rate_momentum)) * L.omega_max_rad_s / sc.wheel_inertia_kgm2)
     b["nominal_steps"] = max(1, round(o.backup_nominal_s / o.sample_time_s))
     b["reserve_step_s"] = RESERVE_STEP_S
     b["reserve_steps"] = round(o.backup_energy_lookahead_s / RESERVE_STEP_S)
@@ -191,6 +194,8 @@ def backup_record(cfg: Config) -> NDArray[np.void]:
     if b["permuted"]:
         plant["inertia_kgm2"] = perm @ plant["inertia_kgm2"]
         plant["control_gain"] = perm @ plant["control_gain"]
+        for key in ("inertia_matrix", "inertia_inverse", "control_matrix"):  # tensors turn as P M P^T
+            plant[key] = P @ plant[key] @ P.T + 0.0
     b["law_plant"] = plant
     reach = (1.0 - 2.0 * drive_lag(cfg)[0]) * cfg.u_max_rad_s2  # (as `constraints.base.constraint_record`)
     b["u_reach_rad_s2"] = perm @ reach if b["permuted"] else reach

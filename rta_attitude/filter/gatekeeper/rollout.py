@@ -29,6 +29,7 @@ from rta_attitude.dynamics.sensors import (
     interface_energy_error,
 )
 from rta_attitude.dynamics.spacecraft import (
+    control_error,
     net_power,
     rk4_hold,
     saturate,
@@ -76,7 +77,7 @@ def check_margins(p: np.void, c: np.void, out: Array) -> None:
     out[c.row_temperature] = c.err_T_K
     out[c.row_battery] = c.err_E_J
     for a in range(3):
-        e = c.err_omega_axis_rad_s + abs(p.control_gain[a]) * c.err_u_rad_s2[a] * dt + ia[a] * dt
+        e = c.err_omega_axis_rad_s + control_error(p, c.err_u_rad_s2, a) * dt + ia[a] * dt
         out[c.row_omega + a] = 2.0 * c.omega_max_rad_s * e + e * e
         e = wheel_speed_error(c, a)
         out[c.row_psi + a] = 2.0 * c.psi_limit_rad_s * e + e * e
