@@ -142,35 +142,7 @@ def zoh_rows(ctx: np.void, x: NDArray[np.float64], c: np.void, p: np.void, t: np
     L1 = (d1 * (A2 * W0 + W2 * A0) + D * (W2 * U[0] + W0 * U[2]) + 2.0 * k * d1 * w_rel) / J[1]
     L2 = (d2 * (A0 * W1 + W0 * A1) + D * (W0 * U[1] + W1 * U[0]) + 2.0 * k * d2 * w_rel) / J[2]
     energy = J[0] * L0 * L0 + J[1] * L1 * L1 + J[2] * L2 * L2
-    limit = (1.0 - c.zoh_margin) * w_max
-    ew_axis, eu = c.err_omega_axis_rad_s, c.err_u_rad_s2
-    S = ctx.zoh_sum
-    row = 0
-    for m in range(ZOH_CHECKS):
-        tau = ZOH_TIMES[m] * dt
-        h = ZOH_SPACING[m] * dt
-        _hold_series(ctx, tau)
-        for i in range(3):
-            # E = I + Omega tau S, Phi = tau S
-            ew = w[i]
-            # measurement-robust: |E delta_omega|_i + |Phi G delta_u|_i (0 without sensor errors), and |Phi e|_i of
-            # the inertia's error e (`base.inertia_error`, 0 without an uncertainty)
-            robust = 0.0
-            for a in range(3):
-                oms = tau * (Om[i, 0] * S[0, a] + Om[i, 1] * S[1, a] + Om[i, 2] * S[2, a])
-                ew += oms * w[a]
-                robust += abs((1.0 if a == i else 0.0) + oms) * ew_axis + abs(tau * S[i, a] * G[a]) * eu[a]
-                robust += abs(tau * S[i, a]) * ctx.inertia_err[a]  # the inertia's (0 without an uncertainty)
-            free = ew + tau * (S[i, 0] * e0_0 + S[i, 1] * e0_1 + S[i, 2] * e0_2)
-            B = B0 if i == 0 else (B1 if i == 1 else B2)
-            slack = limit - math.sqrt(energy / J[i]) * 0.5 * tau * tau - B * h * h / 8.0 - robust
-            t.zoh_axis[row] = i
-            for a in range(3):
-                t.zoh_gain[row, a] = tau * S[i, a] * G[a]
-            t.zoh_lo[row] = -slack - free
-            t.zoh_hi[row] = slack - free
-            row += 1
-    t.zoh_rows = row
+    _rows_over_the_hold(ctx, c, t, (e0_0, e0_1, e0_2), (energy / J[0], energy / J[1], energy / J[2]), (B0, B1, B2))
 
 
 @numba.njit(**LEAF)
@@ -239,26 +211,52 @@ def _general_zoh_rows(ctx: np.void, x: NDArray[np.float64], c: np.void, p: np.vo
     for a in range(3):
         for b in range(3):
             energy += abs(J[a, b]) * Ls[a] * Ls[b]
-    limit = (1.0 - c.zoh_margin) * w_max
-    ew_axis, eu = c.err_omega_axis_rad_s, c.err_u_rad_s2
+    _rows_over_the_hold(ctx, c, t, e0, (energy * Ji[0, 0], energy * Ji[1, 1], energy * Ji[2, 2]), Bs)
+
+
+@numba.njit(**LEAF, inline="always")
+def _phi_g(ctx: np.void, tau: float, i: int, a: int) -> float:
+    """(Phi G)_ia = tau (S G)_ia over the hold (ctx.zoh_sum = S): G_a on principal axes, the full G with products."""
     S = ctx.zoh_sum
+    if ctx.principal:
+        return tau * S[i, a] * ctx.control_gain[a]
+    G = ctx.control_matrix
+    return tau * (S[i, 0] * G[0, a] + S[i, 1] * G[1, a] + S[i, 2] * G[2, a])
+
+
+@numba.njit(**LEAF)
+def _rows_over_the_hold(ctx: np.void, c: np.void, t: np.void, e0: tuple[float, float, float],
+                        energy_axis: tuple[float, float, float], B: tuple[float, float, float]) -> None:
+    """The ZOH_ROWS rows of `zoh_rows` into t from ctx.zoh_omega (Omega), the torques e0 at the sample, the
+    remainder's bound squared per axis (energy_axis_i: |r_i| <= sqrt(energy_axis_i) tau^2 / 2) and B_i >=
+    |omega_i''| over the hold: at each check point E = I + Omega tau S, Phi = tau S,
+
+        |E omega + Phi (e0 + G u)|_i <= (1 - zoh_margin) omega_max - |r_i| - B_i h^2 / 8 - robust_i
+
+    with robust_i the measurement-robust |E delta_omega|_i + |Phi G delta_u|_i and |Phi e|_i of the inertia's
+    error e (`base.inertia_error`; each 0 without sensor errors or an uncertainty)."""
+    dt = c.dt_s
+    Om, S, w = ctx.zoh_omega, ctx.zoh_sum, ctx.omega
+    limit = (1.0 - c.zoh_margin) * c.omega_max_rad_s
+    ew_axis, eu = c.err_omega_axis_rad_s, c.err_u_rad_s2
     row = 0
     for m in range(ZOH_CHECKS):
         tau = ZOH_TIMES[m] * dt
         h = ZOH_SPACING[m] * dt
         _hold_series(ctx, tau)
         for i in range(3):
-            ewi = w[i]
+            ew = w[i]
             robust = 0.0
             for a in range(3):
                 oms = tau * (Om[i, 0] * S[0, a] + Om[i, 1] * S[1, a] + Om[i, 2] * S[2, a])
-                ewi += oms * w[a]
-                phig = tau * (S[i, 0] * G[0, a] + S[i, 1] * G[1, a] + S[i, 2] * G[2, a])  # (Phi G)_ia
-                robust += abs((1.0 if a == i else 0.0) + oms) * ew_axis + abs(phig) * eu[a]
-                t.zoh_gain[row, a] = phig
-            free = ewi + tau * (S[i, 0] * e0[0] + S[i, 1] * e0[1] + S[i, 2] * e0[2])
-            slack = limit - math.sqrt(energy * Ji[i, i]) * 0.5 * tau * tau - Bs[i] * h * h / 8.0 - robust
+                ew += oms * w[a]
+                robust += abs((1.0 if a == i else 0.0) + oms) * ew_axis + abs(_phi_g(ctx, tau, i, a)) * eu[a]
+                robust += abs(tau * S[i, a]) * ctx.inertia_err[a]
+            free = ew + tau * (S[i, 0] * e0[0] + S[i, 1] * e0[1] + S[i, 2] * e0[2])
+            slack = limit - math.sqrt(energy_axis[i]) * 0.5 * tau * tau - B[i] * h * h / 8.0 - robust
             t.zoh_axis[row] = i
+            for a in range(3):
+                t.zoh_gain[row, a] = _phi_g(ctx, tau, i, a)
             t.zoh_lo[row] = -slack - free
             t.zoh_hi[row] = slack - free
             row += 1
