@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from helpers import best_panel_cos
+from helpers import best_panel_cos, turned_vehicle
 
 from rta_attitude import config
 from rta_attitude.config.schema import BarrierGains, Config, PointingConstraint
@@ -32,7 +32,14 @@ from rta_attitude.viability.laws import LAWS, quat_from_matrix, simulate_law, su
 from rta_attitude.viability.model import constraint_values
 from rta_attitude.viability.params import check_enforce, default_enforce, from_config
 from rta_attitude.viability.result import NO_WITNESS, RECOVERABLE, UNRECOVERABLE, Result
-from rta_attitude.viability.rules import _distance_to_bands, battery_rule, check_rules, momentum_band, momentum_bands
+from rta_attitude.viability.rules import (
+    _distance_to_bands,
+    battery_rule,
+    check_rules,
+    momentum_band,
+    momentum_bands,
+    rules_apply,
+)
 
 MODELS = ("paper", "gyrostat")
 
@@ -117,11 +124,14 @@ def dark_panel_state(cfg: Config, E_J: float, theta: float = 1.0) -> np.ndarray:
 
 
 # ----------------------------------------------------------------------------- the model
+@pytest.mark.parametrize("turn_deg", [0.0, 25.0], ids=["principal", "tensor"])
 @pytest.mark.parametrize("model", MODELS)
-def test_the_casadi_model_agrees_with_the_project_plant(cfg: Config, model: str) -> None:
+def test_the_casadi_model_agrees_with_the_project_plant(cfg: Config, model: str, turn_deg: float) -> None:
+    """The oracle's model against the compiled plant, on principal axes and with products of inertia (the 6U's
+    principal axes turned 25 deg)."""
     from rta_attitude.viability.model import simulate
 
-    c = with_model(cfg, model)
+    c = turned_vehicle(with_model(cfg, model), turn_deg)[0] if turn_deg else with_model(cfg, model)
     rng = np.random.default_rng(14)
     x0 = sun_safe_state(c, 30.0, 0.5, (400.0, -300.0, 200.0), 280.0, 3000.0)
     x0[4:7] += rng.uniform(-0.5, 0.5, 3) * c.limits.omega_max_rad_s
@@ -131,7 +141,7 @@ def test_the_casadi_model_agrees_with_the_project_plant(cfg: Config, model: str)
     np.testing.assert_allclose(xs, ref_x[:, :13], rtol=0, atol=1e-9)
     np.testing.assert_allclose(subs, ref_subs[:, :13], rtol=0, atol=1e-9)
     # the two models differ on this state (the wheels' gyroscopic term matters)
-    other = from_config(with_model(cfg, MODELS[1 - MODELS.index(model)]))
+    other = from_config(with_model(c, MODELS[1 - MODELS.index(model)]))
     assert np.max(np.abs(simulate(x0, u, other)[0] - xs)) > 1e-6
 
 
@@ -545,9 +555,15 @@ def test_a_failed_monte_carlo_run_gets_a_witness_over_its_whole_run(cfg: Config)
     assert worst["exclusion_zone"] > 0.1  # the witness keeps the sensor well out of the cone
 
 
-def test_a_law_witness_is_checked_on_the_project_plant(cfg: Config) -> None:
-    x0 = sun_safe_state(with_model(cfg, "gyrostat"), 45.0, -0.9, (500.0, -500.0, 500.0), 280.0, 3000.0)
+@pytest.mark.parametrize("turn_deg", [0.0, 25.0], ids=["principal", "tensor"])
+def test_a_law_witness_is_checked_on_the_project_plant(cfg: Config, turn_deg: float) -> None:
+    """A warm-start law's witness, re-run on the compiled plant; with products of inertia too (the oracle's rules
+    do not apply there: `rules_apply` is False, so only the search answers)."""
     c = with_model(cfg, "gyrostat")
+    c = turned_vehicle(c, turn_deg)[0] if turn_deg else c
+    if turn_deg:
+        assert not rules_apply(from_config(c))
+    x0 = sun_safe_state(c, 45.0, -0.9, (500.0, -500.0, 500.0), 280.0, 3000.0)
     res = find_witness(x0, 100.0, c, compile=False)
     assert res.method == "warm_start" and res.ipopt_status == "not needed"
     check_witness(c, x0, res, 100)

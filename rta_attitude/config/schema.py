@@ -895,17 +895,20 @@ class Config:
     def u_max_rad_s2(self) -> NDArray[np.float64]:
         """Bounds of the admissible set U (3,), rad/s^2: actuator and angular-acceleration limits.
 
-        |u_i| <= min(psi_dot_max, (J_i omega_dot_max - |J_j - J_k| omega_max^2) / D) on principal axes; with
-        products of inertia one bound for every wheel, |u| <= (omega_dot_max - E_i) / sum_j |G_ij| for each axis i,
-        E = |J^-1| e with e_j >= |(w x J w)_j| at |w_k| <= omega_max (`config.inertia.euler_bound`).
+        |u_i| <= min(psi_dot_max, (J_i omega_dot_max - |J_j - J_k| omega_max^2) / D) on principal axes. With
+        products of inertia every wheel turns every axis, so the box must keep sum_j |G_ij| U_j <= b_i =
+        omega_dot_max - E_i on each axis i (E = |J^-1| e, e_j >= |(w x J w)_j| at |w_k| <= omega_max,
+        `config.inertia.euler_bound`): the box each axis would allow alone, U0_j = b_j / |G_jj| (the principal
+        formula's form), scaled down by the one factor that meets every axis' sum.
         """
         sc, L = self.spacecraft, self.limits
         if not sc.principal:
             J, w = sc.inertia_matrix, L.omega_max_rad_s
             e = np.array([euler_bound(J, w, w, w, j) for j in range(3)])
-            E = np.abs(np.linalg.inv(J)) @ e
-            per_axis = (L.omega_dot_max_rad_s2 - E) / np.abs(sc.control_matrix).sum(axis=1)
-            return np.full(3, min(L.wheel_accel_max_rad_s2, float(per_axis.min())))
+            b = L.omega_dot_max_rad_s2 - np.abs(np.linalg.inv(J)) @ e
+            G = np.abs(sc.control_matrix)
+            alone = b / np.diag(G)
+            return np.minimum(L.wheel_accel_max_rad_s2, float(np.min(b / (G @ alone))) * alone)
         J = sc.J
         dJ = np.abs(np.array([J[1] - J[2], J[2] - J[0], J[0] - J[1]]))
         accel = (J * L.omega_dot_max_rad_s2 - dJ * L.omega_max_rad_s**2) / sc.wheel_inertia_kgm2

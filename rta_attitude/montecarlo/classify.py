@@ -150,10 +150,9 @@ def classify(x0: Array, violated: NDArray[np.bool_], cfg: Config,
     from rta_attitude.viability.rules import battery_rule, rules_apply
 
     proofs = unavoidable(x0, cfg, duration_s)  # name -> (n, m) bool
-    # the oracle's rule is derived on principal axes: with products of inertia it excuses no failure
-    model = from_config(cfg) if cfg.spacecraft.principal else None
+    model = from_config(cfg)
     enforced = default_enforce(cfg)
-    momentum = (model is not None and rules_apply(model) and all(g in enforced for g in ("omega", "psi", "battery"))
+    momentum = (rules_apply(model) and all(g in enforced for g in ("omega", "psi", "battery"))
                 and math.isfinite(duration_s))
     kept = np.array([c.kind in KEPT_BY_MOMENTUM_BATTERY for c in ConstraintSet(cfg).registry])
     rules: list[str] = []
@@ -161,7 +160,7 @@ def classify(x0: Array, violated: NDArray[np.bool_], cfg: Config,
     for k in range(len(x0)):
         hit = [name for name, mask in proofs.items() if np.any(mask[k] & violated[k])]
         if (momentum and np.any(violated[k] & kept)
-                and battery_rule(as_oracle_state(x0[k]), duration_s, model, momentum=True)):  # type: ignore[arg-type]
+                and battery_rule(as_oracle_state(x0[k]), duration_s, model, momentum=True)):
             hit.append("momentum_battery")
         rules.append(";".join(hit))
         out[k] = bool(hit)

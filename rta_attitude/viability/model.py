@@ -207,13 +207,15 @@ def ca_dynamics(m: OracleModel, exact: bool) -> ca.Function:
     a = ca_attitude(q)
     s_b = a @ ca_sun_hill(x[12], m)
     e_b = a @ ca.DM(EARTH_HILL)
-    jd = ca.DM(m.inertia_kgm2)
+    # J (x) as J_i x_i on principal axes, J @ x with products of inertia
+    jd = ca.DM(m.inertia_kgm2) if m.principal else ca.DM(m.J_matrix)
+    inertia = (lambda v: jd * v) if m.principal else (lambda v: jd @ v)
     d = m.wheel_inertia_kgm2
-    h = jd * w - d * psi if m.gyrostat else jd * w
+    h = inertia(w) - d * psi if m.gyrostat else inertia(w)
     torque = -ca.cross(w, h) + m.torque_sign * d * u
     if m.gravity_gradient:
         r = a[:, 0]
-        torque = torque + 3.0 * m.mean_motion_rad_s**2 * ca.cross(r, jd * r)
+        torque = torque + 3.0 * m.mean_motion_rad_s**2 * ca.cross(r, inertia(r))
     w_rel = w - m.frame_rate_rad_s * a[:, 2] if m.frame_rate_rad_s != 0.0 else w
     q1, q2, q3, q4 = q[0], q[1], q[2], q[3]
     xi = ca.vertcat(ca.horzcat(q4, -q3, q2), ca.horzcat(q3, q4, -q1), ca.horzcat(-q2, q1, q4),
@@ -228,7 +230,8 @@ def ca_dynamics(m: OracleModel, exact: bool) -> ca.Function:
              + (lit * m.albedo_W + m.sigma_eps_A_W_K4 * m.earth_T4_K4) * view
              - m.sigma_eps_A_W_K4 * temp**4) / m.heat_capacity_J_K
     e_dot = lit * m.panel_peak_W * under(ca_along(m.panel_normal_body, s_b)) - m.load_W
-    xdot = ca.vertcat(0.5 * (xi @ w_rel), torque / jd, u, t_dot, e_dot, -m.mean_motion_rad_s)
+    w_dot = torque / jd if m.principal else ca.DM(np.linalg.inv(m.J_matrix)) @ torque
+    xdot = ca.vertcat(0.5 * (xi @ w_rel), w_dot, u, t_dot, e_dot, -m.mean_motion_rad_s)
     return ca.Function("f", [x, u], [xdot])
 
 

@@ -86,6 +86,7 @@ class OracleModel:
     gyrostat: bool
     """True: the wheels' gyroscopic term -omega x (-D psi) (config `spacecraft.model: gyrostat`)."""
     inertia_kgm2: tuple[float, float, float]
+    """The tensor's diagonal (the principal moments where `principal`)."""
     wheel_inertia_kgm2: float
     torque_sign: float
     control_gain: tuple[float, float, float]
@@ -131,6 +132,10 @@ class OracleModel:
     kp: float
     kd: float
     wheel_accel_max_rad_s2: float
+    inertia_matrix: tuple[tuple[float, float, float], ...] = ((0.0, 0.0, 0.0),) * 3
+    """The inertia tensor (3 x 3, body axes); `from_config` sets it."""
+    principal: bool = True
+    """No products of inertia (the rules' proofs are per principal axis: `rules.rules_apply`)."""
 
     @property
     def name(self) -> str:
@@ -138,7 +143,13 @@ class OracleModel:
 
     @property
     def J(self) -> Array:
+        """The tensor's diagonal (3,)."""
         return np.array(self.inertia_kgm2)
+
+    @property
+    def J_matrix(self) -> Array:
+        """The tensor (3, 3)."""
+        return np.array(self.inertia_matrix)
 
     @property
     def u_max(self) -> Array:
@@ -212,18 +223,15 @@ def oracle_cones(cfg: Config) -> tuple[OracleCone, ...]:
 def from_config(cfg: Config) -> OracleModel:
     """The oracle's parameters of a configuration (plant constants formed as the plant forms them).
 
-    Raises:
-        ConfigError: products of inertia (the oracle's transcription and its rules are on principal axes).
     """
-    if not cfg.spacecraft.principal:
-        raise ConfigError("the viability oracle models principal axes only: it cannot judge a vehicle with "
-                          "spacecraft.products_of_inertia_kgm2 (its verdicts would not be about this vehicle)")
     p = plant_record(cfg)[0]
     L = cfg.limits
     return OracleModel(
         gyrostat=bool(p["wheel_gyroscopic"]),
         inertia_kgm2=tuple(float(v) for v in p["inertia_kgm2"]),  # type: ignore[arg-type]
         wheel_inertia_kgm2=float(p["wheel_inertia_kgm2"]),
+        inertia_matrix=tuple(tuple(float(v) for v in row) for row in p["inertia_matrix"]),
+        principal=bool(p["principal"]),
         torque_sign=float(cfg.spacecraft.torque_sign),
         control_gain=tuple(float(v) for v in p["control_gain"]),  # type: ignore[arg-type]
         frame_rate_rad_s=float(p["frame_rate_rad_s"]),
