@@ -115,7 +115,10 @@ class Loop:
             proc.send_signal(sig)
         return proc.wait(timeout_s)
 
-    def wait(self, *names: str, timeout_s: float = 90.0) -> dict[str, int]:
+    def wait(self, *names: str, timeout_s: float = 240.0) -> dict[str, int]:
+        """Each process' exit code, waiting for its exit (a deadline, not a duration: a 2,000-step lockstep run
+        takes ~16 s alone and was seen past 90 s with the other pytest worker's node processes on the same two
+        cores)."""
         return {n: self.procs[n].wait(timeout_s) for n in names}
 
     def log(self, name: str) -> str:

@@ -222,25 +222,36 @@ def test_lockstep_with_sensor_errors_publishes_measured_and_true_states(tmp_path
     assert np.allclose(run.h_substep_min, ref.h_substep_min, rtol=1e-9, atol=1e-12)  # re-integrated: D u / D rounds
 
 
+VEHICLE_OPTIONS = {
+    "transport_delay": {"spacecraft.transport_delay_s": 0.1},
+    "products_of_inertia": {"spacecraft.inertia_kgm2": [0.0263875, 0.0413341, 0.0542784],
+                            "spacecraft.products_of_inertia_kgm2": [-0.0072898, 0.0069871, 0.0007506]},
+}
+"""A vehicle the nodes must model as `simulate` does: a 0.1 s transport delay; the 6U with products of inertia
+(config/examples/products_of_inertia.yaml)."""
+
+
 @pytest.mark.slow
-def test_lockstep_with_a_transport_delay_equals_the_in_process_run(tmp_path: Path) -> None:
-    """spacecraft.transport_delay_s:=0.1: the plant node holds the previous command over the delay and the
-    filter node plans from the state at its end, as `simulate` does: the run over DDS equals it bit for bit, and
-    the bag's analysis re-integrates it (the previous command over the delay) to the recorded states."""
+@pytest.mark.parametrize("option", list(VEHICLE_OPTIONS))
+def test_lockstep_with_a_vehicle_option_equals_the_in_process_run(option: str, tmp_path: Path) -> None:
+    """The plant node and the filter node model the vehicle as `simulate` does: with a 0.1 s transport delay the
+    plant holds the previous command over the delay and the filter plans from the state at its end; with products
+    of inertia both use the full tensor. The run over DDS equals `simulate` bit for bit, and the bag's analysis
+    re-integrates it to the recorded states."""
     from rosbags.highlevel import AnyReader
 
     from rta_attitude.recording.analysis import load_run
     from rta_attitude.simulation.closed_loop import simulate
 
-    delayed = config.load(overrides={"spacecraft.transport_delay_s": 0.1})
+    delayed = config.load(overrides=VEHICLE_OPTIONS[option])
     ref = simulate(delayed, "paper-example")
-    out = run_nodes(tmp_path, params={"spacecraft.transport_delay_s": 0.1})
+    out = run_nodes(tmp_path, params=VEHICLE_OPTIONS[option])
     assert out["plant"].exit_code == 0 and out["plant"].k == ref.steps
     with AnyReader([out["bag"]]) as reader:
         states = [np.array(reader.deserialize(raw, c.msgtype).position) for c, _, raw in reader.messages()
                   if c.topic == _topic(topics.STATE)]
     assert np.array_equal(np.array(states), ref.x)
-    assert not np.array_equal(ref.x, simulate(CFG, "paper-example").x)  # the delay changed the run
+    assert not np.array_equal(ref.x, simulate(CFG, "paper-example").x)  # the option changed the run
     run = load_run(out["bag"], delayed)
     assert np.array_equal(run.x, ref.x) and run.reintegration_residual < 1e-9
 

@@ -217,10 +217,15 @@ def _general_zoh_rows(ctx: np.void, x: NDArray[np.float64], c: np.void, p: np.vo
 @numba.njit(**LEAF, inline="always")
 def _phi_g(ctx: np.void, tau: float, i: int, a: int) -> float:
     """(Phi G)_ia = tau (S G)_ia over the hold (ctx.zoh_sum = S): G_a on principal axes, the full G with products."""
-    S = ctx.zoh_sum
     if ctx.principal:
-        return tau * S[i, a] * ctx.control_gain[a]
-    G = ctx.control_matrix
+        return tau * ctx.zoh_sum[i, a] * ctx.control_gain[a]
+    return _general_phi_g(ctx, tau, i, a)
+
+
+@numba.njit(**LEAF)
+def _general_phi_g(ctx: np.void, tau: float, i: int, a: int) -> float:
+    """`_phi_g` with products of inertia."""
+    S, G = ctx.zoh_sum, ctx.control_matrix
     return tau * (S[i, 0] * G[0, a] + S[i, 1] * G[1, a] + S[i, 2] * G[2, a])
 
 

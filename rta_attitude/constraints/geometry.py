@@ -45,7 +45,6 @@ CONTEXT_DTYPE = np.dtype([
     ("omega_drift", np.float64, (3,)),  # omega_dot at u = 0, rad/s^2
     ("control_gain", np.float64, (3,)),  # d omega_dot_i / d u_i (principal axes)
     ("control_matrix", np.float64, (3, 3)),  # G = d omega_dot / d u
-    ("principal", np.uint8),           # 1: G is diagonal (the principal-axis arithmetic)
     ("sun", np.float64, (3,)),         # r_S in body
     ("sun_rate", np.float64, (3,)),    # inertial first derivative of r_S, in body, 1/s
     ("sun_acc", np.float64, (3,)),     # inertial second derivative of r_S, in body, 1/s^2
@@ -60,6 +59,8 @@ CONTEXT_DTYPE = np.dtype([
     ("zoh_term", np.float64, (3, 3)),
     ("zoh_next", np.float64, (3, 3)),
     ("inertia_err", np.float64, (3,)),  # bound on omega_dot's error from the inertia's (`base.inertia_error`)
+    ("principal", np.uint8),           # 1: G is diagonal (the principal-axis arithmetic); last, so the floats
+    # before it stay 8-byte aligned
 ])  # fmt: skip
 """Per-state quantities shared by the barriers (one record)."""
 
@@ -122,6 +123,12 @@ def through_control(ctx: np.void, m0: float, m1: float, m2: float) -> tuple[floa
     if ctx.principal:
         cg = ctx.control_gain
         return m0 * cg[0], m1 * cg[1], m2 * cg[2]
+    return _general_through_control(ctx, m0, m1, m2)
+
+
+@numba.njit(**LEAF)
+def _general_through_control(ctx: np.void, m0: float, m1: float, m2: float) -> tuple[float, float, float]:
+    """`through_control` with products of inertia: m^T G."""
     G = ctx.control_matrix
     return (m0 * G[0, 0] + m1 * G[1, 0] + m2 * G[2, 0], m0 * G[0, 1] + m1 * G[1, 1] + m2 * G[2, 1],
             m0 * G[0, 2] + m1 * G[1, 2] + m2 * G[2, 2])

@@ -78,10 +78,10 @@ PLANT_DTYPE = np.dtype([
     ("face_axis", np.int64),                   # `signed_axis` of face_normal: i if it is +-e_i, else -1
     ("panel_axis", np.int64),                  # the same of panel_normal
     ("delay_substeps", np.int64),              # substeps of a sample the previous command still holds
-    ("principal", np.uint8),                   # 1: no products of inertia (the principal-axis arithmetic)
     ("inertia_matrix", np.float64, (3, 3)),    # J, body axes (diag(inertia_kgm2) where principal)
     ("inertia_inverse", np.float64, (3, 3)),   # J^-1
     ("control_matrix", np.float64, (3, 3)),    # G = d omega_dot / d u = s D J^-1
+    ("principal", np.uint8),                   # 1: no products of inertia (the principal-axis arithmetic)
 ])  # fmt: skip
 """The plant's parameters, in model units, as the compiled code reads them."""
 
@@ -174,7 +174,7 @@ def positive_part(c: float) -> float:
     return c if (c > 0.0 or c != c) else 0.0
 
 
-@numba.njit(**LEAF)
+@numba.njit(**LEAF, inline="always")
 def _principal_drift(x: Array, A: Array, p: np.void, out: Array) -> None:
     """`omega_drift` on principal axes."""
     w1, w2, w3 = x[4], x[5], x[6]
@@ -207,8 +207,14 @@ def omega_drift(x: Array, A: Array, p: np.void, out: Array) -> None:
     the arithmetic of the first implementation (`_principal_drift`); with products of inertia
     J^-1 (-w x (J w - s D psi) + 3 n^2 r x J r)."""
     if p.principal:
-        _principal_drift(x, A, p, out)
+        _principal_drift(x, A, p, out)  # (inlined: the plant's hot path, 40 calls a step)
         return
+    _general_drift(x, A, p, out)
+
+
+@numba.njit(**LEAF)
+def _general_drift(x: Array, A: Array, p: np.void, out: Array) -> None:
+    """`omega_drift` with products of inertia."""
     J, Ji = p.inertia_matrix, p.inertia_inverse
     w1, w2, w3 = x[4], x[5], x[6]
     h1 = J[0, 0] * w1 + J[0, 1] * w2 + J[0, 2] * w3
@@ -239,6 +245,12 @@ def control_accel(wd: Array, u: Array, p: np.void, a: int) -> float:
     principal axes (the first implementation's arithmetic), the row G_a . u with products of inertia."""
     if p.principal:
         return wd[a] + p.control_gain[a] * u[a]
+    return _general_accel(wd, u, p, a)
+
+
+@numba.njit(**LEAF)
+def _general_accel(wd: Array, u: Array, p: np.void, a: int) -> float:
+    """`control_accel` with products of inertia (out of line: the principal path stays small where it is inlined)."""
     G = p.control_matrix
     return wd[a] + (G[a, 0] * u[0] + G[a, 1] * u[1] + G[a, 2] * u[2])
 
@@ -247,11 +259,15 @@ def control_accel(wd: Array, u: Array, p: np.void, a: int) -> float:
 def angular_momentum(p: np.void, x: Array, a: int) -> float:
     """(J w)_a - s D psi_a of the state x (19,), N m s: the body's angular momentum on axis a."""
     if p.principal:
-        Jw = p.inertia_kgm2[a] * x[4 + a]
-    else:
-        J = p.inertia_matrix
-        Jw = J[a, 0] * x[4] + J[a, 1] * x[5] + J[a, 2] * x[6]
-    return Jw - p.torque_sign * p.wheel_inertia_kgm2 * x[7 + a]
+        return p.inertia_kgm2[a] * x[4 + a] - p.torque_sign * p.wheel_inertia_kgm2 * x[7 + a]
+    return _general_momentum(p, x, a)
+
+
+@numba.njit(**LEAF)
+def _general_momentum(p: np.void, x: Array, a: int) -> float:
+    """`angular_momentum` with products of inertia."""
+    J = p.inertia_matrix
+    return (J[a, 0] * x[4] + J[a, 1] * x[5] + J[a, 2] * x[6]) - p.torque_sign * p.wheel_inertia_kgm2 * x[7 + a]
 
 
 @numba.njit(**LEAF, inline="always")
@@ -259,6 +275,12 @@ def rate_momentum(p: np.void, a: int) -> float:
     """The most |(J w)_a| / |w|_inf can be, kg m^2: J_a on principal axes, sum_b |J_ab| with products."""
     if p.principal:
         return p.inertia_kgm2[a]
+    return _general_rate_momentum(p, a)
+
+
+@numba.njit(**LEAF)
+def _general_rate_momentum(p: np.void, a: int) -> float:
+    """`rate_momentum` with products of inertia."""
     J = p.inertia_matrix
     return abs(J[a, 0]) + abs(J[a, 1]) + abs(J[a, 2])
 
@@ -268,6 +290,12 @@ def control_error(p: np.void, e: Array, a: int) -> float:
     """The most |(G v)_a| can be for |v_b| <= e_b (3,), rad/s^2: |G_a| e_a on principal axes, sum_b |G_ab| e_b."""
     if p.principal:
         return abs(p.control_gain[a]) * e[a]
+    return _general_control_error(p, e, a)
+
+
+@numba.njit(**LEAF)
+def _general_control_error(p: np.void, e: Array, a: int) -> float:
+    """`control_error` with products of inertia."""
     G = p.control_matrix
     return abs(G[a, 0]) * e[0] + abs(G[a, 1]) * e[1] + abs(G[a, 2]) * e[2]
 
