@@ -200,7 +200,7 @@ def _principal_drift(x: Array, A: Array, p: np.void, out: Array) -> None:
     out[2] = t3 / J3
 
 
-@numba.njit(**LEAF)
+@numba.njit(**LEAF, inline="always")
 def omega_drift(x: Array, A: Array, p: np.void, out: Array) -> None:
     """omega_dot at u = 0 (3,), rad/s^2: Euler's equations, the wheels' gyroscopic term (gyrostat) and
     the gravity-gradient torque (if on). A = A(q) of x (used only with gravity gradient). On principal axes
@@ -246,6 +246,13 @@ def control_accel(wd: Array, u: Array, p: np.void, a: int) -> float:
     if p.principal:
         return wd[a] + p.control_gain[a] * u[a]
     return _general_accel(wd, u, p, a)
+
+
+@numba.njit(**LEAF)
+def _general_accels(wd: Array, u: Array, p: np.void, f: Array) -> None:
+    """f[4:7] = omega_dot = wd + G u with products of inertia (`derivative`)."""
+    for a in range(3):
+        f[4 + a] = _general_accel(wd, u, p, a)
 
 
 @numba.njit(**LEAF)
@@ -354,9 +361,13 @@ def derivative(x: Array, u: Array, p: np.void, A: Array, wd: Array, f: Array) ->
     f[1] = 0.5 * (q3 * w1 + q4 * w2 - q1 * w3)
     f[2] = 0.5 * (-q2 * w1 + q1 * w2 + q4 * w3)
     f[3] = -0.5 * (q1 * w1 + q2 * w2 + q3 * w3)
-    f[4] = control_accel(wd, u, p, 0)
-    f[5] = control_accel(wd, u, p, 1)
-    f[6] = control_accel(wd, u, p, 2)
+    if p.principal:  # (written out: the plant's and the rollouts' hot path)
+        cg = p.control_gain
+        f[4] = wd[0] + cg[0] * u[0]
+        f[5] = wd[1] + cg[1] * u[1]
+        f[6] = wd[2] + cg[2] * u[2]
+    else:
+        _general_accels(wd, u, p, f)
     f[7] = 0.0 + u[0]
     f[8] = 0.0 + u[1]
     f[9] = 0.0 + u[2]
