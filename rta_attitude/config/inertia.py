@@ -42,7 +42,7 @@ def check_inertia(J: NDArray[np.float64], where: str) -> None:
     triangle inequalities (J_1 + J_2 >= J_3 for every ordering: no body has any other)."""
     if not np.all(np.isfinite(J)):
         raise ConfigError(f"{where} must be finite, got {J.tolist()!r}")
-    moments = np.linalg.eigvalsh(J)
+    moments = principal_moments(J)
     if not moments[0] > 0.0:
         raise ConfigError(f"{where}: the inertia tensor must be positive definite; its principal moments are "
                           f"{', '.join(f'{m:.6g}' for m in moments)} kg m^2")

@@ -174,6 +174,11 @@ class Spacecraft:
         return inertia_matrix(self.inertia_kgm2, self.products_of_inertia_kgm2)
 
     @property
+    def inertia_inverse(self) -> NDArray[np.float64]:
+        """J^-1 (3, 3), 1/(kg m^2)."""
+        return np.linalg.inv(self.inertia_matrix)
+
+    @property
     def principal_moments(self) -> NDArray[np.float64]:
         """The tensor's eigenvalues (3,), kg m^2: the diagonal itself where `principal`."""
         return self.J if self.principal else principal_moments(self.inertia_matrix)
@@ -188,7 +193,7 @@ class Spacecraft:
         """G = d omega_dot / d u = sign D J^-1 (3, 3), 1/s^2 per rad/s^2 (diag(control_gain) where `principal`)."""
         if self.principal:
             return np.diag(self.control_gain)
-        return self.torque_sign * self.wheel_inertia_kgm2 * np.linalg.inv(self.inertia_matrix)
+        return self.torque_sign * self.wheel_inertia_kgm2 * self.inertia_inverse
 
     def control_times(self, v: NDArray[np.float64]) -> NDArray[np.float64]:
         """G v (3,): the body's angular acceleration of wheel accelerations v, rad/s^2."""
@@ -905,7 +910,7 @@ class Config:
         if not sc.principal:
             J, w = sc.inertia_matrix, L.omega_max_rad_s
             e = np.array([euler_bound(J, w, w, w, j) for j in range(3)])
-            b = L.omega_dot_max_rad_s2 - np.abs(np.linalg.inv(J)) @ e
+            b = L.omega_dot_max_rad_s2 - np.abs(sc.inertia_inverse) @ e
             G = np.abs(sc.control_matrix)
             alone = b / np.diag(G)
             return np.minimum(L.wheel_accel_max_rad_s2, float(np.min(b / (G @ alone))) * alone)

@@ -151,12 +151,8 @@ def _general_zoh_rows(ctx: np.void, x: NDArray[np.float64], c: np.void, p: np.vo
     per-axis interval no longer applies). The same construction with the tensor J, J^-1 and the full G:
 
         Omega = s D J^-1 [. x psi]   (0 in the paper's model)
-        A_i >= |omega_dot_i| = sum_j |J^-1_ij| (E_j + D |w x psi|_j + k E1_j / 2) + sum_j |G_ij| U_j
-        B_i >= |omega_ddot_i|, L_i >= |de_i/dt|: J^-1 applied the same way to the rates of those torques
-        |r_i| <= sqrt((J^-1)_ii sum_ab |J_ab| L_a L_b) tau^2 / 2   (E keeps w^T J w: J Omega is skew)
-
-    E_j, E'_j: `config.inertia.euler_bound`, `euler_rate_bound` (|w x J w|_j and its rate); the gravity
-    gradient's 3 n^2 r x J r with |r_k| <= 1 (E1: the Euler bound at unit rates), its rate 2 w_rel E1."""
+        A_i >= |omega_dot_i|, B_i >= |omega_ddot_i|, L_i >= |de_i/dt|: `general_rate_bounds`
+        |r_i| <= sqrt((J^-1)_ii sum_ab |J_ab| L_a L_b) tau^2 / 2   (E keeps w^T J w: J Omega is skew)"""
     dt = c.dt_s
     J, Ji, G = p.inertia_matrix, p.inertia_inverse, ctx.control_matrix
     gyro = p.wheel_gyroscopic != 0
@@ -180,38 +176,54 @@ def _general_zoh_rows(ctx: np.void, x: NDArray[np.float64], c: np.void, p: np.vo
     P = (abs(p0) + U[0] * dt, abs(p1) + U[1] * dt, abs(p2) + U[2] * dt) if gyro else (0.0, 0.0, 0.0)
     k = 3.0 * p.mean_motion_rad_s * p.mean_motion_rad_s if p.gravity_gradient else 0.0
     w_rel = math.sqrt(W[0] * W[0] + W[1] * W[1] + W[2] * W[2]) + abs(p.frame_rate_rad_s)
-    # torque bounds (body, N m) then through J^-1
-    tq = ctx.zoh_next[0]  # scratch rows (no allocation; `_hold_series` reuses them after)
-    for j in range(3):
-        b, d = (j + 1) % 3, (j + 2) % 3
-        tq[j] = euler_bound(J, W[0], W[1], W[2], j) + D * (W[b] * P[d] + W[d] * P[b]) + k * euler_bound(
-            J, 1.0, 1.0, 1.0, j)
-    A0 = A1 = A2 = 0.0
-    for j in range(3):
-        A0 += abs(Ji[0, j]) * tq[j] + abs(G[0, j]) * U[j]
-        A1 += abs(Ji[1, j]) * tq[j] + abs(G[1, j]) * U[j]
-        A2 += abs(Ji[2, j]) * tq[j] + abs(G[2, j]) * U[j]
-    rb = ctx.zoh_next[1]  # |rate of the torque| with the wheel term (B) and without its frozen part (L)
-    rl = ctx.zoh_next[2]
-    A = (A0, A1, A2)
-    for j in range(3):
-        b, d = (j + 1) % 3, (j + 2) % 3
-        eul = euler_rate_bound(J, W[0], W[1], W[2], A0, A1, A2, j) + 2.0 * k * w_rel * euler_bound(J, 1.0, 1.0, 1.0, j)
-        rb[j] = eul + D * (A[b] * P[d] + W[b] * U[d] + A[d] * P[b] + W[d] * U[b])
-        rl[j] = eul + D * (W[b] * U[d] + W[d] * U[b])
-    B0 = abs(Ji[0, 0]) * rb[0] + abs(Ji[0, 1]) * rb[1] + abs(Ji[0, 2]) * rb[2]
-    B1 = abs(Ji[1, 0]) * rb[0] + abs(Ji[1, 1]) * rb[1] + abs(Ji[1, 2]) * rb[2]
-    B2 = abs(Ji[2, 0]) * rb[0] + abs(Ji[2, 1]) * rb[1] + abs(Ji[2, 2]) * rb[2]
-    Bs = (B0, B1, B2)
-    L0 = abs(Ji[0, 0]) * rl[0] + abs(Ji[0, 1]) * rl[1] + abs(Ji[0, 2]) * rl[2]
-    L1 = abs(Ji[1, 0]) * rl[0] + abs(Ji[1, 1]) * rl[1] + abs(Ji[1, 2]) * rl[2]
-    L2 = abs(Ji[2, 0]) * rl[0] + abs(Ji[2, 1]) * rl[1] + abs(Ji[2, 2]) * rl[2]
-    Ls = (L0, L1, L2)
+    out = ctx.zoh_next  # scratch (no allocation; `_hold_series` reuses it after)
+    general_rate_bounds(J, Ji, G, D, W[0], W[1], W[2], P[0], P[1], P[2], U, k, w_rel, out)
+    Bs = (out[1, 0], out[1, 1], out[1, 2])
+    Ls = (out[2, 0], out[2, 1], out[2, 2])
     energy = 0.0
     for a in range(3):
         for b in range(3):
             energy += abs(J[a, b]) * Ls[a] * Ls[b]
     _rows_over_the_hold(ctx, c, t, e0, (energy * Ji[0, 0], energy * Ji[1, 1], energy * Ji[2, 2]), Bs)
+
+
+@numba.njit(**LEAF)
+def general_rate_bounds(J: NDArray[np.float64], Ji: NDArray[np.float64], G: NDArray[np.float64], D: float, W0: float,
+                        W1: float, W2: float, P0: float, P1: float, P2: float, U: NDArray[np.float64], k: float,
+                        w_rel: float, out: NDArray[np.float64]) -> None:
+    """With products of inertia, bounds per axis over a hold with u held in the box U, for |w_a| <= W_a and
+    |psi_a| <= P_a (D = 0: the paper's model), into the rows of out (3, 3):
+
+        A_i >= |omega_dot_i|  = sum_j |J^-1_ij| (E_j + D |w x psi|_j + k E1_j) + sum_j |G_ij| U_j
+        B_i >= |omega_ddot_i| = sum_j |J^-1_ij| (E'_j + 2 k w_rel E1_j + D |(w x psi)'|_j)
+        L_i >= |de_i/dt|: B_i without the wheel term's frozen part (D |w' x psi|)
+
+    E_j, E'_j: `config.inertia.euler_bound`, `euler_rate_bound`; the gravity gradient k r x J r with |r_k| <= 1
+    (E1: the Euler bound at unit rates), its rate 2 w_rel E1 (w_rel: the body's rate to the Hill frame). The
+    per-state bounds of `zoh_rows` and the worst case of `margins.axis_rate_bounds` (k = 0, every W and P at
+    the limits) both take them from here."""
+    W = (W0, W1, W2)
+    P = (P0, P1, P2)
+    for j in range(3):  # the torques' bounds, body axes, N m (out[2] as scratch)
+        b, d = (j + 1) % 3, (j + 2) % 3
+        out[2, j] = (euler_bound(J, W0, W1, W2, j) + D * (W[b] * P[d] + W[d] * P[b])
+                     + k * euler_bound(J, 1.0, 1.0, 1.0, j))
+    for i in range(3):
+        a_i = 0.0
+        for j in range(3):
+            a_i += abs(Ji[i, j]) * out[2, j] + abs(G[i, j]) * U[j]
+        out[0, i] = a_i
+    A = (out[0, 0], out[0, 1], out[0, 2])
+    for j in range(3):  # the torques' rates: with the wheel term (out[1]) and without its frozen part (out[2])
+        b, d = (j + 1) % 3, (j + 2) % 3
+        eul = euler_rate_bound(J, W0, W1, W2, A[0], A[1], A[2], j) + 2.0 * k * w_rel * euler_bound(J, 1.0, 1.0, 1.0, j)
+        out[1, j] = eul + D * (A[b] * P[d] + W[b] * U[d] + A[d] * P[b] + W[d] * U[b])
+        out[2, j] = eul + D * (W[b] * U[d] + W[d] * U[b])
+    rb = (out[1, 0], out[1, 1], out[1, 2])
+    rl = (out[2, 0], out[2, 1], out[2, 2])
+    for i in range(3):
+        out[1, i] = abs(Ji[i, 0]) * rb[0] + abs(Ji[i, 1]) * rb[1] + abs(Ji[i, 2]) * rb[2]
+        out[2, i] = abs(Ji[i, 0]) * rl[0] + abs(Ji[i, 1]) * rl[1] + abs(Ji[i, 2]) * rl[2]
 
 
 @numba.njit(**LEAF, inline="always")

@@ -31,8 +31,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from rta_attitude.config.schema import Config, PointingConstraint
+from rta_attitude.constraints.angular_rate import general_rate_bounds
 from rta_attitude.constraints.base import inertia_error_bound
-from rta_attitude.dynamics.spacecraft import euler_bound, euler_rate_bound
 
 
 def axis_rate_bounds(cfg: Config, model: str, delta: float = 0.0) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
@@ -68,19 +68,12 @@ def _general_axis_rate_bounds(cfg: Config, model: str) -> tuple[NDArray[np.float
     `config.inertia.euler_bound` and its rate; the wheels' D |w x psi|) through |J^-1|, as
     `angular_rate.zoh_rows` bounds them per state."""
     sc, L = cfg.spacecraft, cfg.limits
-    J = sc.inertia_matrix
-    Ji = np.abs(np.linalg.inv(J))
-    G = np.abs(sc.control_matrix)
-    D = sc.wheel_inertia_kgm2 if model == "gyrostat" else 0.0
-    U = cfg.u_max_rad_s2
-    w = L.omega_max_rad_s
-    P = L.psi_max_rad_s if model == "gyrostat" else 0.0
-    torque = np.array([euler_bound(J, w, w, w, j) + 2.0 * D * w * P for j in range(3)])
-    A = Ji @ torque + G @ U
-    rate = np.array([euler_rate_bound(J, w, w, w, A[0], A[1], A[2], j)
-                     + D * (A[(j + 1) % 3] * P + w * U[(j + 2) % 3] + A[(j + 2) % 3] * P + w * U[(j + 1) % 3])
-                     for j in range(3)])
-    return A, Ji @ rate
+    gyrostat = model == "gyrostat"
+    w, P = L.omega_max_rad_s, L.psi_max_rad_s if gyrostat else 0.0
+    out = np.empty((3, 3))
+    general_rate_bounds(sc.inertia_matrix, sc.inertia_inverse, sc.control_matrix,
+                        sc.wheel_inertia_kgm2 if gyrostat else 0.0, w, w, w, P, P, P, cfg.u_max_rad_s2, 0.0, 0.0, out)
+    return out[0].copy(), out[1].copy()
 
 
 def rate_bounds(cfg: Config, model: str) -> tuple[float, float]:

@@ -129,7 +129,7 @@ def plant_record(cfg: Config, model: str | None = None) -> NDArray[np.void]:
     vehicle = sc if true_J is None else replace(sc, inertia_kgm2=true_J)
     p["principal"] = vehicle.principal
     p["inertia_matrix"] = vehicle.inertia_matrix
-    p["inertia_inverse"] = np.linalg.inv(vehicle.inertia_matrix)
+    p["inertia_inverse"] = vehicle.inertia_inverse
     p["control_matrix"] = vehicle.control_matrix
     return rec
 

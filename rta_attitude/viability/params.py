@@ -132,9 +132,9 @@ class OracleModel:
     kp: float
     kd: float
     wheel_accel_max_rad_s2: float
-    inertia_matrix: tuple[tuple[float, float, float], ...] = ((0.0, 0.0, 0.0),) * 3
-    """The inertia tensor (3 x 3, body axes); `from_config` sets it."""
-    principal: bool = True
+    inertia_matrix: tuple[tuple[float, float, float], ...]
+    """The inertia tensor (3 x 3, body axes)."""
+    principal: bool
     """No products of inertia (the rules' proofs are per principal axis: `rules.rules_apply`)."""
 
     @property

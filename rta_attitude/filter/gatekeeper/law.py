@@ -114,10 +114,7 @@ def large_momentum(x: Array, p: np.void, b: np.void) -> bool:
     D): a momentum the sun-safe attitude may not hold at rest (the gate's and the backup law's test)."""
     hh = 0.0
     for a in range(3):
-        if p.principal:  # (the principal-axis expression written out: this runs at every rollout step)
-            ha = (p.inertia_kgm2[a] * x[4 + a] - p.torque_sign * p.wheel_inertia_kgm2 * x[7 + a]) / p.wheel_inertia_kgm2
-        else:
-            ha = angular_momentum(p, x, a) / p.wheel_inertia_kgm2
+        ha = angular_momentum(p, x, a) / p.wheel_inertia_kgm2
         hh += ha * ha
     return math.sqrt(hh) > b.momentum_variant_rad_s
 
@@ -130,8 +127,7 @@ def _wheel_load(T: Array, Hh: Array, p: np.void, b: np.void, share: float = 1.0)
     worst = -np.inf
     for a in range(3):
         ha = abs(T[a, 0] * Hh[0] + T[a, 1] * Hh[1] + T[a, 2] * Hh[2])
-        Ja = p.inertia_kgm2[a] if p.principal else rate_momentum(p, a)
-        v = (ha + Ja * share * b.omega_max_rad_s) / p.wheel_inertia_kgm2
+        v = (ha + rate_momentum(p, a) * share * b.omega_max_rad_s) / p.wheel_inertia_kgm2
         worst = max(worst, v)
     return worst - b.psi_limit_rad_s
 
@@ -207,8 +203,6 @@ def _wheel_caps(p: np.void, b: np.void, share: float = 1.0) -> tuple[float, floa
     or the terminal set's SETTLED_RATE_FRACTION in the TIGHT variant, `_rate_share`)."""
     top = (1.0 - TILT_WHEEL_MARGIN) * b.psi_limit_rad_s * p.wheel_inertia_kgm2
     w = share * b.omega_max_rad_s
-    if p.principal:
-        return top - p.inertia_kgm2[0] * w, top - p.inertia_kgm2[1] * w, top - p.inertia_kgm2[2] * w
     return top - rate_momentum(p, 0) * w, top - rate_momentum(p, 1) * w, top - rate_momentum(p, 2) * w
 
 
@@ -252,13 +246,7 @@ def _momentum(x: Array, p: np.void, g: np.void) -> tuple[float, float, float]:
     in Hill (A^T H) into g.Hh; g.A := A(q)."""
     A = g.A
     attitude_matrix(x[0], x[1], x[2], x[3], A)
-    if p.principal:
-        s, D = p.torque_sign, p.wheel_inertia_kgm2
-        Hb0 = p.inertia_kgm2[0] * x[4] - s * D * x[7]
-        Hb1 = p.inertia_kgm2[1] * x[5] - s * D * x[8]
-        Hb2 = p.inertia_kgm2[2] * x[6] - s * D * x[9]
-    else:
-        Hb0, Hb1, Hb2 = angular_momentum(p, x, 0), angular_momentum(p, x, 1), angular_momentum(p, x, 2)
+    Hb0, Hb1, Hb2 = angular_momentum(p, x, 0), angular_momentum(p, x, 1), angular_momentum(p, x, 2)
     for c in range(3):
         g.Hh[c] = A[0, c] * Hb0 + A[1, c] * Hb1 + A[2, c] * Hb2
     return Hb0, Hb1, Hb2

@@ -22,6 +22,7 @@ from rta_attitude.dynamics.spacecraft import (
     PLANT_DTYPE,
     RK4_WORK_ROWS,
     plant_record,
+    rate_momentum,
 )
 from rta_attitude.dynamics.state import STATE_SIZE
 from rta_attitude.filter.gatekeeper.law import (
@@ -169,10 +170,6 @@ def backup_record(cfg: Config) -> NDArray[np.void]:
     b["omega_max_rad_s"], b["psi_max_rad_s"] = L.omega_max_rad_s, L.psi_max_rad_s
     b["psi_limit_rad_s"] = L.psi_keep_rad_s
     b["psi_hold_rad_s"] = L.psi_keep_rad_s
-    sc = cfg.spacecraft
-    rate_momentum = sc.J if sc.principal else np.abs(sc.inertia_matrix).sum(axis=1)  # (`spacecraft.rate_momentum`)
-    b["momentum_variant_rad_s"] = (L.psi_keep_rad_s
-                                   - float(np.max(rate_momentum)) * L.omega_max_rad_s / sc.wheel_inertia_kgm2)
     b["nominal_steps"] = max(1, round(o.backup_nominal_s / o.sample_time_s))
     b["reserve_step_s"] = RESERVE_STEP_S
     b["reserve_steps"] = round(o.backup_energy_lookahead_s / RESERVE_STEP_S)
@@ -191,6 +188,8 @@ def backup_record(cfg: Config) -> NDArray[np.void]:
     b["law_quat"] = q
     perm = np.abs(P)
     plant = plant_record(cfg, o.model)[0]
+    most = max(rate_momentum(plant, a) for a in range(3))  # the largest |(J w)_a| / w_max (any axis order)
+    b["momentum_variant_rad_s"] = L.psi_keep_rad_s - most * L.omega_max_rad_s / cfg.spacecraft.wheel_inertia_kgm2
     if b["permuted"]:
         plant["inertia_kgm2"] = perm @ plant["inertia_kgm2"]
         plant["control_gain"] = perm @ plant["control_gain"]
