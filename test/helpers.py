@@ -144,3 +144,27 @@ def turned_vehicle(cfg: Config, angle_deg: float, axis: tuple[float, float, floa
     sc = dataclasses.replace(cfg.spacecraft, inertia_kgm2=(J[0, 0], J[1, 1], J[2, 2]),
                              products_of_inertia_kgm2=(J[0, 1], J[0, 2], J[1, 2]))
     return dataclasses.replace(cfg, spacecraft=sc), R
+
+
+SKEWED_AXES = ((0.9592, 0.1998, -0.1998), (0.3, 0.9, 0.3162), (-0.2506, 0.3509, 0.9023))
+"""Three wheels' spin axes (rows, body axes), none on a body axis nor orthogonal to another (normalised where
+used): a generic array."""
+
+
+def with_wheels(cfg: Config, axes: tuple[tuple[float, float, float], ...] | np.ndarray) -> Config:
+    """cfg with its wheels' spin axes (rows; normalised) set as `spacecraft.wheel_spin_axes_body` sets them."""
+    import dataclasses
+
+    rows = np.asarray(axes, dtype=float)
+    rows = rows / np.linalg.norm(rows, axis=1, keepdims=True)
+    sc = dataclasses.replace(cfg.spacecraft, wheel_axes_body=tuple(tuple(float(v) for v in r) for r in rows))
+    return dataclasses.replace(cfg, spacecraft=sc)
+
+
+def turned_with_wheels(cfg: Config, angle_deg: float, axis: tuple[float, float, float] = (1.0, 2.0, 3.0)
+                       ) -> tuple[Config, np.ndarray]:
+    """`turned_vehicle` with its wheels turned along: wheel i on the turned principal axis R e_i. The vehicle is
+    cfg's principal one seen from body axes turned by R^T (omega_body = R omega, psi the same, u the same).
+    Returns (the configuration, R)."""
+    turned, R = turned_vehicle(cfg, angle_deg, axis)
+    return with_wheels(turned, R.T), R

@@ -16,7 +16,7 @@ import math
 
 import numpy as np
 import pytest
-from helpers import random_states, turned_vehicle
+from helpers import SKEWED_AXES, random_states, turned_vehicle, with_wheels
 
 from rta_attitude import config
 from rta_attitude.config.schema import Config
@@ -32,21 +32,26 @@ N_ORB = BASE.environment.mean_motion_rad_s
 
 
 def variant(model: str = "gyrostat", rotating_hill: bool = False, gravity_gradient: bool = False,
-            torque_sign: float = 1.0, turn_deg: float = 0.0) -> Config:
+            torque_sign: float = 1.0, turn_deg: float = 0.0, skewed: bool = False) -> Config:
     """The default configuration with the plant (and the filter's model) set as asked; turn_deg: the vehicle's
-    principal axes that far from the body axes (products of inertia, `helpers.turned_vehicle`)."""
+    principal axes that far from the body axes (products of inertia, `helpers.turned_vehicle`); skewed: its
+    wheels on `helpers.SKEWED_AXES`."""
     sc = dataclasses.replace(BASE.spacecraft, model=model, torque_sign=torque_sign)
     env = dataclasses.replace(BASE.environment, rotating_hill=rotating_hill, gravity_gradient=gravity_gradient)
     cfg = dataclasses.replace(BASE, spacecraft=sc, environment=env).with_models(model, model)
-    return turned_vehicle(cfg, turn_deg)[0] if turn_deg else cfg
+    cfg = turned_vehicle(cfg, turn_deg)[0] if turn_deg else cfg
+    return with_wheels(cfg, SKEWED_AXES) if skewed else cfg
 
 
 VARIANTS = {f"hill={'rot' if r else 'inertial'}-gg={'on' if g else 'off'}": (r, g)
             for r in (False, True) for g in (False, True)}
-ROW_VARIANTS = {**{k: (r, g, 0.0) for k, (r, g) in VARIANTS.items()},
-                "tensor-25deg-hill=rot-gg=on": (True, True, 25.0),
-                "tensor-60deg-hill=inertial-gg=off": (False, False, 60.0)}
-"""VARIANTS and two vehicles with products of inertia (principal axes 25 and 60 deg off the body axes)."""
+ROW_VARIANTS = {**{k: (r, g, 0.0, False) for k, (r, g) in VARIANTS.items()},
+                "tensor-25deg-hill=rot-gg=on": (True, True, 25.0, False),
+                "tensor-60deg-hill=inertial-gg=off": (False, False, 60.0, False),
+                "skewed-wheels-hill=rot-gg=on": (True, True, 0.0, True),
+                "skewed-wheels-tensor-25deg-hill=inertial-gg=off": (False, False, 25.0, True)}
+"""VARIANTS, two vehicles with products of inertia (principal axes 25 and 60 deg off the body axes) and two with
+skewed wheels (`helpers.SKEWED_AXES`: every wheel turns every axis, its momentum on every axis)."""
 
 
 # ----------------------------------------------------------------------------- (i) rows vs finite differences
@@ -74,8 +79,8 @@ def test_gyrostat_rows_are_the_derivatives_of_their_levels(name: str) -> None:
     (relative degree 1: d/dt h + k1 h + bias), the derivatives taken numerically along the gyrostat
     plant's derivative, with the Hill frame rotating or not, gravity gradient on or off, and with products of
     inertia (every row's gain then reaches every wheel)."""
-    r, g, turn = ROW_VARIANTS[name]
-    cfg = variant("gyrostat", r, g, turn_deg=turn)
+    r, g, turn, skewed = ROW_VARIANTS[name]
+    cfg = variant("gyrostat", r, g, turn_deg=turn, skewed=skewed)
     cs = ConstraintSet(cfg)
     p = spacecraft.plant_record(cfg)
     assert p[0]["wheel_gyroscopic"] == 1

@@ -226,9 +226,13 @@ VEHICLE_OPTIONS = {
     "transport_delay": {"spacecraft.transport_delay_s": 0.1},
     "products_of_inertia": {"spacecraft.inertia_kgm2": [0.0263875, 0.0413341, 0.0542784],
                             "spacecraft.products_of_inertia_kgm2": [-0.0072898, 0.0069871, 0.0007506]},
+    "skewed_wheels": {"spacecraft.wheel_spin_axes_body.wheel_x": [0.9592, 0.1998, -0.1998],
+                      "spacecraft.wheel_spin_axes_body.wheel_y": [0.3, 0.9, 0.3162],
+                      "spacecraft.wheel_spin_axes_body.wheel_z": [-0.2506, 0.3509, 0.9023]},
 }
 """A vehicle the nodes must model as `simulate` does: a 0.1 s transport delay; the 6U with products of inertia
-(config/examples/products_of_inertia.yaml)."""
+(config/examples/products_of_inertia.yaml); wheels on skewed axes (`helpers.SKEWED_AXES`: the torque interface
+carries D A u)."""
 
 
 @pytest.mark.slow
@@ -236,7 +240,8 @@ VEHICLE_OPTIONS = {
 def test_lockstep_with_a_vehicle_option_equals_the_in_process_run(option: str, tmp_path: Path) -> None:
     """The plant node and the filter node model the vehicle as `simulate` does: with a 0.1 s transport delay the
     plant holds the previous command over the delay and the filter plans from the state at its end; with products
-    of inertia both use the full tensor. The run over DDS equals `simulate` bit for bit, and the bag's analysis
+    of inertia both use the full tensor; with skewed wheels the torques they exchange are D A u. The run over DDS
+    equals `simulate` bit for bit, and the bag's analysis
     re-integrates it to the recorded states."""
     from rosbags.highlevel import AnyReader
 

@@ -47,6 +47,11 @@ def run(args: argparse.Namespace) -> int:
         off = np.degrees(np.arccos(np.minimum(1.0, np.abs(axes).max(axis=0))))  # each axis to its nearest body axis
         print(f"  products of inertia: principal moments {', '.join(f'{m:.6g}' for m in moments)} kg m^2, their axes "
               f"{', '.join(f'{a:.3g}' for a in off)} deg from the nearest body axes; every wheel turns every axis")
+    if not sc.wheels_on_body_axes:
+        off = np.degrees(np.arccos(np.minimum(1.0, np.abs(sc.wheel_axes).max(axis=0))))
+        smallest = np.linalg.svd(sc.wheel_axes, compute_uv=False)[-1]
+        print(f"  wheels' spin axes {', '.join(f'{a:.3g}' for a in off)} deg from the nearest body axes (the axes' "
+              f"smallest singular value {smallest:.3g}); every wheel turns every axis")
     delta = robust_inertia_uncertainty(cfg)
     if delta > 0.0:
         worst = inertia_accel_bound(cfg, cfg.filter.model)
@@ -64,7 +69,7 @@ def run(args: argparse.Namespace) -> int:
     L = cfg.limits
     if L.wheel_speed_relative_to_body:
         print(f"  wheel speed: |psi + omega| <= {L.psi_max_rad_s:g} rad/s (relative to the body); the filter keeps "
-              f"|psi| <= {L.psi_keep_rad_s:.6g} rad/s")
+              f"|psi| <= {cfg.psi_keep_rad_s:.6g} rad/s")
     print(f"  pointing constraints ({len(cfg.pointing)}):")
     for c in cfg.pointing:
         b = ", ".join(f"{v:g}" for v in c.boresight_body)

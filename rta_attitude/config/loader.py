@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 
 from rta_attitude.config.schema import (
+    BODY_AXES,
     DEFAULT_EPOCH_UTC,
     UNIT_TOLERANCE,
     Augmentation,
@@ -41,9 +42,11 @@ from rta_attitude.config.schema import (
     Sensors,
     Spacecraft,
     Thermal,
+    unit_vector,
 )
 from rta_attitude.dynamics.state import make_state
 from rta_attitude.errors import ConfigError
+from rta_attitude.topics import WHEEL_JOINTS
 
 CONFIG_FILE_NAME = "rta_attitude.yaml"
 CELSIUS_OFFSET_K = 273.15
@@ -275,6 +278,21 @@ def _barrier(s: _Section, second_order: bool, derive: bool = False) -> BarrierGa
     return gains
 
 
+def _wheel_axes(sc: _Section) -> tuple[tuple[float, float, float], ...]:
+    """`spacecraft.wheel_spin_axes_body`: a unit vector per wheel, keyed by its joint name (`topics.WHEEL_JOINTS`,
+    all of them); missing: the body axes."""
+    sc.used.add("wheel_spin_axes_body")
+    if "wheel_spin_axes_body" not in sc.data:
+        return BODY_AXES
+    ws = sc.section("wheel_spin_axes_body")
+    if set(ws.data) != set(WHEEL_JOINTS):
+        raise ConfigError(f"{ws.where} must give one spin axis for each of the wheels {', '.join(WHEEL_JOINTS)}, got "
+                          f"{', '.join(map(str, ws.data)) or 'none'}")
+    axes = tuple(unit_vector(f"{ws.where}.{name}", ws.vector(name, 3)) for name in WHEEL_JOINTS)
+    ws.done()
+    return axes  # type: ignore[return-value]
+
+
 def _pointing(name: str, s: _Section) -> PointingConstraint:
     """One entry of `constraints.pointing` (degrees here, radians after)."""
     target = s.text("target")
@@ -349,7 +367,8 @@ def from_parameters(params: Mapping[str, Any], source: str = "<memory>") -> Conf
     spacecraft = Spacecraft(sc.vector("inertia_kgm2", 3), sc.number("wheel_inertia_kgm2"),  # type: ignore[arg-type]
                             sc.number("torque_sign", 1.0), sc.text("model", "gyrostat"),
                             sc.number("inertia_uncertainty", 0.0), sc.number("transport_delay_s", 0.0),
-                            sc.vector("products_of_inertia_kgm2", 3, (0.0, 0.0, 0.0)))  # type: ignore[arg-type]
+                            sc.vector("products_of_inertia_kgm2", 3, (0.0, 0.0, 0.0)),  # type: ignore[arg-type]
+                            _wheel_axes(sc))
     sc.done()
     ev = root.section("environment")
     environment = Environment(

@@ -115,9 +115,16 @@ def _choice(where: str, value: str, allowed: tuple[str, ...]) -> None:
         raise ConfigError(f"{where} must be one of {', '.join(allowed)}, got {value!r}")
 
 
+BODY_AXES: tuple[tuple[float, float, float], ...] = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))
+"""The paper's wheels' spin axes: one wheel on each body axis."""
+WHEEL_CONDITION_MIN = 1e-3
+"""The wheels' spin axes must span the body's three axes: the matrix of their axes' smallest singular value at
+least this (below it one axis is all but out of their reach)."""
+
+
 @dataclass(frozen=True)
 class Spacecraft:
-    """Rigid body with three reaction wheels on its body axes."""
+    """Rigid body with three reaction wheels (`wheel_axes_body`: on its body axes unless configured)."""
 
     inertia_kgm2: tuple[float, float, float]
     """The inertia tensor's diagonal J_xx, J_yy, J_zz in body axes (the principal moments where the products are
@@ -140,6 +147,10 @@ class Spacecraft:
     products_of_inertia_kgm2: tuple[float, float, float] = (0.0, 0.0, 0.0)
     """The tensor's off-diagonal entries J_xy, J_xz, J_yz (J_xy = -int x y dm), kg m^2 (`config.inertia`); zero:
     the body axes are principal."""
+    wheel_axes_body: tuple[tuple[float, float, float], ...] = BODY_AXES
+    """Each wheel's spin axis, a unit vector in body axes, in the order of `topics.WHEEL_JOINTS` (wheel i's speed is
+    psi_i, its acceleration u_i): the body's angular acceleration is G u with G = s D J^-1 A, A's columns these
+    axes, and the wheels' momentum -s D A psi (docs/conventions.md, "Wheels")."""
 
     def __post_init__(self) -> None:
         _choice("spacecraft.model", self.model, PLANT_MODELS)
@@ -157,6 +168,18 @@ class Spacecraft:
         if not self.principal and self.inertia_uncertainty > 0.0:
             raise ConfigError("spacecraft.inertia_uncertainty is for principal moments: set it to 0 with "
                               "spacecraft.products_of_inertia_kgm2 (docs/conventions.md, \"Inertia\")")
+        if len(self.wheel_axes_body) != 3:
+            raise ConfigError(f"spacecraft.wheel_spin_axes_body must give 3 wheels, got {len(self.wheel_axes_body)}")
+        for i, a in enumerate(self.wheel_axes_body):
+            unit_vector(f"spacecraft.wheel_spin_axes_body[{i}]", a)
+        smallest = float(np.linalg.svd(self.wheel_axes, compute_uv=False)[-1])
+        if not smallest >= WHEEL_CONDITION_MIN:
+            raise ConfigError(f"spacecraft.wheel_spin_axes_body: the wheels' axes must span the three body axes "
+                              f"(3-axis control); their smallest singular value is {smallest:.3g}, below "
+                              f"{WHEEL_CONDITION_MIN}")
+        if not self.wheels_on_body_axes and self.inertia_uncertainty > 0.0:
+            raise ConfigError("spacecraft.inertia_uncertainty is for wheels on the body axes: set it to 0 with "
+                              "spacecraft.wheel_spin_axes_body (docs/conventions.md, \"Inertia\")")
 
     @property
     def J(self) -> NDArray[np.float64]:
@@ -167,6 +190,22 @@ class Spacecraft:
     def principal(self) -> bool:
         """The body axes are principal (no products of inertia): the kernels' principal-axis arithmetic."""
         return is_principal(self.products_of_inertia_kgm2)
+
+    @property
+    def wheel_axes(self) -> NDArray[np.float64]:
+        """A (3, 3): wheel i's spin axis in body axes is column i."""
+        return np.array(self.wheel_axes_body, dtype=float).T
+
+    @property
+    def wheels_on_body_axes(self) -> bool:
+        """Wheel i spins about body axis i (A = I, the paper's)."""
+        return self.wheel_axes_body == BODY_AXES
+
+    @property
+    def diagonal(self) -> bool:
+        """Principal axes and the wheels on them: G is diagonal, and every kernel runs the paper's per-axis
+        arithmetic (else the general one)."""
+        return self.principal and self.wheels_on_body_axes
 
     @property
     def inertia_matrix(self) -> NDArray[np.float64]:
@@ -185,19 +224,19 @@ class Spacecraft:
 
     @property
     def control_gain(self) -> NDArray[np.float64]:
-        """d omega_dot_i / d u_i = sign D / J_i (3,), 1/s^2 per rad/s^2, where `principal`."""
+        """d omega_dot_i / d u_i = sign D / J_i (3,), 1/s^2 per rad/s^2, where `diagonal`."""
         return self.torque_sign * self.wheel_inertia_kgm2 / self.J
 
     @property
     def control_matrix(self) -> NDArray[np.float64]:
-        """G = d omega_dot / d u = sign D J^-1 (3, 3), 1/s^2 per rad/s^2 (diag(control_gain) where `principal`)."""
-        if self.principal:
+        """G = d omega_dot / d u = sign D J^-1 A (3, 3), 1/s^2 per rad/s^2 (diag(control_gain) where `diagonal`)."""
+        if self.diagonal:
             return np.diag(self.control_gain)
-        return self.torque_sign * self.wheel_inertia_kgm2 * self.inertia_inverse
+        return self.torque_sign * self.wheel_inertia_kgm2 * (self.inertia_inverse @ self.wheel_axes)
 
     def control_times(self, v: NDArray[np.float64]) -> NDArray[np.float64]:
         """G v (3,): the body's angular acceleration of wheel accelerations v, rad/s^2."""
-        return self.control_gain * v if self.principal else self.control_matrix @ v
+        return self.control_gain * v if self.diagonal else self.control_matrix @ v
 
 
 @dataclass(frozen=True)
@@ -396,13 +435,6 @@ class Limits:
     wheel_speed_relative_to_body: bool = False
     """True: psi_max bounds each rotor's speed relative to the body, |psi_i + omega_i| (a drive's limit: back-EMF,
     bearings); False: psi_i itself, the rotor's inertial rate about its axis (the paper's reading)."""
-
-    @property
-    def psi_keep_rad_s(self) -> float:
-        """The wheel speed psi (the rotor's inertial rate) the filter's rows and the backup law keep within: psi_max,
-        or with the limit relative to the body psi_max - omega_max (|psi_i + omega_i| <= |psi_i| + omega_max, and
-        the rates are kept within omega_max: docs/conventions.md)."""
-        return self.psi_max_rad_s - self.omega_max_rad_s if self.wheel_speed_relative_to_body else self.psi_max_rad_s
 
     def __post_init__(self) -> None:
         for name in ("wheel_accel_max_rad_s2", "omega_dot_max_rad_s2", "omega_max_rad_s",
@@ -897,23 +929,43 @@ class Config:
                 levels[-1 if c.gains.slack_weight else 0].append(c.name)
         return tuple(tuple(level) for level in levels if level)
     @property
+    def psi_keep_rad_s(self) -> float:
+        """The wheel speed psi (the rotor's inertial rate) the filter's rows and the backup law keep within: psi_max,
+        or with the limit relative to the body psi_max - omega_max max_i |a_i|_1 (|psi_i + a_i . omega| <= |psi_i|
+        + omega_max |a_i|_1 while the rates are kept within omega_max on each axis; |a_i|_1 = 1 for a wheel on a
+        body axis: docs/conventions.md)."""
+        L = self.limits
+        if not L.wheel_speed_relative_to_body:
+            return L.psi_max_rad_s
+        reach = 1.0 if self.spacecraft.wheels_on_body_axes else max(sum(abs(v) for v in a)
+                                                                     for a in self.spacecraft.wheel_axes_body)
+        return L.psi_max_rad_s - L.omega_max_rad_s * reach
+
+    @property
+    def accel_limit_rad_s2(self) -> NDArray[np.float64]:
+        """b (3,), rad/s^2: how much angular acceleration u may add on each body axis, omega_dot_max less Euler's
+        at the rate limits, b = omega_dot_max - |J^-1| e (e_j >= |(w x J w)_j| at |w_k| <= omega_max,
+        `config.inertia.euler_bound`). Where not `diagonal`, the filter's QP keeps |(G u)_i| <= b_i as three rows
+        (`filter.qp.assemble`): every wheel turns every axis, so a box on u cannot give every axis its
+        authority at once."""
+        sc, L = self.spacecraft, self.limits
+        J, w = sc.inertia_matrix, L.omega_max_rad_s
+        e = np.array([euler_bound(J, w, w, w, j) for j in range(3)])
+        return L.omega_dot_max_rad_s2 - np.abs(sc.inertia_inverse) @ e
+
+    @property
     def u_max_rad_s2(self) -> NDArray[np.float64]:
         """Bounds of the admissible set U (3,), rad/s^2: actuator and angular-acceleration limits.
 
-        |u_i| <= min(psi_dot_max, (J_i omega_dot_max - |J_j - J_k| omega_max^2) / D) on principal axes. With
-        products of inertia every wheel turns every axis, so the box must keep sum_j |G_ij| U_j <= b_i =
-        omega_dot_max - E_i on each axis i (E = |J^-1| e, e_j >= |(w x J w)_j| at |w_k| <= omega_max,
-        `config.inertia.euler_bound`): the box each axis would allow alone, U0_j = b_j / |G_jj| (the principal
-        formula's form), scaled down by the one factor that meets every axis' sum.
+        |u_i| <= min(psi_dot_max, (J_i omega_dot_max - |J_j - J_k| omega_max^2) / D) on principal axes with the
+        wheels on them. Otherwise every wheel turns every axis: U is the polytope |(G u)_i| <= b_i
+        (`accel_limit_rad_s2`, rows of the QP) within the actuator's box, and this is the box that bounds it,
+        |u_j| <= min(psi_dot_max, sum_i |(G^-1)_ji| b_i) (what the wheel needs to give every axis its b_i).
         """
         sc, L = self.spacecraft, self.limits
-        if not sc.principal:
-            J, w = sc.inertia_matrix, L.omega_max_rad_s
-            e = np.array([euler_bound(J, w, w, w, j) for j in range(3)])
-            b = L.omega_dot_max_rad_s2 - np.abs(sc.inertia_inverse) @ e
-            G = np.abs(sc.control_matrix)
-            alone = b / np.diag(G)
-            return np.minimum(L.wheel_accel_max_rad_s2, float(np.min(b / (G @ alone))) * alone)
+        if not sc.diagonal:
+            reach = np.abs(np.linalg.inv(sc.control_matrix)) @ self.accel_limit_rad_s2
+            return np.minimum(L.wheel_accel_max_rad_s2, reach)
         J = sc.J
         dJ = np.abs(np.array([J[1] - J[2], J[2] - J[0], J[0] - J[1]]))
         accel = (J * L.omega_dot_max_rad_s2 - dJ * L.omega_max_rad_s**2) / sc.wheel_inertia_kgm2

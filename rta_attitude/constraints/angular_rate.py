@@ -34,7 +34,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from rta_attitude.constraints.base import ZOH_CHECKS, speed_limit_row
-from rta_attitude.dynamics.spacecraft import euler_bound, euler_rate_bound
+from rta_attitude.dynamics.spacecraft import euler_bound, euler_rate_bound, wheel_vector
 from rta_attitude.jit import LEAF
 
 
@@ -50,7 +50,7 @@ def row(ctx: np.void, x: NDArray[np.float64], c: np.void, axis: int, t: np.void)
     i = c.row_omega + axis
     speed_limit_row(t, i, axis, x[4 + axis], c.omega_max_rad_s, c.err_omega_axis_rad_s, ctx.control_gain[axis],
                     ctx.omega_drift[axis], c.gains[i])
-    if not ctx.principal:  # omega_dot_axis = drift + G_axis . u: every wheel turns every axis
+    if not ctx.diagonal:  # omega_dot_axis = drift + G_axis . u: every wheel turns every axis
         for a in range(3):
             t.gain[i, a] = -2.0 * x[4 + axis] * ctx.control_matrix[axis, a]
 
@@ -101,9 +101,9 @@ def zoh_rows(ctx: np.void, x: NDArray[np.float64], c: np.void, p: np.void, t: np
     """The coupled zero-order-hold rate rows of state x into t (zoh_rows, zoh_axis, zoh_gain, zoh_lo,
     zoh_hi): in the robust preset, with the rate constraint on and the gyrostat model (p); else none."""
     t.zoh_rows = 0
-    if not (c.robust and (p.wheel_gyroscopic or not p.principal) and c.gains[c.row_omega].enabled):
+    if not (c.robust and (p.wheel_gyroscopic or not p.diagonal) and c.gains[c.row_omega].enabled):
         return
-    if not p.principal:
+    if not p.diagonal:
         _general_zoh_rows(ctx, x, c, p, t)
         return
     dt = c.dt_s
@@ -147,10 +147,11 @@ def zoh_rows(ctx: np.void, x: NDArray[np.float64], c: np.void, p: np.void, t: np
 
 @numba.njit(**LEAF)
 def _general_zoh_rows(ctx: np.void, x: NDArray[np.float64], c: np.void, p: np.void, t: np.void) -> None:
-    """`zoh_rows` with products of inertia (and with either plant model: every wheel turns every axis, so the
-    per-axis interval no longer applies). The same construction with the tensor J, J^-1 and the full G:
+    """`zoh_rows` in general: with products of inertia or wheels off the body axes (and with either plant model:
+    every wheel turns every axis, so the per-axis interval no longer applies). The same construction with the
+    tensor J, J^-1, the full G and the wheels' speeds along the body axes psi_b = A psi:
 
-        Omega = s D J^-1 [. x psi]   (0 in the paper's model)
+        Omega = s D J^-1 [. x psi_b]   (0 in the paper's model)
         A_i >= |omega_dot_i|, B_i >= |omega_ddot_i|, L_i >= |de_i/dt|: `general_rate_bounds`
         |r_i| <= sqrt((J^-1)_ii sum_ab |J_ab| L_a L_b) tau^2 / 2   (E keeps w^T J w: J Omega is skew)"""
     dt = c.dt_s
@@ -160,8 +161,10 @@ def _general_zoh_rows(ctx: np.void, x: NDArray[np.float64], c: np.void, p: np.vo
     sD = p.torque_sign * D
     U = c.u_max_rad_s2
     w_max = c.omega_max_rad_s
-    p0, p1, p2 = (x[7], x[8], x[9]) if gyro else (0.0, 0.0, 0.0)
-    # Omega w = s D J^-1 (w x psi); w x psi = C w
+    Aw = p.wheel_axes
+    p0, p1, p2 = ((wheel_vector(p, x, 0), wheel_vector(p, x, 1), wheel_vector(p, x, 2)) if gyro
+                  else (0.0, 0.0, 0.0))
+    # Omega w = s D J^-1 (w x psi_b); w x psi_b = C w
     Om = ctx.zoh_omega
     for i in range(3):
         Om[i, 0] = sD * (-Ji[i, 1] * p2 + Ji[i, 2] * p1)
@@ -173,11 +176,18 @@ def _general_zoh_rows(ctx: np.void, x: NDArray[np.float64], c: np.void, p: np.vo
           ctx.omega_drift[2] - (Om[2, 0] * w[0] + Om[2, 1] * w[1] + Om[2, 2] * w[2]))
     ew = c.err_omega_rad_s
     W = (max(abs(w[0]) + ew, w_max), max(abs(w[1]) + ew, w_max), max(abs(w[2]) + ew, w_max))
-    P = (abs(p0) + U[0] * dt, abs(p1) + U[1] * dt, abs(p2) + U[2] * dt) if gyro else (0.0, 0.0, 0.0)
+    # |psi_b| over the hold: sum_i |A_ji| (|psi_i| + U_i dt); |psi_b'| <= sum_i |A_ji| U_i
+    Ub = ctx.zoh_term[0]  # scratch (`_hold_series` overwrites it after)
+    Pb = ctx.zoh_term[1]
+    for j in range(3):
+        Ub[j] = abs(Aw[j, 0]) * U[0] + abs(Aw[j, 1]) * U[1] + abs(Aw[j, 2]) * U[2]
+        Pb[j] = (abs(Aw[j, 0]) * (abs(x[7]) + U[0] * dt) + abs(Aw[j, 1]) * (abs(x[8]) + U[1] * dt)
+                 + abs(Aw[j, 2]) * (abs(x[9]) + U[2] * dt)) if gyro else 0.0
+    P = (Pb[0], Pb[1], Pb[2])
     k = 3.0 * p.mean_motion_rad_s * p.mean_motion_rad_s if p.gravity_gradient else 0.0
     w_rel = math.sqrt(W[0] * W[0] + W[1] * W[1] + W[2] * W[2]) + abs(p.frame_rate_rad_s)
     out = ctx.zoh_next  # scratch (no allocation; `_hold_series` reuses it after)
-    general_rate_bounds(J, Ji, G, D, W[0], W[1], W[2], P[0], P[1], P[2], U, k, w_rel, out)
+    general_rate_bounds(J, Ji, G, D, W[0], W[1], W[2], P[0], P[1], P[2], U, Ub, c.accel_limit_rad_s2, k, w_rel, out)
     Bs = (out[1, 0], out[1, 1], out[1, 2])
     Ls = (out[2, 0], out[2, 1], out[2, 2])
     energy = 0.0
@@ -189,17 +199,21 @@ def _general_zoh_rows(ctx: np.void, x: NDArray[np.float64], c: np.void, p: np.vo
 
 @numba.njit(**LEAF)
 def general_rate_bounds(J: NDArray[np.float64], Ji: NDArray[np.float64], G: NDArray[np.float64], D: float, W0: float,
-                        W1: float, W2: float, P0: float, P1: float, P2: float, U: NDArray[np.float64], k: float,
-                        w_rel: float, out: NDArray[np.float64]) -> None:
-    """With products of inertia, bounds per axis over a hold with u held in the box U, for |w_a| <= W_a and
-    |psi_a| <= P_a (D = 0: the paper's model), into the rows of out (3, 3):
+                        W1: float, W2: float, P0: float, P1: float, P2: float, U: NDArray[np.float64],
+                        Ub: NDArray[np.float64], cap: NDArray[np.float64], k: float, w_rel: float,
+                        out: NDArray[np.float64]) -> None:
+    """In general (products of inertia, wheels off the body axes), bounds per axis over a hold with u held in the
+    box U, for |w_a| <= W_a and the wheels' speeds along the body axes |psi_b,a| <= P_a, |psi_b,a'| <= Ub_a
+    (psi_b = A psi; D = 0: the paper's model), into the rows of out (3, 3):
 
-        A_i >= |omega_dot_i|  = sum_j |J^-1_ij| (E_j + D |w x psi|_j + k E1_j) + sum_j |G_ij| U_j
-        B_i >= |omega_ddot_i| = sum_j |J^-1_ij| (E'_j + 2 k w_rel E1_j + D |(w x psi)'|_j)
-        L_i >= |de_i/dt|: B_i without the wheel term's frozen part (D |w' x psi|)
+        A_i >= |omega_dot_i|  = sum_j |J^-1_ij| (E_j + D |w x psi_b|_j + k E1_j) + min(sum_j |G_ij| U_j, cap_i)
+        B_i >= |omega_ddot_i| = sum_j |J^-1_ij| (E'_j + 2 k w_rel E1_j + D |(w x psi_b)'|_j)
+        L_i >= |de_i/dt|: B_i without the wheel term's frozen part (D |w' x psi_b|)
 
-    E_j, E'_j: `config.inertia.euler_bound`, `euler_rate_bound`; the gravity gradient k r x J r with |r_k| <= 1
-    (E1: the Euler bound at unit rates), its rate 2 w_rel E1 (w_rel: the body's rate to the Hill frame). The
+    cap_i: the QP's angular-acceleration row |(G u)_i| <= b_i (`filter.qp.assemble`), which every command these
+    bounds serve keeps. E_j, E'_j: `config.inertia.euler_bound`, `euler_rate_bound`; the gravity gradient
+    k r x J r with |r_k| <= 1 (E1: the Euler bound at unit rates), its rate 2 w_rel E1 (w_rel: the body's rate
+    to the Hill frame). The
     per-state bounds of `zoh_rows` and the worst case of `margins.axis_rate_bounds` (k = 0, every W and P at
     the limits) both take them from here."""
     W = (W0, W1, W2)
@@ -210,15 +224,17 @@ def general_rate_bounds(J: NDArray[np.float64], Ji: NDArray[np.float64], G: NDAr
                      + k * euler_bound(J, 1.0, 1.0, 1.0, j))
     for i in range(3):
         a_i = 0.0
+        g_i = 0.0
         for j in range(3):
-            a_i += abs(Ji[i, j]) * out[2, j] + abs(G[i, j]) * U[j]
-        out[0, i] = a_i
+            a_i += abs(Ji[i, j]) * out[2, j]
+            g_i += abs(G[i, j]) * U[j]
+        out[0, i] = a_i + min(g_i, cap[i])
     A = (out[0, 0], out[0, 1], out[0, 2])
     for j in range(3):  # the torques' rates: with the wheel term (out[1]) and without its frozen part (out[2])
         b, d = (j + 1) % 3, (j + 2) % 3
         eul = euler_rate_bound(J, W0, W1, W2, A[0], A[1], A[2], j) + 2.0 * k * w_rel * euler_bound(J, 1.0, 1.0, 1.0, j)
-        out[1, j] = eul + D * (A[b] * P[d] + W[b] * U[d] + A[d] * P[b] + W[d] * U[b])
-        out[2, j] = eul + D * (W[b] * U[d] + W[d] * U[b])
+        out[1, j] = eul + D * (A[b] * P[d] + W[b] * Ub[d] + A[d] * P[b] + W[d] * Ub[b])
+        out[2, j] = eul + D * (W[b] * Ub[d] + W[d] * Ub[b])
     rb = (out[1, 0], out[1, 1], out[1, 2])
     rl = (out[2, 0], out[2, 1], out[2, 2])
     for i in range(3):
@@ -228,15 +244,15 @@ def general_rate_bounds(J: NDArray[np.float64], Ji: NDArray[np.float64], G: NDAr
 
 @numba.njit(**LEAF, inline="always")
 def _phi_g(ctx: np.void, tau: float, i: int, a: int) -> float:
-    """(Phi G)_ia = tau (S G)_ia over the hold (ctx.zoh_sum = S): G_a on principal axes, the full G with products."""
-    if ctx.principal:
+    """(Phi G)_ia = tau (S G)_ia over the hold (ctx.zoh_sum = S): G_a where diagonal, else the full G."""
+    if ctx.diagonal:
         return tau * ctx.zoh_sum[i, a] * ctx.control_gain[a]
     return _general_phi_g(ctx, tau, i, a)
 
 
 @numba.njit(**LEAF)
 def _general_phi_g(ctx: np.void, tau: float, i: int, a: int) -> float:
-    """`_phi_g` with products of inertia."""
+    """`_phi_g` in general."""
     S, G = ctx.zoh_sum, ctx.control_matrix
     return tau * (S[i, 0] * G[0, a] + S[i, 1] * G[1, a] + S[i, 2] * G[2, a])
 

@@ -82,9 +82,9 @@ CONSTRAINT_DTYPE = np.dtype([
     ("temperature_max_K", np.float64),
     ("energy_min_J", np.float64),
     ("omega_max_rad_s", np.float64),
-    ("psi_max_rad_s", np.float64),         # the wheel speed psi the rows keep within (`Limits.psi_keep_rad_s`)
+    ("psi_max_rad_s", np.float64),         # the wheel speed psi the rows keep within (`Config.psi_keep_rad_s`)
     ("psi_limit_rad_s", np.float64),       # the wheel-speed limit h judges (psi_max)
-    ("wheel_speed_relative", np.uint8),    # 1: h judges |psi_i + omega_i|, the speed relative to the body
+    ("wheel_speed_relative", np.uint8),    # 1: h judges |psi_i + a_i . omega|, the speed relative to the body
     ("delta0_K_rad", np.float64),          # temperature: sun-incidence augmentation
     ("delta1_K_rad", np.float64),          # temperature: Earth-incidence augmentation
     ("delta2_J_rad", np.float64),          # battery: panel-angle augmentation
@@ -93,6 +93,7 @@ CONSTRAINT_DTYPE = np.dtype([
     ("dt_s", np.float64),                  # the hold the filter plans for
     ("zoh_margin", np.float64),            # ZOH bounds aim at (1 - zoh_margin) of the limit
     ("u_max_rad_s2", np.float64, (3,)),    # the box U
+    ("wheel_axes", np.float64, (3, 3)),    # A: wheel i's spin axis in body axes is column i
     ("u_reach_rad_s2", np.float64, (3,)),  # the box a drive in any state reaches: (1 - 2c) U (`drive_lag`; U if c = 0)
     # measurement-robust margins (robust preset with sensors on; 0 otherwise): bounds on the errors of
     # what the filter reads (docs/noise.md, `measurement_errors`)
@@ -107,6 +108,8 @@ CONSTRAINT_DTYPE = np.dtype([
     # the vehicle's inertia within +-delta of the model's (robust preset; 0 otherwise, `inertia_errors`)
     ("inertia_error_gain", np.float64),    # delta / (1 - delta)
     ("inertia_accel_rad_s2", np.float64, (3,)),  # its bound on |omega_dot(true) - omega_dot(model)|, any state
+    ("accel_limit_rad_s2", np.float64, (3,)),  # b: |(G u)_i| <= b_i (`Config.accel_limit_rad_s2`)
+    ("accel_rows", np.uint8),              # 1: the QP keeps those three rows (G not diagonal); 0: the box is U
 ])  # fmt: skip
 
 ZOH_CHECKS = 5
@@ -160,7 +163,7 @@ def constraint_record(cfg: Config) -> NDArray[np.void]:
             e["window_on_s"][w] = ramp_start(cfg, cone, start)
             e["window_start_s"][w], e["window_end_s"][w] = start, end
     c["temperature_max_K"], c["energy_min_J"] = L.temperature_max_K, L.energy_min_J
-    c["omega_max_rad_s"], c["psi_max_rad_s"] = L.omega_max_rad_s, L.psi_keep_rad_s
+    c["omega_max_rad_s"], c["psi_max_rad_s"] = L.omega_max_rad_s, cfg.psi_keep_rad_s
     c["psi_limit_rad_s"] = L.psi_max_rad_s
     c["wheel_speed_relative"] = L.wheel_speed_relative_to_body
     c["delta0_K_rad"], c["delta1_K_rad"], c["delta2_J_rad"] = aug.delta0_K_rad, aug.delta1_K_rad, aug.delta2_J_rad
@@ -168,6 +171,9 @@ def constraint_record(cfg: Config) -> NDArray[np.void]:
     c["robust"] = robust
     c["dt_s"], c["zoh_margin"] = cfg.filter.sample_time_s, cfg.filter.zoh_margin
     c["u_max_rad_s2"] = cfg.u_max_rad_s2
+    c["wheel_axes"] = cfg.spacecraft.wheel_axes
+    c["accel_rows"] = not cfg.spacecraft.diagonal
+    c["accel_limit_rad_s2"] = cfg.accel_limit_rad_s2
     # with the drive's lag compensated, what a rollout plans keeps to the part of U every drive state can
     # deliver (the filter's answer now: the part its drive's state can, `filter.drive.drive_box`)
     c["u_reach_rad_s2"] = (1.0 - 2.0 * drive_lag(cfg)[0]) * cfg.u_max_rad_s2

@@ -59,7 +59,7 @@ CONTEXT_DTYPE = np.dtype([
     ("zoh_term", np.float64, (3, 3)),
     ("zoh_next", np.float64, (3, 3)),
     ("inertia_err", np.float64, (3,)),  # bound on omega_dot's error from the inertia's (`base.inertia_error`)
-    ("principal", np.uint8),           # 1: G is diagonal (the principal-axis arithmetic); last, so the floats
+    ("diagonal", np.uint8),            # 1: G is diagonal (the per-axis arithmetic); last, so the floats
     # before it stay 8-byte aligned
 ])  # fmt: skip
 """Per-state quantities shared by the barriers (one record)."""
@@ -113,14 +113,14 @@ def context(x: Array, p: np.void, rates: bool, ctx: np.void) -> None:
         ctx.control_gain[a] = p.control_gain[a]
         for b in range(3):
             ctx.control_matrix[a, b] = p.control_matrix[a, b]
-    ctx.principal = p.principal
+    ctx.diagonal = p.diagonal
 
 
 @numba.njit(**LEAF, inline="always")
 def through_control(ctx: np.void, m0: float, m1: float, m2: float) -> tuple[float, float, float]:
     """The gain on u of a quantity whose gain on omega_dot is m (3): m_a G_a per wheel on principal axes, m^T G
     with products of inertia (ctx: `context` with rates)."""
-    if ctx.principal:
+    if ctx.diagonal:
         cg = ctx.control_gain
         return m0 * cg[0], m1 * cg[1], m2 * cg[2]
     return _general_through_control(ctx, m0, m1, m2)

@@ -41,7 +41,7 @@ def axis_rate_bounds(cfg: Config, model: str, delta: float = 0.0) -> tuple[NDArr
     and rad/s^3; for every inertia within +-delta of the configured one (each bound grows with |J_j - J_k|, D /
     J_i and G_i, so the worst case takes |J_j - J_k| + delta (J_j + J_k), (1 - delta) J_i and G_i / (1 - delta))."""
     sc, L = cfg.spacecraft, cfg.limits
-    if not sc.principal:
+    if not sc.diagonal:
         return _general_axis_rate_bounds(cfg, model)
     J = sc.J * (1.0 - delta)
     D = sc.wheel_inertia_kgm2
@@ -64,15 +64,19 @@ def axis_rate_bounds(cfg: Config, model: str, delta: float = 0.0) -> tuple[NDArr
 
 
 def _general_axis_rate_bounds(cfg: Config, model: str) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """`axis_rate_bounds` with products of inertia (no uncertainty): the torques' bounds (Euler's,
-    `config.inertia.euler_bound` and its rate; the wheels' D |w x psi|) through |J^-1|, as
+    """`axis_rate_bounds` in general (products of inertia, wheels off the body axes; no uncertainty): the torques'
+    bounds (Euler's, `config.inertia.euler_bound` and its rate; the wheels' D |w x A psi|) through |J^-1|, as
     `angular_rate.zoh_rows` bounds them per state."""
     sc, L = cfg.spacecraft, cfg.limits
     gyrostat = model == "gyrostat"
-    w, P = L.omega_max_rad_s, L.psi_max_rad_s if gyrostat else 0.0
+    w = L.omega_max_rad_s
+    reach = np.abs(sc.wheel_axes)
+    P = reach @ np.full(3, L.psi_max_rad_s if gyrostat else 0.0)
+    U = cfg.u_max_rad_s2
     out = np.empty((3, 3))
     general_rate_bounds(sc.inertia_matrix, sc.inertia_inverse, sc.control_matrix,
-                        sc.wheel_inertia_kgm2 if gyrostat else 0.0, w, w, w, P, P, P, cfg.u_max_rad_s2, 0.0, 0.0, out)
+                        sc.wheel_inertia_kgm2 if gyrostat else 0.0, w, w, w, P[0], P[1], P[2], U, reach @ U,
+                        cfg.accel_limit_rad_s2, 0.0, 0.0, out)
     return out[0].copy(), out[1].copy()
 
 

@@ -1,10 +1,10 @@
 """Wheel speed, per wheel i: |psi_i| <= psi_max.
 
 With `limits.wheel_speed_relative_to_body` the limit is on the rotor's speed relative to the body, |psi_i +
-omega_i| <= psi_max (psi is the rotor's inertial rate: docs/conventions.md). h judges that speed; the rows
-below keep |psi_i| <= psi_max - omega_max (c.psi_max_rad_s, `Limits.psi_keep_rad_s`), which implies it while
-the rate rows keep |omega_i| <= omega_max: a 3e-5 share of the wheels' range here, for rows that stay exact
-(psi is linear over a hold; omega is not).
+a_i . omega| <= psi_max (a_i its spin axis; psi is the rotor's inertial rate: docs/conventions.md). h judges
+that speed; the rows below keep |psi_i| <= psi_max - omega_max max_i |a_i|_1 (c.psi_max_rad_s,
+`Config.psi_keep_rad_s`), which implies it while the rate rows keep |omega_j| <= omega_max: a 3e-5 share of the
+wheels' range here, for rows that stay exact (psi is linear over a hold; omega is not).
 
     h  = psi_max^2 - psi_i^2                (rad^2/s^2; relative degree 1, CBF)
     BC = -2 psi_i u_i + k1 h + bias >= 0
@@ -26,10 +26,14 @@ from rta_attitude.jit import LEAF
 
 @numba.njit(**LEAF)
 def h(ctx: np.void, x: NDArray[np.float64], c: np.void, axis: int) -> float:
-    """psi_max^2 - v^2 (rad^2/s^2), v = psi_axis, or with the limit relative to the body the rotor's speed
-    relative to it, psi_axis + omega_axis; negative = the wheel is too fast."""
+    """psi_max^2 - v^2 (rad^2/s^2), v = psi_axis (wheel `axis`), or with the limit relative to the body the
+    rotor's speed relative to it, psi_axis + a_axis . omega; negative = the wheel is too fast."""
     if c.wheel_speed_relative:
-        v = x[7 + axis] + x[4 + axis]
+        a = c.wheel_axes
+        if a[axis, axis] == 1.0:  # on its body axis (the arithmetic of a wheel per axis)
+            v = x[7 + axis] + x[4 + axis]
+        else:
+            v = x[7 + axis] + (a[0, axis] * x[4] + a[1, axis] * x[5] + a[2, axis] * x[6])
         return c.psi_limit_rad_s**2 - v * v
     return c.psi_limit_rad_s**2 - x[7 + axis] ** 2
 

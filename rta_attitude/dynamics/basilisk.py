@@ -2,10 +2,11 @@
 imports Basilisk, and only when a `BasiliskPlant` is built (`plant.simulator: basilisk`).
 
 What Basilisk integrates: a rigid hub with three balanced reaction wheels (`BalancedWheels`) on the
-body axes, torque-commanded, RK4 at h = dt / substeps (its `svIntegratorRK4`), optionally the
-gravity-gradient torque of a point-mass Earth (`GravityGradientEffector`) and a circular orbit
-(rotating Hill frame). Its equations carry the wheels' gyroscopic torque always, so it is the
-`gyrostat` model whatever `spacecraft.model` says (the filter keeps `filter.model`).
+configured spin axes a_i (`spacecraft.wheel_spin_axes_body`, A's columns), torque-commanded, RK4 at
+h = dt / substeps (its `svIntegratorRK4`), optionally the gravity-gradient torque of a point-mass Earth
+(`GravityGradientEffector`) and a circular orbit (rotating Hill frame). Its equations carry the wheels'
+gyroscopic torque always, so it is the `gyrostat` model whatever `spacecraft.model` says (the filter keeps
+`filter.model`).
 
 Mapping (each line checked in test/test_basilisk.py):
 
@@ -14,19 +15,21 @@ Mapping (each line checked in test/test_basilisk.py):
     frames     N = Hill at t = 0; Hill inertial (paper): q_BH = q_BN; rotating Hill: the orbit starts at
                r x_N with velocity n r y_N, so q_BH = q_BN (x) q_NH(t), q_NH = [0, 0, -sin(nt/2), cos(nt/2)]
     rates      omega_BN_B is the state's omega
-    hub        Basilisk's hub inertia is the whole spacecraft's (balanced wheels add none): J + D I
-    wheels     motor torque u_s = -D u (held over the step, clipped by Basilisk at D psi_dot_max, as the
-               actuator clips u; with spacecraft.transport_delay_s, written when the delay's substeps are
-               over, the previous step's torque held before); psi = -(Omega + omega_i), Omega the wheel
-               rate relative to the body
+    hub        Basilisk's hub inertia is the whole spacecraft's (balanced wheels add none): J + D A A^T
+               (J + D I with a wheel on each body axis)
+    wheels     motor torque u_s = -D u_i on wheel i (held over the step, clipped by Basilisk at D psi_dot_max,
+               as the actuator clips u; with spacecraft.transport_delay_s, written when the delay's substeps
+               are over, the previous step's torque held before); psi_i = -(Omega_i + a_i . omega), Omega_i
+               the wheel's rate relative to the body
 
-With these readings Basilisk's equations are the gyrostat model exactly: H_B = (J + D) w + D Omega =
-J w - D psi, the rotor equation D (Omega_dot + w_dot_i) = u_s gives psi_dot = u, and H_B_dot + w x H_B
-= tau gives J w_dot = -w x (J w - D psi) + D u (+ tau_gg: r x (D I r) = 0, so the hub's extra D changes
-no gravity-gradient torque). J is the spacecraft without the rotors' spin inertia and psi the negative
-inertial rotor rate, the readings `dynamics.spacecraft` states. Basilisk's wheel-speed limit is left
-off (Omega_max < 0): the wheels are not stopped at psi_max, so the psi constraints are judged on the
-truth, as on the compiled plant.
+With these readings Basilisk's equations are the gyrostat model exactly: H_B = (J + D A A^T) w + D A Omega
+= J w - D A psi, the rotor equation D (Omega_dot_i + a_i . w_dot) = u_s gives psi_dot = u, and H_B_dot +
+w x H_B = tau gives J w_dot = -w x (J w - D A psi) + D A u (+ tau_gg: r x (D I r) = 0 with a wheel on each
+body axis, so the hub's extra D changes no gravity-gradient torque; with skewed wheels Basilisk's hub adds
+3 n^2 r x (D A A^T r), below 3 n^2 D ~ 1.3e-10 N m here, which the compiled model leaves out). J is the
+spacecraft without the rotors' spin inertia and psi the negative inertial rotor rate, the readings
+`dynamics.spacecraft` states. Basilisk's wheel-speed limit is left off (Omega_max < 0): the wheels are not
+stopped at psi_max, so the psi constraints are judged on the truth, as on the compiled plant.
 
 Not from Basilisk: T, E, theta_S and the Clohessy-Wiltshire entries. Basilisk has no model of the
 paper's lumped -j_B face node or its battery, and theta_S and CW do not depend on the attitude; they
@@ -131,7 +134,13 @@ def _follow(x0: Array, sigma: Array, w: Array, Omega: Array, t0_s: float, h_s: f
             row[i] = row[i] / norm
         for a in range(3):
             row[4 + a] = w[j, a]
-            row[7 + a] = -(Omega[j, a] + w[j, a])
+        if p.diagonal:
+            for a in range(3):
+                row[7 + a] = -(Omega[j, a] + w[j, a])
+        else:  # psi_i = -(Omega_i + a_i . omega), a_i wheel i's spin axis
+            A = p.wheel_axes
+            for i in range(3):
+                row[7 + i] = -(Omega[j, i] + (A[0, i] * w[j, 0] + A[1, i] * w[j, 1] + A[2, i] * w[j, 2]))
         prev = row
 
 
@@ -216,7 +225,9 @@ class BasiliskPlant:
         sc.ModelTag = "cubesat"
         sc.hub.mHub = HUB_MASS_KG
         sc.hub.r_BcB_B = [[0.0], [0.0], [0.0]]
-        sc.hub.IHubPntBc_B = (self.J + self.D * np.eye(3)).tolist()  # balanced wheels add no inertia
+        A = self.record[0]["wheel_axes"]
+        # balanced wheels add no inertia: the hub carries the rotors' spin-axis part, D sum_i a_i a_i^T
+        sc.hub.IHubPntBc_B = (self.J + self.D * (A @ A.T)).tolist()
         sc.hub.sigma_BNInit = quaternion_to_mrp(x[0:4]).reshape(3, 1).tolist()  # N = Hill at t = 0
         w0 = x[4:7]
         sc.hub.omega_BN_BInit = w0.reshape(3, 1).tolist()
@@ -226,11 +237,10 @@ class BasiliskPlant:
 
         factory = simIncludeRW.rwFactory()
         for a in range(3):
-            axis = [0.0, 0.0, 0.0]
-            axis[a] = 1.0
+            axis = [float(v) for v in A[:, a]]
             rw = factory.create("custom", axis, Js=float(self.D), u_max=float(self.D * self.u_max),
                                 RWModel=messaging.BalancedWheels, useMaxTorque=True)
-            rw.Omega = float(-x[7 + a] - w0[a])  # rad/s (create() takes RPM); psi = -(Omega + omega)
+            rw.Omega = float(-x[7 + a] - A[:, a] @ w0)  # rad/s (create() takes RPM); psi = -(Omega + a . omega)
         wheels = reactionWheelStateEffector.ReactionWheelStateEffector()
         factory.addToSpacecraft("wheels", wheels, sc)
         self._command = messaging.ArrayMotorTorqueMsgPayload()

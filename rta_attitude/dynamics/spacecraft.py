@@ -80,8 +80,10 @@ PLANT_DTYPE = np.dtype([
     ("delay_substeps", np.int64),              # substeps of a sample the previous command still holds
     ("inertia_matrix", np.float64, (3, 3)),    # J, body axes (diag(inertia_kgm2) where principal)
     ("inertia_inverse", np.float64, (3, 3)),   # J^-1
-    ("control_matrix", np.float64, (3, 3)),    # G = d omega_dot / d u = s D J^-1
-    ("principal", np.uint8),                   # 1: no products of inertia (the principal-axis arithmetic)
+    ("control_matrix", np.float64, (3, 3)),    # G = d omega_dot / d u = s D J^-1 A
+    ("wheel_axes", np.float64, (3, 3)),        # A: wheel i's spin axis in body axes is column i
+    ("wheel_axes_inverse", np.float64, (3, 3)),  # A^-1
+    ("diagonal", np.uint8),                    # 1: principal axes, wheel i on body axis i (the per-axis arithmetic)
 ])  # fmt: skip
 """The plant's parameters, in model units, as the compiled code reads them."""
 
@@ -127,10 +129,12 @@ def plant_record(cfg: Config, model: str | None = None) -> NDArray[np.void]:
     p["panel_axis"] = signed_axis(pw.panel_normal_body)
     p["delay_substeps"] = cfg.delay_substeps
     vehicle = sc if true_J is None else replace(sc, inertia_kgm2=true_J)
-    p["principal"] = vehicle.principal
+    p["diagonal"] = vehicle.diagonal
     p["inertia_matrix"] = vehicle.inertia_matrix
     p["inertia_inverse"] = vehicle.inertia_inverse
     p["control_matrix"] = vehicle.control_matrix
+    p["wheel_axes"] = vehicle.wheel_axes
+    p["wheel_axes_inverse"] = np.linalg.inv(vehicle.wheel_axes)
     return rec
 
 
@@ -206,7 +210,7 @@ def omega_drift(x: Array, A: Array, p: np.void, out: Array) -> None:
     the gravity-gradient torque (if on). A = A(q) of x (used only with gravity gradient). On principal axes
     the arithmetic of the first implementation (`_principal_drift`); with products of inertia
     J^-1 (-w x (J w - s D psi) + 3 n^2 r x J r)."""
-    if p.principal:
+    if p.diagonal:
         _principal_drift(x, A, p, out)  # (inlined: the plant's hot path, 40 calls a step)
         return
     _general_drift(x, A, p, out)
@@ -220,9 +224,9 @@ def _general_drift(x: Array, A: Array, p: np.void, out: Array) -> None:
     h1 = J[0, 0] * w1 + J[0, 1] * w2 + J[0, 2] * w3
     h2 = J[1, 0] * w1 + J[1, 1] * w2 + J[1, 2] * w3
     h3 = J[2, 0] * w1 + J[2, 1] * w2 + J[2, 2] * w3
-    if p.wheel_gyroscopic:  # the body's momentum J w - s D psi
+    if p.wheel_gyroscopic:  # the body's momentum J w - s D A psi
         D = p.torque_sign * p.wheel_inertia_kgm2
-        h1, h2, h3 = h1 - D * x[7], h2 - D * x[8], h3 - D * x[9]
+        h1, h2, h3 = h1 - D * wheel_vector(p, x, 0), h2 - D * wheel_vector(p, x, 1), h3 - D * wheel_vector(p, x, 2)
     t1 = -(w2 * h3 - w3 * h2)
     t2 = -(w3 * h1 - w1 * h3)
     t3 = -(w1 * h2 - w2 * h1)
@@ -243,7 +247,7 @@ def _general_drift(x: Array, A: Array, p: np.void, out: Array) -> None:
 def control_accel(wd: Array, u: Array, p: np.void, a: int) -> float:
     """omega_dot_a = drift_a + (G u)_a (rad/s^2) of the drift wd (3,) and wheel accelerations u (3,): G_a u_a on
     principal axes (the first implementation's arithmetic), the row G_a . u with products of inertia."""
-    if p.principal:
+    if p.diagonal:
         return wd[a] + p.control_gain[a] * u[a]
     return _general_accel(wd, u, p, a)
 
@@ -264,23 +268,32 @@ def _general_accel(wd: Array, u: Array, p: np.void, a: int) -> float:
 
 @numba.njit(**LEAF, inline="always")
 def angular_momentum(p: np.void, x: Array, a: int) -> float:
-    """(J w)_a - s D psi_a of the state x (19,), N m s: the body's angular momentum on axis a."""
-    if p.principal:
+    """(J w)_a - s D (A psi)_a of the state x (19,), N m s: the body's angular momentum on axis a."""
+    if p.diagonal:
         return p.inertia_kgm2[a] * x[4 + a] - p.torque_sign * p.wheel_inertia_kgm2 * x[7 + a]
     return _general_momentum(p, x, a)
 
 
 @numba.njit(**LEAF)
 def _general_momentum(p: np.void, x: Array, a: int) -> float:
-    """`angular_momentum` with products of inertia."""
+    """`angular_momentum` in general (products of inertia, wheels off the body axes)."""
     J = p.inertia_matrix
-    return (J[a, 0] * x[4] + J[a, 1] * x[5] + J[a, 2] * x[6]) - p.torque_sign * p.wheel_inertia_kgm2 * x[7 + a]
+    Jw = J[a, 0] * x[4] + J[a, 1] * x[5] + J[a, 2] * x[6]
+    return Jw - p.torque_sign * p.wheel_inertia_kgm2 * wheel_vector(p, x, a)
+
+
+@numba.njit(**LEAF, inline="always")
+def wheel_vector(p: np.void, x: Array, a: int) -> float:
+    """(A psi)_a of the state x (19,), rad/s: the wheels' speeds summed along body axis a (their momentum on it is
+    -s D (A psi)_a); psi_a where wheel a is on body axis a."""
+    A = p.wheel_axes
+    return A[a, 0] * x[7] + A[a, 1] * x[8] + A[a, 2] * x[9]
 
 
 @numba.njit(**LEAF, inline="always")
 def rate_momentum(p: np.void, a: int) -> float:
     """The most |(J w)_a| / |w|_inf can be, kg m^2: J_a on principal axes, sum_b |J_ab| with products."""
-    if p.principal:
+    if p.diagonal:
         return p.inertia_kgm2[a]
     return _general_rate_momentum(p, a)
 
@@ -295,7 +308,7 @@ def _general_rate_momentum(p: np.void, a: int) -> float:
 @numba.njit(**LEAF, inline="always")
 def control_error(p: np.void, e: Array, a: int) -> float:
     """The most |(G v)_a| can be for |v_b| <= e_b (3,), rad/s^2: |G_a| e_a on principal axes, sum_b |G_ab| e_b."""
-    if p.principal:
+    if p.diagonal:
         return abs(p.control_gain[a]) * e[a]
     return _general_control_error(p, e, a)
 
@@ -361,7 +374,7 @@ def derivative(x: Array, u: Array, p: np.void, A: Array, wd: Array, f: Array) ->
     f[1] = 0.5 * (q3 * w1 + q4 * w2 - q1 * w3)
     f[2] = 0.5 * (-q2 * w1 + q1 * w2 + q4 * w3)
     f[3] = -0.5 * (q1 * w1 + q2 * w2 + q3 * w3)
-    if p.principal:  # (written out: the plant's and the rollouts' hot path)
+    if p.diagonal:  # (written out: the plant's and the rollouts' hot path)
         cg = p.control_gain
         f[4] = wd[0] + cg[0] * u[0]
         f[5] = wd[1] + cg[1] * u[1]
@@ -459,24 +472,110 @@ def delay_time(dt_s: float, substeps: int, m: int) -> float:
 
 @numba.vectorize(["float64(float64, float64)"], cache=True)
 def wheel_accel_to_torque(u_rad_s2: float, D_kgm2: float) -> float:
-    """The body torque of a wheel command, tau = D u (N m): what crosses DDS (a ufunc: scalars, arrays,
-    compiled code)."""
+    """D u (N m) per entry (a ufunc: scalars, arrays, compiled code): a primary controller's demand as the body
+    torque it asks for (`demand_round_trip`), and a wheel command's torque where the wheels are on the body axes
+    (`wheels_to_torque`)."""
     return D_kgm2 * u_rad_s2
 
 
 @numba.vectorize(["float64(float64, float64)"], cache=True)
 def torque_to_wheel_accel(tau_Nm: float, D_kgm2: float) -> float:
-    """The wheel command of a body torque, u = tau / D (rad/s^2) (a ufunc)."""
+    """tau / D (rad/s^2) per entry (a ufunc): the wheel command of a body torque where the wheels are on the body
+    axes (`torque_to_wheels`)."""
     return tau_Nm / D_kgm2
+
+
+@numba.njit(**LEAF, inline="always")
+def axes_aligned(p: np.void) -> bool:
+    """Wheel i spins about body axis i (A = I: its columns are unit vectors)."""
+    A = p.wheel_axes
+    return p.diagonal or (A[0, 0] == 1.0 and A[1, 1] == 1.0 and A[2, 2] == 1.0)
+
+
+@numba.njit(**LEAF)
+def _general_to_wheels(tau0: float, tau1: float, tau2: float, p: np.void, out: Array) -> None:
+    """out := A^-1 tau / D (3,): the wheel accelerations whose torque D A u is tau."""
+    Ai, D = p.wheel_axes_inverse, p.wheel_inertia_kgm2
+    for a in range(3):
+        out[a] = torque_to_wheel_accel(Ai[a, 0] * tau0 + Ai[a, 1] * tau1 + Ai[a, 2] * tau2, D)
+
+
+@numba.njit(**LEAF)
+def _general_to_torque(u: Array, p: np.void, out: Array) -> None:
+    """out := D A u (3,): the body torque of wheel accelerations u."""
+    A, D = p.wheel_axes, p.wheel_inertia_kgm2
+    for a in range(3):
+        out[a] = wheel_accel_to_torque(A[a, 0] * u[0] + A[a, 1] * u[1] + A[a, 2] * u[2], D)
 
 
 @numba.njit(**LEAF)
 def torque_round_trip(u: Array, p: np.void, out: Array) -> None:
-    """u -> tau = D u -> u = tau / D: the round trip every command makes over DDS (the nodes convert
-    with the same two functions, so a lockstep run over DDS equals the in-process one bit for bit)."""
+    """u -> tau = D A u -> u = A^-1 tau / D: the round trip every wheel command makes over DDS as a body torque
+    (the nodes convert with `wheels_to_torque` and `torque_to_wheels`, which run these kernels, so a lockstep run
+    over DDS equals the in-process one bit for bit); with the wheels on the body axes tau = D u per axis."""
     D = p.wheel_inertia_kgm2
-    for a in range(3):
-        out[a] = torque_to_wheel_accel(wheel_accel_to_torque(u[a], D), D)
+    if axes_aligned(p):
+        for a in range(3):
+            out[a] = torque_to_wheel_accel(wheel_accel_to_torque(u[a], D), D)
+        return
+    _general_to_torque(u, p, out)
+    _general_to_wheels(out[0], out[1], out[2], p, out)
+
+
+@numba.njit(**LEAF)
+def demand_round_trip(v: Array, p: np.void, out: Array) -> None:
+    """A primary controller's demand v (3,; the body torque it asks for over D, `dynamics.controller`) -> tau = D v
+    -> the wheel accelerations u = A^-1 tau / D that give it: the controller's torque_des reaching the filter as
+    its u_des (the nodes: `wheel_accel_to_torque`, then `torque_to_wheels`)."""
+    D = p.wheel_inertia_kgm2
+    if axes_aligned(p):
+        for a in range(3):
+            out[a] = torque_to_wheel_accel(wheel_accel_to_torque(v[a], D), D)
+        return
+    _general_to_wheels(wheel_accel_to_torque(v[0], D), wheel_accel_to_torque(v[1], D),
+                       wheel_accel_to_torque(v[2], D), p, out)
+
+
+def on_body_axes(p: NDArray[np.void]) -> bool:
+    """The record's wheels spin about the body axes (wheel i on axis i): torques and wheel commands convert per
+    axis."""
+    return bool(np.array_equal(p[0]["wheel_axes"], np.eye(3)))
+
+
+def wheels_to_torque(u: Array, p: NDArray[np.void]) -> Array:
+    """The body torque tau = D A u (..., 3), N m, of wheel accelerations u (..., 3): what the filter sends as
+    torque_cmd (`torque_round_trip`'s first half, the same kernel; p: a PLANT_DTYPE record)."""
+    u = np.asarray(u, dtype=float)
+    if on_body_axes(p):
+        return wheel_accel_to_torque(u, float(p[0]["wheel_inertia_kgm2"]))
+    U = np.ascontiguousarray(u.reshape(-1, 3))
+    out = np.empty_like(U)
+    _to_torque_all(U, p, out)
+    return out.reshape(u.shape)
+
+
+def torque_to_wheels(tau: Array, p: NDArray[np.void]) -> Array:
+    """The wheel accelerations u = A^-1 tau / D (..., 3), rad/s^2, whose body torque is tau (..., 3): how torque_des
+    reaches the filter and torque_cmd the plant (`torque_round_trip`'s second half, the same kernel)."""
+    tau = np.asarray(tau, dtype=float)
+    if on_body_axes(p):
+        return torque_to_wheel_accel(tau, float(p[0]["wheel_inertia_kgm2"]))
+    T = np.ascontiguousarray(tau.reshape(-1, 3))
+    out = np.empty_like(T)
+    _to_wheels_all(T, p, out)
+    return out.reshape(tau.shape)
+
+
+@numba.njit(**LEAF)
+def _to_torque_all(U: Array, pa: NDArray[np.void], out: Array) -> None:
+    for k in range(U.shape[0]):
+        _general_to_torque(U[k], pa[0], out[k])
+
+
+@numba.njit(**LEAF)
+def _to_wheels_all(T: Array, pa: NDArray[np.void], out: Array) -> None:
+    for k in range(T.shape[0]):
+        _general_to_wheels(T[k, 0], T[k, 1], T[k, 2], pa[0], out[k])
 
 
 @numba.njit(**LEAF)
@@ -575,5 +674,6 @@ __all__ = [
     "omega_drift", "plant_record", "positive_part", "rk4_delayed", "rk4_hold", "rk4_work", "saturate", "saturated",
     "state_derivative",
     "thermal_rate",
-    "torque_round_trip", "torque_to_wheel_accel", "wheel_accel_to_torque",
+    "axes_aligned", "demand_round_trip", "on_body_axes", "torque_round_trip", "torque_to_wheel_accel",
+    "torque_to_wheels", "wheel_accel_to_torque", "wheel_vector", "wheels_to_torque",
 ]  # fmt: skip

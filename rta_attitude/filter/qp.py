@@ -151,6 +151,14 @@ def prepare(x_in: Array, u_des: Array, t_s: float, f: np.void, ws: np.void, r: n
                 bc0 += t.gain[i, a] * min(max(ws.u_target[a], t.lo[a]), t.hi[a])
             if bc0 < -tol * max(1.0, ws.gnorm[i]):
                 need = True
+    if c.accel_rows:  # |(G u)_i| <= b_i (rad/s^2)
+        G = f.plant.control_matrix
+        for i in range(3):
+            v = 0.0
+            for a in range(3):
+                v += G[i, a] * min(max(ws.u_target[a], t.lo[a]), t.hi[a])
+            if abs(v) > c.accel_limit_rad_s2[i] + tol:
+                need = True
     for q in range(t.zoh_rows):  # the coupled rate rows (rad/s), checked normalised as the QP has them
         v = 0.0
         gn = 0.0
@@ -187,9 +195,10 @@ def assemble(f: np.void, ws: np.void, mode: NDArray[np.int8], relax: Array
     soften_weight). relax (M + ZOH_ROWS,): how far each constraint row (BC_i + relax_i >= 0) and each
     coupled rate row (both sides, rad/s) is relaxed (the `prioritize` fallback; 0: not). Rows are
     normalised to unit norm; then the coupled rate rows of the table (two-sided, `angular_rate.zoh_rows`,
-    reported as and taking the mode of their axis's rate constraint); the last three rows are the box.
+    reported as and taking the mode of their axis's rate constraint); then the box (three rows); where the wheels
+    turn every axis (`accel_rows`), last the angular-acceleration rows |(G u)_i| <= b_i, hard as the box.
 
-    Returns (C (r+3, n), lower, upper (r+3,), z0 (n,), row_of (r,) constraint of each row,
+    Returns (C (r+3+a, n), lower, upper (r+3+a,), z0 (n,), row_of (r,) constraint of each row,
     slack_var (m,) variable of each constraint's slack or -1, scale (n,) delta = scale * s).
     """
     t = ws.table
@@ -211,9 +220,10 @@ def assemble(f: np.void, ws: np.void, mode: NDArray[np.int8], relax: Array
                 ns += 1
     r += nz
     n = 3 + ns
-    C = np.zeros((r + 3, n))
-    lower = np.full(r + 3, -BIG)
-    upper = np.full(r + 3, BIG)
+    na = 3 if f.constraints.accel_rows else 0
+    C = np.zeros((r + 3 + na, n))
+    lower = np.full(r + 3 + na, -BIG)
+    upper = np.full(r + 3 + na, BIG)
     row_of = np.empty(r, dtype=np.int64)
     slack_var = np.full(M, -1, dtype=np.int64)
     scale = np.zeros(n)
@@ -269,6 +279,14 @@ def assemble(f: np.void, ws: np.void, mode: NDArray[np.int8], relax: Array
         C[r + a, a] = 1.0
         lower[r + a] = t.lo[a]
         upper[r + a] = t.hi[a]
+    if na:
+        G, b = f.plant.control_matrix, f.constraints.accel_limit_rad_s2
+        for i in range(3):
+            norm = math.sqrt(G[i, 0] * G[i, 0] + G[i, 1] * G[i, 1] + G[i, 2] * G[i, 2])
+            for a in range(3):
+                C[r + 3 + i, a] = G[i, a] / norm
+            lower[r + 3 + i] = -b[i] / norm
+            upper[r + 3 + i] = b[i] / norm
     z0 = np.zeros(n)
     for a in range(3):
         z0[a] = ws.u_target[a]

@@ -45,7 +45,7 @@ from rta_attitude.constraints.rows import safety_values
 from rta_attitude.dynamics.controller import ControllerError, PrimaryController, pd_command
 from rta_attitude.dynamics.plant import Plant
 from rta_attitude.dynamics.sensors import INSTRUMENT_DTYPE, read, reset_instruments
-from rta_attitude.dynamics.spacecraft import RK4_WORK_ROWS, torque_round_trip
+from rta_attitude.dynamics.spacecraft import RK4_WORK_ROWS, demand_round_trip
 from rta_attitude.dynamics.state import STATE_SIZE
 from rta_attitude.errors import RtaError
 from rta_attitude.filter.gatekeeper.gate import reset
@@ -160,7 +160,7 @@ def run_batch(X0: Array, steps: int, loop: NDArray[np.void], sched_t: Array, sch
             read(x, step, lp.sensors, ins[0], y, yd)
             if lp.controller.pd:  # the branch run_scenario takes; without it u_des stays 0
                 pd_command(yd, sched_q[k, command_row(sched_t, t)], lp.controller, u_pd)
-                torque_round_trip(u_pd, p, u_des)
+                demand_round_trip(u_pd, p, u_des)
             advance(x, yd, u_des, step, lp, ins[0], ws, r[0], u, subs, hs, ctx[0], work)
             status = r[0].status
             if status != PASS:

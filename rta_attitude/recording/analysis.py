@@ -461,13 +461,12 @@ def load_run(
         notes.append(f"steps where the plant applied another torque than torque_cmd: {overridden} (real-time "
                      "deadline misses: held or zero torque); the series use what it applied")
     plant = spacecraft.plant_record(run_cfg)
-    D = run_cfg.spacecraft.wheel_inertia_kgm2
-    u = spacecraft.saturated(spacecraft.torque_to_wheel_accel(tau, D), plant)  # what the actuator applied
+    u = spacecraft.saturated(spacecraft.torque_to_wheels(tau, plant), plant)  # what the actuator applied
     des_missing = sum(c not in rec.torque_des for c in cmd_used)
     if des_missing:
         notes.append(f"steps without torque_des: {des_missing} (u_des taken as the applied command)")
     tau_des = np.array([rec.torque_des.get(c, t) for c, t in zip(cmd_used, tau)])
-    u_des = spacecraft.torque_to_wheel_accel(tau_des, D)
+    u_des = spacecraft.torque_to_wheels(tau_des, plant)
 
     t_ns = np.array(stamps, dtype=np.int64)  # sorted, distinct
     dt_steps = np.diff(t_ns) / NS_PER_S  # (N,)

@@ -53,7 +53,7 @@ import numpy as np
 
 from rta_attitude import topics
 from rta_attitude.dynamics.sensors import sensors_record, state_from_fields
-from rta_attitude.dynamics.spacecraft import torque_to_wheel_accel, wheel_accel_to_torque
+from rta_attitude.dynamics.spacecraft import torque_to_wheels, wheels_to_torque
 from rta_attitude.dynamics.state import STATE_SIZE
 from rta_attitude.errors import MessageError
 from rta_attitude.filter import outcome
@@ -274,11 +274,11 @@ class FilterNode(RtaNode):
 
     # ------------------------------------------------------------------ the call
     def _filter(self, t_ns: int, x: np.ndarray, tau_des: np.ndarray, source: str) -> None:
-        D = self.cfg.spacecraft.wheel_inertia_kgm2
-        res = self.filter.filter(x, torque_to_wheel_accel(tau_des, D), self.sim_s(t_ns))  # t from the state's stamp
+        p = self.filter.record["plant"]  # the torque interface: u_des = A^-1 tau_des / D, tau_cmd = D A u
+        res = self.filter.filter(x, torque_to_wheels(tau_des, p), self.sim_s(t_ns))  # t from the state's stamp
         res = self._guard(res)
         self.answered_ns = max(self.answered_ns, t_ns)
-        self.out[topics.TORQUE_CMD].publish(convert.torque_cdr(wheel_accel_to_torque(res.u, D), t_ns))
+        self.out[topics.TORQUE_CMD].publish(convert.torque_cdr(wheels_to_torque(res.u, p), t_ns))
         self.out[topics.FILTER_STATUS].publish(self.status_builder.build_cdr(
             res, t_ns, self.filter.counters, self.cfg.filter.preset, self.slacked, self.counts, source,
             self.rejection))

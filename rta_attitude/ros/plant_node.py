@@ -242,10 +242,10 @@ class PlantNode(RtaNode):
         """Hold tau over [t_k, t_k+1) through the actuator (the core saturates and integrates), publish the
         new sample; torque_applied is what the wheels held (before saturation)."""
         self.held_tau = tau_Nm
-        u = spacecraft.torque_to_wheel_accel(tau_Nm, self.D)
+        u = spacecraft.torque_to_wheels(tau_Nm, self.plant)
         if self.truth:
             u = self.instruments.actuate(u, self.k)
-            tau_Nm = spacecraft.wheel_accel_to_torque(u, self.D)
+            tau_Nm = spacecraft.wheels_to_torque(u, self.plant)
         u_held = spacecraft.saturated(u, self.plant)
         self.wheel_effort_Nm = -self.cfg.spacecraft.torque_sign * spacecraft.wheel_accel_to_torque(u_held, self.D)
         x_next, _ = self.simulator.step(u)
@@ -277,7 +277,7 @@ class PlantNode(RtaNode):
                               f"t = {self.sim_s(expected):g} s; dropped")
             return
         self.faults.clear("duplicate", "late", "future")
-        u = np.abs(spacecraft.torque_to_wheel_accel(tau, self.D))
+        u = np.abs(spacecraft.torque_to_wheels(tau, self.plant))
         for kind, limit, what in (("outside_u", self.u_admissible, "is outside U; applied"),
                                   ("saturated", self.u_actuator, "is beyond the actuator limit; saturated")):
             if np.any(u > limit * (1 + LIMIT_RTOL)):

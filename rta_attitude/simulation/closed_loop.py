@@ -51,6 +51,7 @@ from rta_attitude.dynamics.spacecraft import (
     RK4_WORK_ROWS,
     attitude_matrix,
     control_accel,
+    demand_round_trip,
     omega_dot,
     omega_drift,
     plant_record,
@@ -58,8 +59,9 @@ from rta_attitude.dynamics.spacecraft import (
     saturate,
     saturated,
     torque_round_trip,
-    torque_to_wheel_accel,
+    torque_to_wheels,
     wheel_accel_to_torque,
+    wheels_to_torque,
 )
 from rta_attitude.dynamics.state import STATE_SIZE
 from rta_attitude.filter.asif import AsifFilter, FilterResult
@@ -152,7 +154,7 @@ def run_scenario(x0: Array, steps: int, sched_t: Array, sched_q: Array, loop: ND
         Q_C[k] = sched_q[command_row(sched_t, t)]
         read(X[k], k, lp.sensors, ins[0], Y[k], yd)
         pd_command(yd, Q_C[k], lp.controller, u_des)
-        torque_round_trip(u_des, p, U_DES[k])
+        demand_round_trip(u_des, p, U_DES[k])
         advance(X[k], yd, U_DES[k], k, lp, ins[0], ws, R[k], U[k], subs, Hsub[k], ctx[0], work)
         attitude_matrix(X[k, 0], X[k, 1], X[k, 2], X[k, 3], A)
         omega_drift(X[k], A, p, wd)
@@ -304,11 +306,11 @@ def run_stepped(cfg: Config, scenario: Scenario, steps: int, plant: Plant, filt:
             u_des = desired_command(y, run.q_c[k], ctrl)
         else:
             u_des = checked_command(command(y.copy(), run.q_c[k].copy(), k * dt), k * dt)
-        run.u_des[k] = torque_to_wheel_accel(wheel_accel_to_torque(u_des, D), D)
+        run.u_des[k] = torque_to_wheels(wheel_accel_to_torque(u_des, D), truth)
         if filt is not None:
             result = filt.filter(y, run.u_des[k], k * dt)
             run.results[k] = result.record
-            u = torque_to_wheel_accel(wheel_accel_to_torque(result.u, D), D)
+            u = torque_to_wheels(wheels_to_torque(result.u, truth), truth)
         else:
             u = run.u_des[k]
         run.u[k] = saturated(instruments.actuate(u, k), truth)

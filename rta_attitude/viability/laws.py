@@ -126,15 +126,18 @@ def law_command(x: Array, law: str, m: OracleModel, rate_limit_fraction: float =
     def inertia(v: Array) -> Array:  # J v: J_i v_i on principal axes, the tensor's product with products
         return J * v if m.principal else m.J_matrix @ v
 
+    A = m.A  # the wheels' spin axes: body torque s D A u, momentum -s D A psi
+
     def held(w_d: Array, psi_d: Array) -> Array:  # the command cancelling the drift of state (w_d, psi_d)
-        h = inertia(w_d) - D * psi_d if m.gyrostat else inertia(w_d)
+        h = inertia(w_d) - D * (A @ psi_d) if m.gyrostat else inertia(w_d)
         u = s * np.cross(w_d, h) / D + s * inertia(w_ref - w) / (RATE_TIME_CONSTANT_S * D)
+        u = u if m.wheels_on_body_axes else np.linalg.solve(A, u)  # the wheels that give that torque
         u = np.clip(u, (-top - psi) / m.dt_s, (top - psi) / m.dt_s)  # each wheel within psi_max at the hold's end
         return np.clip(u, -m.u_max, m.u_max)
 
     # as the backup law: the drift at the hold's middle, one predictor step of the command at its start
     u0 = held(w, psi)
-    torque = -np.cross(w, inertia(w) - D * psi if m.gyrostat else inertia(w)) + s * D * u0
+    torque = -np.cross(w, inertia(w) - D * (A @ psi) if m.gyrostat else inertia(w)) + s * D * (A @ u0)
     w_dot = torque / J if m.principal else np.linalg.solve(m.J_matrix, torque)
     return held(w + 0.5 * m.dt_s * w_dot, psi + 0.5 * m.dt_s * u0)
 

@@ -115,7 +115,7 @@ def constraint_values(xs: Array, m: OracleModel, t_s: float | Array = 0.0) -> di
         elif kind == RATE:
             out[group] = m.omega_max_rad_s - np.max(np.abs(xs[:, 4:7]), axis=1)
         elif kind == WHEEL_SPEED:
-            speed = xs[:, 7:10] + xs[:, 4:7] if m.wheel_speed_relative else xs[:, 7:10]
+            speed = xs[:, 7:10] + xs[:, 4:7] @ m.A if m.wheel_speed_relative else xs[:, 7:10]  # psi_i + a_i . w
             out[group] = m.psi_max_rad_s - np.max(np.abs(speed), axis=1)
         else:
             raise ValueError(f"constraint group {group!r} has kind {kind!r}, which the oracle does not model")
@@ -211,8 +211,9 @@ def ca_dynamics(m: OracleModel, exact: bool) -> ca.Function:
     jd = ca.DM(m.inertia_kgm2) if m.principal else ca.DM(m.J_matrix)
     inertia = (lambda v: jd * v) if m.principal else (lambda v: jd @ v)
     d = m.wheel_inertia_kgm2
-    h = inertia(w) - d * psi if m.gyrostat else inertia(w)
-    torque = -ca.cross(w, h) + m.torque_sign * d * u
+    wheels = (lambda v: v) if m.wheels_on_body_axes else (lambda v: ca.DM(m.A) @ v)  # A v: along the body axes
+    h = inertia(w) - d * wheels(psi) if m.gyrostat else inertia(w)
+    torque = -ca.cross(w, h) + m.torque_sign * d * wheels(u)
     if m.gravity_gradient:
         r = a[:, 0]
         torque = torque + 3.0 * m.mean_motion_rad_s**2 * ca.cross(r, inertia(r))

@@ -123,7 +123,7 @@ class OracleModel:
     """psi_max bounds |psi_i + omega_i|, the rotor's speed relative to the body
     (`limits.wheel_speed_relative_to_body`)."""
     psi_keep_rad_s: float
-    """The |psi_i| the transcription and the laws keep (`Limits.psi_keep_rad_s`: psi_max, less omega_max if
+    """The |psi_i| the transcription and the laws keep (`Config.psi_keep_rad_s`: psi_max, less omega_max if
     relative)."""
     u_max_rad_s2: tuple[float, float, float]
     """The box U (`Config.u_max_rad_s2`)."""
@@ -136,6 +136,18 @@ class OracleModel:
     """The inertia tensor (3 x 3, body axes)."""
     principal: bool
     """No products of inertia (the rules' proofs are per principal axis: `rules.rules_apply`)."""
+    wheel_axes: tuple[tuple[float, float, float], ...]
+    """A (3 x 3): wheel i's spin axis in body axes is column i (the identity: a wheel on each body axis)."""
+
+    @property
+    def A(self) -> NDArray[np.float64]:
+        """`wheel_axes` as an array (3, 3)."""
+        return np.array(self.wheel_axes, dtype=float)
+
+    @property
+    def wheels_on_body_axes(self) -> bool:
+        """Wheel i spins about body axis i."""
+        return bool(np.array_equal(self.A, np.eye(3)))
 
     @property
     def name(self) -> str:
@@ -231,7 +243,8 @@ def from_config(cfg: Config) -> OracleModel:
         inertia_kgm2=tuple(float(v) for v in p["inertia_kgm2"]),  # type: ignore[arg-type]
         wheel_inertia_kgm2=float(p["wheel_inertia_kgm2"]),
         inertia_matrix=tuple(tuple(float(v) for v in row) for row in p["inertia_matrix"]),
-        principal=bool(p["principal"]),
+        principal=bool(cfg.spacecraft.principal),
+        wheel_axes=tuple(tuple(float(v) for v in row) for row in p["wheel_axes"]),
         torque_sign=float(cfg.spacecraft.torque_sign),
         control_gain=tuple(float(v) for v in p["control_gain"]),  # type: ignore[arg-type]
         frame_rate_rad_s=float(p["frame_rate_rad_s"]),
@@ -257,7 +270,7 @@ def from_config(cfg: Config) -> OracleModel:
         omega_max_rad_s=L.omega_max_rad_s,
         psi_max_rad_s=L.psi_max_rad_s,
         wheel_speed_relative=L.wheel_speed_relative_to_body,
-        psi_keep_rad_s=L.psi_keep_rad_s,
+        psi_keep_rad_s=cfg.psi_keep_rad_s,
         u_max_rad_s2=tuple(float(v) for v in cfg.u_max_rad_s2),  # type: ignore[arg-type]
         dt_s=cfg.filter.sample_time_s,
         substeps=cfg.substeps,

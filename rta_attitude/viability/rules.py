@@ -20,7 +20,8 @@ The rules bound how fast the panel (or the hot face) can turn away from (towards
 the sun, which needs the rate constraint to be enforced (`rate_envelope`), and they are proved for
 the exact ODE with any input in U: the constraints are only checked at the substep times, so the
 rates between them are bounded from the dynamics. They apply to the model the proofs are written
-for: Hill frame inertial, no gravity-gradient torque, principal body axes (no products of inertia: the bounds
+for: Hill frame inertial, no gravity-gradient torque, a wheel on each principal body axis (no products of
+inertia, no skewed wheel: the bounds
 are per axis) and, for the gyrostat, torque sign +1 (H = J w - D psi conserved in magnitude); otherwise they do
 not fire (`rules_apply`). Small
 margins (RULE_DELTA_E, RULE_DELTA_T) cover the gap between RK4 and the exact ODE.
@@ -49,7 +50,7 @@ RULE_DELTA_T_K = 1e-3
 def rules_apply(m: OracleModel) -> bool:
     """The physical rules' proofs hold for this model (module docstring)."""
     return (m.frame_rate_rad_s == 0.0 and not m.gravity_gradient and (m.torque_sign == 1.0 or not m.gyrostat)
-            and m.principal)
+            and m.principal and m.wheels_on_body_axes)
 
 
 def body_momentum(x0: Array, m: OracleModel) -> Array:

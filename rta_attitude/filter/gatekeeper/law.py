@@ -37,7 +37,7 @@ from rta_attitude.constraints.geometry import angle_between
 from rta_attitude.constraints.windows import OFF, window_at
 from rta_attitude.dynamics.environment import sun_hill, target_hill
 from rta_attitude.dynamics.quaternion import attitude_matrix, error_vector, from_matrix, product
-from rta_attitude.dynamics.spacecraft import angular_momentum, control_accel, omega_drift, rate_momentum
+from rta_attitude.dynamics.spacecraft import angular_momentum, axes_aligned, control_accel, omega_drift, rate_momentum
 from rta_attitude.dynamics.state import ENERGY, OMEGA, STATE_SIZE, THETA_S
 from rta_attitude.jit import LEAF
 
@@ -124,11 +124,31 @@ def _wheel_load(T: Array, Hh: Array, p: np.void, b: np.void, share: float = 1.0)
     """The largest wheel speed the momentum Hh (Hill, 3) needs at rest in the attitude T (rows i_B, j_B,
     k_B in Hill), plus J_a share w_max / D (the rates the law may still command), minus psi_max: > 0 means
     the wheels cannot hold it."""
+    if not axes_aligned(p):
+        return _general_wheel_load(T, Hh, p, b, share)
     worst = -np.inf
     for a in range(3):
         ha = abs(T[a, 0] * Hh[0] + T[a, 1] * Hh[1] + T[a, 2] * Hh[2])
         v = (ha + rate_momentum(p, a) * share * b.omega_max_rad_s) / p.wheel_inertia_kgm2
         worst = max(worst, v)
+    return worst - b.psi_limit_rad_s
+
+
+@numba.njit(**LEAF)
+def _general_wheel_load(T: Array, Hh: Array, p: np.void, b: np.void, share: float) -> float:
+    """`_wheel_load` with the wheels off the body axes: wheel i holds (A^-1 H_body)_i / D at rest, and
+    sum_b |(A^-1 J)_ib| share w_max / D for the rates."""
+    Ai, J = p.wheel_axes_inverse, p.inertia_matrix
+    H0 = T[0, 0] * Hh[0] + T[0, 1] * Hh[1] + T[0, 2] * Hh[2]
+    H1 = T[1, 0] * Hh[0] + T[1, 1] * Hh[1] + T[1, 2] * Hh[2]
+    H2 = T[2, 0] * Hh[0] + T[2, 1] * Hh[1] + T[2, 2] * Hh[2]
+    worst = -np.inf
+    for i in range(3):
+        hi = abs(Ai[i, 0] * H0 + Ai[i, 1] * H1 + Ai[i, 2] * H2)
+        rates = 0.0
+        for c in range(3):
+            rates += abs(Ai[i, 0] * J[0, c] + Ai[i, 1] * J[1, c] + Ai[i, 2] * J[2, c])
+        worst = max(worst, (hi + rates * share * b.omega_max_rad_s) / p.wheel_inertia_kgm2)
     return worst - b.psi_limit_rad_s
 
 
@@ -443,7 +463,8 @@ def _error_to(x: Array, g: np.void) -> float:
 def law_state(x: Array, b: np.void, g: np.void) -> None:
     """g.xl := the body-frame state x (19,) in the law's frame (`records.law_axes`: its rows the sun axis' and
     secondary axis' complement, the secondary axis, the sun axis, in body axes): q' = q_P (x) q, omega' =
-    P omega, psi' = P psi; a copy where the frames are the same."""
+    P omega, psi' = P psi where the wheels are on the body axes (else they keep their order, and the law's plant
+    has their axes turned); a copy where the frames are the same."""
     for i in range(STATE_SIZE):
         g.xl[i] = x[i]
     if not b.permuted:
@@ -452,15 +473,16 @@ def law_state(x: Array, b: np.void, g: np.void) -> None:
     P = b.law_axes
     for a in range(3):
         g.xl[4 + a] = P[a, 0] * x[4] + P[a, 1] * x[5] + P[a, 2] * x[6]
-        g.xl[7 + a] = P[a, 0] * x[7] + P[a, 1] * x[8] + P[a, 2] * x[9]
+        if b.permute_wheels:
+            g.xl[7 + a] = P[a, 0] * x[7] + P[a, 1] * x[8] + P[a, 2] * x[9]
 
 
 @numba.njit(**LEAF)
 def _to_body(b: np.void, u: Array, out: Array) -> None:
-    """out := the law-frame command u (3,) in body axes (P^T u)."""
+    """out := the law-frame command u (3,) for the body's wheels (P^T u where they turned with the frame)."""
     P = b.law_axes
     for a in range(3):
-        out[a] = (P[0, a] * u[0] + P[1, a] * u[1] + P[2, a] * u[2]) if b.permuted else u[a]
+        out[a] = (P[0, a] * u[0] + P[1, a] * u[1] + P[2, a] * u[2]) if b.permute_wheels else u[a]
 
 
 @numba.njit(**LEAF)
@@ -522,17 +544,20 @@ def _rate_command(x: Array, p: np.void, c: np.void, b: np.void, g: np.void, out:
 @numba.njit(**LEAF, inline="always")
 def _wheel_for(acc: Array, p: np.void, a: int) -> float:
     """Wheel a's acceleration of u = G^-1 acc (acc (3,): the body's angular acceleration asked of u), rad/s^2:
-    acc_a / G_a on principal axes; with products of inertia G^-1 = J / (s D)."""
-    if p.principal:
+    acc_a / G_a where diagonal; in general G^-1 = A^-1 J / (s D)."""
+    if p.diagonal:
         return acc[a] / p.control_gain[a]
     return _general_wheel_for(acc, p, a)
 
 
 @numba.njit(**LEAF)
 def _general_wheel_for(acc: Array, p: np.void, a: int) -> float:
-    """`_wheel_for` with products of inertia."""
-    J = p.inertia_matrix
-    return (J[a, 0] * acc[0] + J[a, 1] * acc[1] + J[a, 2] * acc[2]) / (p.torque_sign * p.wheel_inertia_kgm2)
+    """`_wheel_for` in general."""
+    J, Ai = p.inertia_matrix, p.wheel_axes_inverse
+    v = 0.0
+    for b in range(3):
+        v += Ai[a, b] * (J[b, 0] * acc[0] + J[b, 1] * acc[1] + J[b, 2] * acc[2])
+    return v / (p.torque_sign * p.wheel_inertia_kgm2)
 
 
 @numba.njit(**LEAF)

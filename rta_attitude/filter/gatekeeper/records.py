@@ -68,6 +68,7 @@ BACKUP_DTYPE = np.dtype([
     ("dt_s", np.float64),                # the sample
     # the law's frame (`law.law_state`): rows the secondary axis x the sun axis, the secondary axis, the sun axis
     ("permuted", np.uint8),              # 1: the law's frame is not the body frame
+    ("permute_wheels", np.uint8),        # 1: and the wheels (on the body axes) turn with it: psi' = P psi, u = P^T u'
     ("law_axes", np.float64, (3, 3)),    # P: the law frame's axes in body axes (a signed permutation)
     ("law_quat", np.float64, (4,)),      # q_P, A(q_P) = P
     ("law_plant", PLANT_DTYPE),          # the filter's plant model in the law's frame (J, D / J permuted)
@@ -168,8 +169,8 @@ def backup_record(cfg: Config) -> NDArray[np.void]:
     b["settled_sin_half_angle"] = math.sin(0.5 * SETTLED_ANGLE_RAD)
     b["settled_rate_rad_s"] = SETTLED_RATE_FRACTION * L.omega_max_rad_s
     b["omega_max_rad_s"], b["psi_max_rad_s"] = L.omega_max_rad_s, L.psi_max_rad_s
-    b["psi_limit_rad_s"] = L.psi_keep_rad_s
-    b["psi_hold_rad_s"] = L.psi_keep_rad_s
+    b["psi_limit_rad_s"] = cfg.psi_keep_rad_s
+    b["psi_hold_rad_s"] = cfg.psi_keep_rad_s
     b["nominal_steps"] = max(1, round(o.backup_nominal_s / o.sample_time_s))
     b["reserve_step_s"] = RESERVE_STEP_S
     b["reserve_steps"] = round(o.backup_energy_lookahead_s / RESERVE_STEP_S)
@@ -189,15 +190,30 @@ def backup_record(cfg: Config) -> NDArray[np.void]:
     perm = np.abs(P)
     plant = plant_record(cfg, o.model)[0]
     most = max(rate_momentum(plant, a) for a in range(3))  # the largest |(J w)_a| / w_max (any axis order)
-    b["momentum_variant_rad_s"] = L.psi_keep_rad_s - most * L.omega_max_rad_s / cfg.spacecraft.wheel_inertia_kgm2
+    D = cfg.spacecraft.wheel_inertia_kgm2
+    if cfg.spacecraft.wheels_on_body_axes:
+        b["momentum_variant_rad_s"] = cfg.psi_keep_rad_s - most * L.omega_max_rad_s / D
+    else:  # wheel i holds (A^-1 H)_i / D at rest: every |H| up to this fits every wheel in any attitude
+        Ai = np.linalg.inv(cfg.spacecraft.wheel_axes)
+        rates = float(np.max(np.abs(Ai @ cfg.spacecraft.inertia_matrix).sum(axis=1))) * L.omega_max_rad_s / D
+        b["momentum_variant_rad_s"] = (cfg.psi_keep_rad_s - rates) / float(np.max(np.linalg.norm(Ai, axis=1)))
+    # wheels on the body axes turn with the frame (each stays on its axis); other wheels keep their order, and
+    # their axes turn instead (A' = P A, G' = P G)
+    b["permute_wheels"] = b["permuted"] and cfg.spacecraft.wheels_on_body_axes
     if b["permuted"]:
         plant["inertia_kgm2"] = perm @ plant["inertia_kgm2"]
         plant["control_gain"] = perm @ plant["control_gain"]
-        for key in ("inertia_matrix", "inertia_inverse", "control_matrix"):  # tensors turn as P M P^T
+        for key in ("inertia_matrix", "inertia_inverse"):  # tensors turn as P M P^T
             plant[key] = P @ plant[key] @ P.T + 0.0
+        if b["permute_wheels"]:
+            plant["control_matrix"] = P @ plant["control_matrix"] @ P.T + 0.0
+        else:
+            plant["control_matrix"] = P @ plant["control_matrix"] + 0.0
+            plant["wheel_axes"] = P @ plant["wheel_axes"] + 0.0
+            plant["wheel_axes_inverse"] = plant["wheel_axes_inverse"] @ P.T + 0.0
     b["law_plant"] = plant
     reach = (1.0 - 2.0 * drive_lag(cfg)[0]) * cfg.u_max_rad_s2  # (as `constraints.base.constraint_record`)
-    b["u_reach_rad_s2"] = perm @ reach if b["permuted"] else reach
+    b["u_reach_rad_s2"] = perm @ reach if b["permute_wheels"] else reach
     b["secondary"] = FIXED_HILL[o.backup_secondary_target]
     b["radiator"] = P @ np.array(cfg.thermal.face_normal_body)
     hard = [j for j, c in enumerate(cfg.pointing) if c.gains.enabled and not c.gains.slack_weight > 0]
