@@ -314,14 +314,15 @@ QP_KEYS: tuple[str, ...] = (
     "u_des_x", "u_des_y", "u_des_z", "u_x", "u_y", "u_z", "u_held_x", "u_held_y", "u_held_z",
     *(f"{KEY_BOX_ACTIVE}_{a}" for a in "xyz"),
     "calls", "fast_path", "solved", "fallbacks", "solver_failures", "backup_solves", "invalid_states",
-    INPUT_SOURCE_KEY, *INPUT_COUNTERS, "gate", "gave_way", REJECTION_KEY,
+    INPUT_SOURCE_KEY, *INPUT_COUNTERS, "gate", "gave_way", REJECTION_KEY, "wheels",
 )  # fmt: skip
 """Keys of the `filter` entry: status ('pass', 'solved', 'fallback'), solver status (outcome.solve_text), iterations,
 fallback policy applied ('none' if none), solve time [s], preset, u_des, u (the command sent) and u_held (the
 filter's answer: what the wheels hold, u but where the drive's lag is compensated) [rad/s^2], box flags,
 the filter's running counters (core: calls .. invalid_states), the source of u_des, the node's
 input counters (INPUT_COUNTERS), what the gatekeeper did (`filter.outcome.GATE_NAMES`: 'off'
-without a backup law) and why the latest rejected torque_des was rejected (REJECTION_KEY)."""
+without a backup law), why the latest rejected torque_des was rejected (REJECTION_KEY) and the wheels ('ok', or
+with `spacecraft.failed_wheels` what is lost: the entry is then an ERROR)."""
 NO_FALLBACK = "none"
 KEY_SLACK, KEY_INTERVENING, KEY_SLACKED = "slack", "intervening", "slacked"
 CONSTRAINT_KEYS: tuple[str, ...] = (

@@ -52,6 +52,8 @@ def run(args: argparse.Namespace) -> int:
         smallest = np.linalg.svd(sc.wheel_axes, compute_uv=False)[-1]
         print(f"  wheels' spin axes {', '.join(f'{a:.3g}' for a in off)} deg from the nearest body axes (the axes' "
               f"smallest singular value {smallest:.3g}); every wheel turns every axis")
+    if sc.control_lost:
+        print(f"  WARNING: {sc.control_lost}: the filter keeps u = 0 on the failed wheel and holds what the others can")
     delta = robust_inertia_uncertainty(cfg)
     if delta > 0.0:
         worst = inertia_accel_bound(cfg, cfg.filter.model)

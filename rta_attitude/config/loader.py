@@ -246,6 +246,13 @@ class _Section:
                               f"commas), got {value!r}")
         return tuple(tuple(v.replace(",", " ").split()) for v in value)
 
+    def names(self, key: str) -> tuple[str, ...]:
+        """A list of strings (a ROS string array); missing: none."""
+        value = self._get(key, [])
+        if not (isinstance(value, list) and all(isinstance(v, str) for v in value)):
+            raise ConfigError(f"{self.where}.{key} must be a list of names, got {value!r}")
+        return tuple(value)
+
     def section(self, key: str) -> _Section:
         return _Section(self._get(key, _REQUIRED), f"{self.where}.{key}")
 
@@ -368,7 +375,7 @@ def from_parameters(params: Mapping[str, Any], source: str = "<memory>") -> Conf
                             sc.number("torque_sign", 1.0), sc.text("model", "gyrostat"),
                             sc.number("inertia_uncertainty", 0.0), sc.number("transport_delay_s", 0.0),
                             sc.vector("products_of_inertia_kgm2", 3, (0.0, 0.0, 0.0)),  # type: ignore[arg-type]
-                            _wheel_axes(sc))
+                            _wheel_axes(sc), sc.names("failed_wheels"))
     sc.done()
     ev = root.section("environment")
     environment = Environment(

@@ -15,6 +15,7 @@ from numpy.typing import NDArray
 
 from rta_attitude.config.inertia import check_inertia, euler_bound, inertia_matrix, is_principal, principal_moments
 from rta_attitude.errors import ConfigError
+from rta_attitude.topics import WHEEL_JOINTS
 
 FIXED_GROUPS: tuple[str, ...] = ("temperature", "battery", "omega", "psi")
 """The constraints that are not pointing cones, as sections of `constraints:` (after `pointing`): the thermal
@@ -151,6 +152,10 @@ class Spacecraft:
     """Each wheel's spin axis, a unit vector in body axes, in the order of `topics.WHEEL_JOINTS` (wheel i's speed is
     psi_i, its acceleration u_i): the body's angular acceleration is G u with G = s D J^-1 A, A's columns these
     axes, and the wheels' momentum -s D A psi (docs/conventions.md, "Wheels")."""
+    failed_wheels: tuple[str, ...] = ()
+    """Wheels (by joint name) whose drive gives no torque: the plant holds their acceleration at 0 (each coasts at
+    its speed, its momentum still in Euler's equations) and the filter's box is 0 on them. With three wheels one
+    failure loses 3-axis control ("Wheels", docs/conventions.md)."""
 
     def __post_init__(self) -> None:
         _choice("spacecraft.model", self.model, PLANT_MODELS)
@@ -177,6 +182,12 @@ class Spacecraft:
             raise ConfigError(f"spacecraft.wheel_spin_axes_body: the wheels' axes must span the three body axes "
                               f"(3-axis control); their smallest singular value is {smallest:.3g}, below "
                               f"{WHEEL_CONDITION_MIN}")
+        for name in self.failed_wheels:
+            if name not in WHEEL_JOINTS:
+                raise ConfigError(f"spacecraft.failed_wheels: unknown wheel {name!r}; the wheels are "
+                                  f"{', '.join(WHEEL_JOINTS)}")
+        if len(set(self.failed_wheels)) != len(self.failed_wheels):
+            raise ConfigError(f"spacecraft.failed_wheels names a wheel twice: {list(self.failed_wheels)!r}")
         if not self.wheels_on_body_axes and self.inertia_uncertainty > 0.0:
             raise ConfigError("spacecraft.inertia_uncertainty is for wheels on the body axes: set it to 0 with "
                               "spacecraft.wheel_spin_axes_body (docs/conventions.md, \"Inertia\")")
@@ -195,6 +206,20 @@ class Spacecraft:
     def wheel_axes(self) -> NDArray[np.float64]:
         """A (3, 3): wheel i's spin axis in body axes is column i."""
         return np.array(self.wheel_axes_body, dtype=float).T
+
+    @property
+    def wheel_working(self) -> NDArray[np.float64]:
+        """1.0 for each working wheel, 0.0 for a failed one (`failed_wheels`), in joint order (3,)."""
+        return np.array([0.0 if name in self.failed_wheels else 1.0 for name in WHEEL_JOINTS])
+
+    @property
+    def control_lost(self) -> str:
+        """'' with every wheel working; else one line saying what the failed wheels take away."""
+        if not self.failed_wheels:
+            return ""
+        left = len(WHEEL_JOINTS) - len(self.failed_wheels)
+        return (f"lost 3-axis control: {', '.join(self.failed_wheels)} failed, {left} wheel{'s' if left != 1 else ''} "
+                "left")
 
     @property
     def wheels_on_body_axes(self) -> bool:
@@ -961,15 +986,18 @@ class Config:
         wheels on them. Otherwise every wheel turns every axis: U is the polytope |(G u)_i| <= b_i
         (`accel_limit_rad_s2`, rows of the QP) within the actuator's box, and this is the box that bounds it,
         |u_j| <= min(psi_dot_max, sum_i |(G^-1)_ji| b_i) (what the wheel needs to give every axis its b_i).
+        A failed wheel's bound is 0 (`Spacecraft.failed_wheels`).
         """
         sc, L = self.spacecraft, self.limits
         if not sc.diagonal:
             reach = np.abs(np.linalg.inv(sc.control_matrix)) @ self.accel_limit_rad_s2
-            return np.minimum(L.wheel_accel_max_rad_s2, reach)
-        J = sc.J
-        dJ = np.abs(np.array([J[1] - J[2], J[2] - J[0], J[0] - J[1]]))
-        accel = (J * L.omega_dot_max_rad_s2 - dJ * L.omega_max_rad_s**2) / sc.wheel_inertia_kgm2
-        return np.minimum(L.wheel_accel_max_rad_s2, accel)
+            box = np.minimum(L.wheel_accel_max_rad_s2, reach)
+        else:
+            J = sc.J
+            dJ = np.abs(np.array([J[1] - J[2], J[2] - J[0], J[0] - J[1]]))
+            accel = (J * L.omega_dot_max_rad_s2 - dJ * L.omega_max_rad_s**2) / sc.wheel_inertia_kgm2
+            box = np.minimum(L.wheel_accel_max_rad_s2, accel)
+        return np.where(sc.wheel_working > 0.0, box, 0.0) if sc.failed_wheels else box
 
     @property
     def slacked_constraints(self) -> tuple[str, ...]:

@@ -84,6 +84,7 @@ PLANT_DTYPE = np.dtype([
     ("wheel_axes", np.float64, (3, 3)),        # A: wheel i's spin axis in body axes is column i
     ("wheel_axes_inverse", np.float64, (3, 3)),  # A^-1
     ("diagonal", np.uint8),                    # 1: principal axes, wheel i on body axis i (the per-axis arithmetic)
+    ("wheel_failed", np.uint8, (3,)),          # 1: the wheel's drive gives no torque (its acceleration held at 0)
 ])  # fmt: skip
 """The plant's parameters, in model units, as the compiled code reads them."""
 
@@ -135,6 +136,7 @@ def plant_record(cfg: Config, model: str | None = None) -> NDArray[np.void]:
     p["control_matrix"] = vehicle.control_matrix
     p["wheel_axes"] = vehicle.wheel_axes
     p["wheel_axes_inverse"] = np.linalg.inv(vehicle.wheel_axes)
+    p["wheel_failed"] = vehicle.wheel_working == 0.0
     return rec
 
 
@@ -396,11 +398,12 @@ def derivative(x: Array, u: Array, p: np.void, A: Array, wd: Array, f: Array) ->
 
 @numba.njit(**LEAF)
 def saturate(u: Array, p: np.void, out: Array) -> None:
-    """The actuator: each wheel acceleration clipped to +-wheel_accel_max (NaN passes as in numpy.clip)."""
+    """The actuator: each wheel acceleration clipped to +-wheel_accel_max (NaN passes as in numpy.clip); a failed
+    wheel's (`spacecraft.failed_wheels`) held at 0."""
     lim = p.wheel_accel_max_rad_s2
     for a in range(3):
         v = u[a]
-        out[a] = -lim if v < -lim else (lim if v > lim else v)
+        out[a] = 0.0 if p.wheel_failed[a] else (-lim if v < -lim else (lim if v > lim else v))
 
 
 RK4_WORK_ROWS = 8

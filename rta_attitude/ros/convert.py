@@ -677,8 +677,10 @@ class FilterStatusBuilder:
     deserializes `build_cdr`'s bytes into `build`'s message.
     """
 
-    def __init__(self, names: Sequence[str]) -> None:
+    def __init__(self, names: Sequence[str], wheels: str = "") -> None:
         self.names = tuple(names)
+        self.wheels = wheels
+        """'' with every wheel working, else what the failed wheels take away (`Spacecraft.control_lost`)."""
         hid = topics.STATUS_HARDWARE_ID
         self.msg = DiagnosticArray()
         self.qp = DiagnosticStatus(name=topics.QP_STATUS_NAME, hardware_id=hid)
@@ -710,6 +712,7 @@ class FilterStatusBuilder:
             str(counters.calls), str(counters.fast_path), str(counters.solved), str(counters.fallbacks),
             str(counters.solver_failures), str(counters.backup_solves), str(counters.invalid_states), source,
             *(str(inputs.get(k, 0)) for k in topics.INPUT_COUNTERS), str(res.gate), str(res.gave_way), rejection,
+            self.wheels or "ok",
         ]  # fmt: skip
         h, psi0, psi1, bc, slack = (r[k].tolist() for k in ("h", "psi0", "psi1", "bc", "slack"))
         inter_all, unctl = r["intervening"].tolist(), r["uncontrollable"].tolist()
@@ -720,7 +723,10 @@ class FilterStatusBuilder:
             per.append((level, "violated" if violated else "intervening" if inter else "ok",
                         [repr(h[i]), repr(psi0[i]), repr(psi1[i]), repr(bc[i]), repr(slack[i]), _bool(inter),
                          _bool(unctl[i]), _bool(name in slacked)]))
-        return _level_text(status), status + (f" ({fallback})" if fallback else ""), texts, per
+        message = status + (f" ({fallback})" if fallback else "")
+        if self.wheels:  # a failed wheel: the filter holds what it still can, and says so
+            return DiagnosticStatus.ERROR, f"{self.wheels}; {message}", texts, per
+        return _level_text(status), message, texts, per
 
     def build(self, res: FilterResult, t_ns: int, counters: FilterCounters, preset: str, slacked: Sequence[str],
               inputs: Mapping[str, int] | None = None, source: str = "torque_des",

@@ -59,7 +59,7 @@ from rta_attitude.errors import MessageError
 from rta_attitude.filter import outcome
 from rta_attitude.filter.asif import AsifFilter, FilterResult
 from rta_attitude.ros import convert, interface, spin
-from rta_attitude.ros.diagnostics import OK, WARN, DiagnosticsPublisher, filter_level
+from rta_attitude.ros.diagnostics import ERROR, OK, WARN, DiagnosticsPublisher, filter_level
 from rta_attitude.ros.faults import StampOrder
 from rta_attitude.ros.spin import RtaNode
 
@@ -85,8 +85,10 @@ class FilterNode(RtaNode):
         with spin.interruptible():
             self.filter = AsifFilter(self.cfg)  # compiles (or loads) numba's kernels before we subscribe
         self.get_logger().info(f"filter ready in {time.perf_counter() - t0:.2f} s")
+        if self.cfg.spacecraft.control_lost:
+            self.get_logger().error(f"{self.cfg.spacecraft.control_lost}: the filter holds what the others can")
         self.slacked = tuple(n for n, s in zip(self.filter.names, self.filter.slacked) if s)
-        self.status_builder = convert.FilterStatusBuilder(self.filter.names)
+        self.status_builder = convert.FilterStatusBuilder(self.filter.names, self.cfg.spacecraft.control_lost)
         self.diagnostics = DiagnosticsPublisher(self, "filter")
         self.interface = sensors_record(self.cfg)  # what decode needs: the bus voltage, the wheels' sign
         self.inputs: dict[int, dict[str, Any]] = {}  # stamp -> the STATE_INPUTS messages of it received so far
@@ -286,6 +288,8 @@ class FilterNode(RtaNode):
         trouble = self._desired_trouble()
         if trouble:  # the command filtered is not the controller's: say so, at least as a warning
             level, text = max(level, WARN), f"{text}; {trouble}"
+        if self.cfg.spacecraft.control_lost:  # a failed wheel: one ERROR line, the filter holds what it can
+            level, text = ERROR, f"{self.cfg.spacecraft.control_lost}; {text}"
         c = self.filter.counters
         self.diagnostics.update(level, text, {"preset": self.cfg.filter.preset, "calls": c.calls, "solved": c.solved,
                                               "fallbacks": c.fallbacks, "t_s": self.sim_s(t_ns),
