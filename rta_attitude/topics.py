@@ -454,9 +454,12 @@ CONFIG_SECTIONS: dict[str, tuple[str, ...]] = {
 besides its own scenario's (`scenarios.<scenario>.*`). The node's configuration is still built from the
 whole parameter file and every override, so a parameter a role does not declare cannot make two nodes
 disagree; it is only not shown by `ros2 param list` there."""
-LIVE_PARAMETERS: dict[str, tuple[str, ...]] = {CONTROLLER: ("controller.kp", "controller.kd")}
+LIVE_PARAMETERS: dict[str, tuple[str, ...]] = {CONTROLLER: ("controller.kp", "controller.kd"),
+                                                PLANT: ("spacecraft.failed_wheels",),
+                                                FILTER: ("spacecraft.failed_wheels",)}
 """Core parameters a role lets `ros2 param set` change while it runs (validated by the core loader, logged);
-every other parameter is read at start-up and read_only."""
+every other parameter is read at start-up and read_only. A failed wheel is the plant's fault injection and the
+filter's knowledge of it: set it on both."""
 
 
 def config_sections(role: str, scenario: str) -> tuple[str, ...]:

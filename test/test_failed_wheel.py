@@ -22,14 +22,14 @@ from rta_attitude.filter.asif import AsifFilter
 from rta_attitude.montecarlo.sampling import sample_initial_states
 from rta_attitude.simulation.closed_loop import simulate
 
-FAILED = {"spacecraft.failed_wheels": ["wheel_x"]}
+FAILED = {"spacecraft.failed_wheels": "wheel_x"}
 
 
 def test_a_failed_wheel_is_checked_at_load() -> None:
     with pytest.raises(ConfigError, match="unknown wheel 'wheel_w'"):
-        config.load(overrides={"spacecraft.failed_wheels": ["wheel_w"]})
+        config.load(overrides={"spacecraft.failed_wheels": "wheel_w"})
     with pytest.raises(ConfigError, match="names a wheel twice"):
-        config.load(overrides={"spacecraft.failed_wheels": ["wheel_y", "wheel_y"]})
+        config.load(overrides={"spacecraft.failed_wheels": "wheel_y, wheel_y"})
     cfg = config.load(overrides=FAILED)
     assert cfg.spacecraft.control_lost == "lost 3-axis control: wheel_x failed, 2 wheels left"
     assert cfg.u_max_rad_s2[0] == 0.0
@@ -93,3 +93,43 @@ def test_filter_status_says_3_axis_control_is_lost() -> None:
             assert entry.level == level and entry.message.startswith("lost 3-axis control: wheel_x failed")
         else:
             assert not entry.message.startswith("lost")
+
+
+def test_a_wheel_fails_while_the_nodes_run() -> None:
+    """`ros2 param set` of spacecraft.failed_wheels on the plant node (the fault injection) and on the filter node
+    (what the filter is told): the plant's actuator holds the wheel at 0 from then on, the filter's next answer
+    leaves it out and its filter_status says 3-axis control is lost; set back to '', both work again. A name that
+    is not a wheel is refused with the loader's line."""
+    import rclpy
+    from rclpy.parameter import Parameter
+    from test_nodes import NODE_CLASSES, NS
+
+    from rta_attitude import topics
+    from rta_attitude.dynamics import spacecraft
+
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    try:
+        plant = NODE_CLASSES[topics.PLANT](context=context, namespace=NS)
+        filt = NODE_CLASSES[topics.FILTER](context=context, namespace=NS)
+        x = plant.cfg.scenario("paper-example").x0
+        u = np.array([20.0, -10.0, 5.0])
+        assert spacecraft.saturated(u, plant.simulator.record)[0] == 20.0
+        bad = plant.set_parameters([Parameter("spacecraft.failed_wheels", value="wheel_q")])[0]
+        ok = [n.set_parameters([Parameter("spacecraft.failed_wheels", value="wheel_x")])[0] for n in (plant, filt)]
+        held = spacecraft.saturated(u, plant.simulator.record)
+        answer = filt.filter.filter(x, u)
+        status = filt.status_builder.build(answer, 0, filt.filter.counters, "robust", ()).status[0]
+        back = [n.set_parameters([Parameter("spacecraft.failed_wheels", value="")])[0] for n in (plant, filt)]
+        again = filt.filter.filter(x, u)
+        for node in (plant, filt):
+            node.close()
+            node.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=context)
+    assert not bad.successful and "unknown wheel 'wheel_q'" in bad.reason
+    assert all(r.successful for r in ok + back)
+    assert held[0] == 0.0 and held[1] == -10.0
+    assert answer.u[0] == 0.0
+    assert status.message.startswith("lost 3-axis control: wheel_x failed")
+    assert again.u[0] != 0.0

@@ -229,10 +229,11 @@ VEHICLE_OPTIONS = {
     "skewed_wheels": {"spacecraft.wheel_spin_axes_body.wheel_x": [0.9592, 0.1998, -0.1998],
                       "spacecraft.wheel_spin_axes_body.wheel_y": [0.3, 0.9, 0.3162],
                       "spacecraft.wheel_spin_axes_body.wheel_z": [-0.2506, 0.3509, 0.9023]},
+    "failed_wheel": {"spacecraft.failed_wheels": "wheel_x"},
 }
 """A vehicle the nodes must model as `simulate` does: a 0.1 s transport delay; the 6U with products of inertia
 (config/examples/products_of_inertia.yaml); wheels on skewed axes (`helpers.SKEWED_AXES`: the torque interface
-carries D A u)."""
+carries D A u); a failed wheel (the plant holds it at 0, the filter leaves it out)."""
 
 
 @pytest.mark.slow

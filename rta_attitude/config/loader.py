@@ -247,10 +247,13 @@ class _Section:
         return tuple(tuple(v.replace(",", " ").split()) for v in value)
 
     def names(self, key: str) -> tuple[str, ...]:
-        """A list of strings (a ROS string array); missing: none."""
-        value = self._get(key, [])
+        """Names separated by commas or spaces in one string (a ROS string: '' is none), or a list of them;
+        missing: none."""
+        value = self._get(key, "")
+        if isinstance(value, str):
+            return tuple(value.replace(",", " ").split())
         if not (isinstance(value, list) and all(isinstance(v, str) for v in value)):
-            raise ConfigError(f"{self.where}.{key} must be a list of names, got {value!r}")
+            raise ConfigError(f"{self.where}.{key} must be names separated by commas, got {value!r}")
         return tuple(value)
 
     def section(self, key: str) -> _Section:

@@ -229,6 +229,16 @@ class AsifFilter:
         self.levels = cfg.priority_levels
         compile_kernels(cfg)
 
+    def fail_wheels(self, cfg: Config) -> None:
+        """Take cfg's failed wheels (`spacecraft.failed_wheels`, the one thing it may change here) while running:
+        the records are rebuilt in place (the box 0 on a failed wheel) and the counters kept. The gatekeeper's
+        committed plan was verified with the wheel, so it is forgotten, with the drive's state and the answer in
+        flight (`reset`: the filter starts over from the next state)."""
+        self.cfg = cfg
+        self.record[:] = filter_record(cfg)
+        self.u_max = cfg.u_max_rad_s2
+        self.reset()
+
     def reset(self) -> None:
         """Forget the gatekeeper's committed plan, the drive's state and the answer in flight (a new run starts;
         nothing else carries over)."""

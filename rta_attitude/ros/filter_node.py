@@ -239,6 +239,16 @@ class FilterNode(RtaNode):
             self.inputs.clear()
             self.desired.clear()
 
+    def on_live_parameters(self, changes: dict[str, Any]) -> None:
+        """A failed wheel set while running (`ros2 param set <ns>/asif_filter spacecraft.failed_wheels wheel_x`):
+        the filter leaves it out from the next state on and says so."""
+        self.filter.fail_wheels(self.cfg)
+        self.status_builder.wheels = self.cfg.spacecraft.control_lost
+        if self.cfg.spacecraft.control_lost:
+            self.get_logger().error(f"{self.cfg.spacecraft.control_lost}: the filter holds what the others can")
+        else:
+            self.get_logger().info("every wheel working")
+
     def on_clock_jump(self) -> None:
         """A replay started over: every stamp is new again; what waited for a partner is of the old pass."""
         self.state_order.reset()

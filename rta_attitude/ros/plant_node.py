@@ -238,6 +238,15 @@ class PlantNode(RtaNode):
             self._publish(topics.STATE_TRUE, convert.state_cdr(self.x, t_ns))
         self._diagnose(topics.RUN_RUNNING)  # after the state: the chain works on it meanwhile
 
+    def on_live_parameters(self, changes: dict[str, Any]) -> None:
+        """A wheel fails (or is repaired) while running, `ros2 param set <ns>/plant spacecraft.failed_wheels
+        wheel_x`: from the next step its drive gives no torque (the fault injection; the filter is told the same
+        way)."""
+        failed = self.cfg.spacecraft.wheel_working == 0.0
+        for record in (self.plant, self.simulator.record):
+            record[0]["wheel_failed"] = failed
+        self.get_logger().warning(f"wheels failed: {', '.join(self.cfg.spacecraft.failed_wheels) or 'none'}")
+
     def _step(self, tau_Nm: np.ndarray) -> None:
         """Hold tau over [t_k, t_k+1) through the actuator (the core saturates and integrates), publish the
         new sample; torque_applied is what the wheels held (before saturation)."""
