@@ -209,21 +209,24 @@ def test_zoh_rate_rows_hold_along_the_finely_integrated_plant(model: str, vehicl
 
 
 @pytest.mark.skipif(not HAVE_BSK, reason="Basilisk is not installed (pip install rta_attitude[basilisk])")
-@pytest.mark.parametrize("vehicle", list(VEHICLES))
+@pytest.mark.parametrize("vehicle", [*VEHICLES, "tensor-skewed-wheels-wheel_y-failed"])
 def test_basilisk_hub_with_the_tensor_agrees_over_2000_s(vehicle: str) -> None:
     """Basilisk's hub inertia is the tensor (plus D A A^T, its wheels' spin-axis part; its wheels on the
-    configured axes through rwFactory): random commands
-    in U held 1 s for 2,000 s, rotating Hill frame. Both integrate the same ODE with RK4 at 0.1 s, so rates and
-    wheel speeds agree to accumulated round-off (< 1e-10 rad/s asserted) and the attitude differs only by the
-    parametrisation inside RK4 (MRP there, quaternion here): well inside the compiled plant's own h vs h/2
-    difference."""
-    cfg = VEHICLES[vehicle]
+    configured axes through rwFactory; a failed wheel's motor torque 0): random commands in U held 1 s for
+    2,000 s, rotating Hill frame. Both integrate the same ODE with RK4 at 0.1 s, so rates and wheel speeds agree
+    to accumulated round-off (< 1e-10 rad/s asserted) and the attitude differs only by the parametrisation inside
+    RK4 (MRP there, quaternion here): well inside the compiled plant's own h vs h/2 difference."""
+    failed = vehicle.endswith("-wheel_y-failed")
+    cfg = VEHICLES[vehicle.removesuffix("-wheel_y-failed")]
+    box = cfg.u_max_rad_s2  # every wheel commanded, the failed one too
+    if failed:
+        cfg = dataclasses.replace(cfg, spacecraft=dataclasses.replace(cfg.spacecraft, failed_wheels=("wheel_y",)))
     cfg = dataclasses.replace(cfg, environment=dataclasses.replace(cfg.environment, rotating_hill=True))
     rng = np.random.default_rng(11)
     x0 = cfg.scenario("paper-example").x0.copy()
     x0[OMEGA] = math.radians(0.5) * np.array([0.6, -0.48, 0.64])
     x0[PSI] = np.array([120.0, -80.0, 60.0])
-    us = rng.uniform(-1.0, 1.0, (2000, 3)) * 0.2 * cfg.u_max_rad_s2
+    us = rng.uniform(-1.0, 1.0, (2000, 3)) * 0.2 * box
     us -= 0.002 * np.cumsum(us, axis=0)  # a pull-back that keeps the wheels within a few hundred rad/s
 
     def run(c: config.Config, simulator: str) -> np.ndarray:
@@ -242,6 +245,9 @@ def test_basilisk_hub_with_the_tensor_agrees_over_2000_s(vehicle: str) -> None:
     assert att < 0.1 * truncation, (att, truncation)  # measured 3.7e-8 rad against 8.2e-7
     assert np.abs(bsk[:, OMEGA] - ours[:, OMEGA]).max() < 1e-10
     assert np.abs(bsk[:, PSI] - ours[:, PSI]).max() < 1e-10
+    if failed:  # the failed wheel coasts in both (Basilisk's psi is rebuilt from its relative speed: round-off)
+        assert np.all(ours[:, PSI.start + 1] == x0[PSI.start + 1])
+        np.testing.assert_allclose(bsk[:, PSI.start + 1], x0[PSI.start + 1], rtol=0, atol=1e-10)
 
 
 def test_the_default_filter_keeps_the_turned_vehicle_safe() -> None:
