@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import replace
+from typing import Any
 
 import numba
 import numpy as np
@@ -548,25 +549,25 @@ def on_body_axes(p: NDArray[np.void]) -> bool:
 def wheels_to_torque(u: Array, p: NDArray[np.void]) -> Array:
     """The body torque tau = D A u (..., 3), N m, of wheel accelerations u (..., 3): what the filter sends as
     torque_cmd (`torque_round_trip`'s first half, the same kernel; p: a PLANT_DTYPE record)."""
-    u = np.asarray(u, dtype=float)
-    if on_body_axes(p):
-        return wheel_accel_to_torque(u, float(p[0]["wheel_inertia_kgm2"]))
-    U = np.ascontiguousarray(u.reshape(-1, 3))
-    out = np.empty_like(U)
-    _to_torque_all(U, p, out)
-    return out.reshape(u.shape)
+    return _convert(u, p, wheel_accel_to_torque, _to_torque_all)
 
 
 def torque_to_wheels(tau: Array, p: NDArray[np.void]) -> Array:
     """The wheel accelerations u = A^-1 tau / D (..., 3), rad/s^2, whose body torque is tau (..., 3): how torque_des
     reaches the filter and torque_cmd the plant (`torque_round_trip`'s second half, the same kernel)."""
-    tau = np.asarray(tau, dtype=float)
+    return _convert(tau, p, torque_to_wheel_accel, _to_wheels_all)
+
+
+def _convert(v: Array, p: NDArray[np.void], per_axis: Any, kernel: Any) -> Array:
+    """v (..., 3) through the torque interface: per axis (a ufunc with D) where the wheels are on the body axes,
+    else the compiled kernel row by row."""
+    v = np.asarray(v, dtype=float)
     if on_body_axes(p):
-        return torque_to_wheel_accel(tau, float(p[0]["wheel_inertia_kgm2"]))
-    T = np.ascontiguousarray(tau.reshape(-1, 3))
-    out = np.empty_like(T)
-    _to_wheels_all(T, p, out)
-    return out.reshape(tau.shape)
+        return per_axis(v, float(p[0]["wheel_inertia_kgm2"]))
+    V = np.ascontiguousarray(v.reshape(-1, 3))
+    out = np.empty_like(V)
+    kernel(V, p, out)
+    return out.reshape(v.shape)
 
 
 @numba.njit(**LEAF)
