@@ -9,7 +9,7 @@ import functools
 import numpy as np
 import pytest
 import scipy.sparse as sp
-from helpers import random_states
+from helpers import SKEWED_AXES, random_states, turned_vehicle, with_wheels
 
 from rta_attitude import config
 from rta_attitude.constraints.registry import levels
@@ -98,9 +98,10 @@ def _objective(u, d, u_des, w):
     return float(np.sum((u - u_des) ** 2) + np.sum(w * d**2))
 
 
-def test_filter_matches_independent_solver(problems):
-    x, u_des = problems
-    f = AsifFilter(CFG)
+def _compare_with_clarabel(f: AsifFilter, x: np.ndarray, u_des: np.ndarray) -> tuple[int, int, int]:
+    """Every solved call of f against Clarabel on the same rows (the coupled rate rows and, where G is not diagonal,
+    the angular-acceleration rows |(G u)_i| <= b_i): the same optimum. Returns (checked, compared_u, infeasible)."""
+    cfg = f.cfg
     tab, lo, hi = _rows(f, x)
     w = f.slack_weights * f.slacked
     checked = infeasible = compared_u = 0
@@ -108,7 +109,12 @@ def test_filter_matches_independent_solver(problems):
         res = f.filter(x[k], u_des[k])
         if res.status != "solved":
             continue
-        ref = clarabel_solve(tab.gain[k], tab.drift[k], w, lo[k], hi[k], res.u_des, _coupled(tab, k))
+        g, low, up = _coupled(tab, k)
+        if not cfg.spacecraft.diagonal:
+            b = cfg.accel_limit_rad_s2
+            g, low, up = (np.vstack([g, cfg.spacecraft.control_matrix]), np.concatenate([low, -b]),
+                          np.concatenate([up, b]))
+        ref = clarabel_solve(tab.gain[k], tab.drift[k], w, lo[k], hi[k], res.u_des, (g, low, up))
         if ref is None:
             infeasible += 1
             continue
@@ -123,11 +129,27 @@ def test_filter_matches_independent_solver(problems):
             np.testing.assert_allclose(res.u, u_ref, atol=2e-4 * (1 + np.abs(u_ref).max()))
             compared_u += 1
         checked += 1
+    return checked, compared_u, infeasible
+
+
+def test_filter_matches_independent_solver(problems):
+    x, u_des = problems
+    checked, compared_u, infeasible = _compare_with_clarabel(AsifFilter(CFG), x, u_des)
     # the random states reach 1.5 w_max; with the gyrostat's coupled rate rows (docs/gyrostat.md) a state
     # past (1 - margin) w_max that one hold cannot bring back is infeasible (fallback), so fewer are
     # "solved" than with the paper model's first-order box (107 of 400 here, 150+ before)
     assert checked > 90 and compared_u > 50
     assert infeasible == 0  # a QP the filter reports solved is one Clarabel can solve
+
+
+def test_filter_with_skewed_wheels_and_a_tensor_matches_independent_solver(problems):
+    """The same with products of inertia and wheels off the body axes: every row's gain reaches every wheel, and
+    the admissible set is the polytope |(G u)_i| <= b_i (rows Clarabel is given as such)."""
+    cfg = with_wheels(turned_vehicle(CFG, 25.0)[0], SKEWED_AXES)
+    x, u_des = problems
+    checked, compared_u, infeasible = _compare_with_clarabel(AsifFilter(cfg), x, u_des)
+    assert checked > 30 and compared_u > 15  # (42 of the 400 random states solved, 24 compared)
+    assert infeasible == 0
 
 
 def test_solutions_meet_every_row(problems):
