@@ -649,8 +649,9 @@ def test_status_on_diagnostics_names_the_node_and_means_its_level() -> None:
 
 
 def test_parameters_describe_themselves_and_are_read_only() -> None:
-    """`ros2 param describe` shows something: a description for every parameter, read_only (all are read
-    at start-up), and a knob's choices and range; an override out of range is one ConfigError."""
+    """`ros2 param describe` shows something: a description for every parameter, read_only (read at start-up)
+    but the plant's live ones (a failed wheel, topics.LIVE_PARAMETERS), and a knob's choices and range; an
+    override out of range is one ConfigError."""
     from rcl_interfaces.msg import ParameterType
 
     context = rclpy.Context()
@@ -663,7 +664,10 @@ def test_parameters_describe_themselves_and_are_read_only() -> None:
         node.destroy_node()
     finally:
         rclpy.try_shutdown(context=context)
-    assert len(described) > 50 and all(d.description and d.read_only for d in described.values())
+    live = set(topics.LIVE_PARAMETERS[topics.PLANT])
+    assert live == {"spacecraft.failed_wheels"} and live <= set(described)
+    assert len(described) > 50 and all(d.description and d.read_only != (n in live) for n, d in described.items())
+    assert "may be changed while the node runs" in described["spacecraft.failed_wheels"].description
     rtf, stepping = described["real_time_factor"], described["stepping"]
     assert rtf.floating_point_range[0].from_value == 0.0 and rtf.type == ParameterType.PARAMETER_DOUBLE
     assert "lockstep" in stepping.additional_constraints and "realtime" in stepping.additional_constraints
