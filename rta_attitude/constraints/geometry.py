@@ -3,10 +3,10 @@
 `context` fills a CONTEXT_DTYPE record from a state x and the filter's plant model (a PLANT_DTYPE
 record): the attitude matrix A(q) (Hill -> body), the body rate omega, the drift of omega_dot
 (`dynamics.spacecraft.omega_drift`: Euler, wheel gyroscopic term, gravity gradient as the model
-has them), the control gain G = d omega_dot / d u (a matrix with products of inertia), and the sun and the
-Earth (nadir) in body axes with
-their first two *inertial* time derivatives (`dynamics.environment`: the one place that says where a target
-is and how it moves). `target` does the same for any target of the cone table (`constraints.cones`).
+has them), the control gain G = d omega_dot / d u (a full matrix with products of inertia or skewed
+wheels), and the sun and the Earth (nadir) in body axes with their first two *inertial* time derivatives
+(`dynamics.environment`: the one place that says where a target is and how it moves). `target` does the
+same for any target of the cone table (`constraints.cones`).
 
 `pointing` gives, for a unit body axis e and a target r_B = A r (with r_B', r_B''), the angle
 theta = angle(e, r_B) and its derivatives along f + g u:
@@ -118,8 +118,8 @@ def context(x: Array, p: np.void, rates: bool, ctx: np.void) -> None:
 
 @numba.njit(**LEAF, inline="always")
 def through_control(ctx: np.void, m0: float, m1: float, m2: float) -> tuple[float, float, float]:
-    """The gain on u of a quantity whose gain on omega_dot is m (3): m_a G_a per wheel on principal axes, m^T G
-    with products of inertia (ctx: `context` with rates)."""
+    """The gain on u of a quantity whose gain on omega_dot is m (3): m_a G_a per wheel where G is diagonal, m^T G
+    in general (products of inertia, wheels off the body axes; ctx: `context` with rates)."""
     if ctx.diagonal:
         cg = ctx.control_gain
         return m0 * cg[0], m1 * cg[1], m2 * cg[2]
@@ -128,7 +128,7 @@ def through_control(ctx: np.void, m0: float, m1: float, m2: float) -> tuple[floa
 
 @numba.njit(**LEAF)
 def _general_through_control(ctx: np.void, m0: float, m1: float, m2: float) -> tuple[float, float, float]:
-    """`through_control` with products of inertia: m^T G."""
+    """`through_control` in general: m^T G."""
     G = ctx.control_matrix
     return (m0 * G[0, 0] + m1 * G[1, 0] + m2 * G[2, 0], m0 * G[0, 1] + m1 * G[1, 1] + m2 * G[2, 1],
             m0 * G[0, 2] + m1 * G[1, 2] + m2 * G[2, 2])

@@ -183,7 +183,7 @@ def positive_part(c: float) -> float:
 
 @numba.njit(**LEAF, inline="always")
 def _principal_drift(x: Array, A: Array, p: np.void, out: Array) -> None:
-    """`omega_drift` on principal axes."""
+    """`omega_drift` where diagonal (principal axes, a wheel on each)."""
     w1, w2, w3 = x[4], x[5], x[6]
     J1, J2, J3 = p.inertia_kgm2[0], p.inertia_kgm2[1], p.inertia_kgm2[2]
     t1 = (J2 - J3) * w2 * w3
@@ -211,7 +211,8 @@ def _principal_drift(x: Array, A: Array, p: np.void, out: Array) -> None:
 def omega_drift(x: Array, A: Array, p: np.void, out: Array) -> None:
     """omega_dot at u = 0 (3,), rad/s^2: Euler's equations, the wheels' gyroscopic term (gyrostat) and
     the gravity-gradient torque (if on). A = A(q) of x (used only with gravity gradient). On principal axes
-    the arithmetic of the first implementation (`_principal_drift`); with products of inertia
+    the arithmetic of the first implementation (`_principal_drift`); in general (products of inertia, wheels off
+    the body axes)
     J^-1 (-w x (J w - s D psi) + 3 n^2 r x J r)."""
     if p.diagonal:
         _principal_drift(x, A, p, out)  # (inlined: the plant's hot path, 40 calls a step)
@@ -221,7 +222,7 @@ def omega_drift(x: Array, A: Array, p: np.void, out: Array) -> None:
 
 @numba.njit(**LEAF)
 def _general_drift(x: Array, A: Array, p: np.void, out: Array) -> None:
-    """`omega_drift` with products of inertia."""
+    """`omega_drift` in general."""
     J, Ji = p.inertia_matrix, p.inertia_inverse
     w1, w2, w3 = x[4], x[5], x[6]
     h1 = J[0, 0] * w1 + J[0, 1] * w2 + J[0, 2] * w3
@@ -249,7 +250,7 @@ def _general_drift(x: Array, A: Array, p: np.void, out: Array) -> None:
 @numba.njit(**LEAF, inline="always")
 def control_accel(wd: Array, u: Array, p: np.void, a: int) -> float:
     """omega_dot_a = drift_a + (G u)_a (rad/s^2) of the drift wd (3,) and wheel accelerations u (3,): G_a u_a on
-    principal axes (the first implementation's arithmetic), the row G_a . u with products of inertia."""
+    principal axes with a wheel on each (the first implementation's arithmetic), the row G_a . u in general."""
     if p.diagonal:
         return wd[a] + p.control_gain[a] * u[a]
     return _general_accel(wd, u, p, a)
@@ -257,14 +258,14 @@ def control_accel(wd: Array, u: Array, p: np.void, a: int) -> float:
 
 @numba.njit(**LEAF)
 def _general_accels(wd: Array, u: Array, p: np.void, f: Array) -> None:
-    """f[4:7] = omega_dot = wd + G u with products of inertia (`derivative`)."""
+    """f[4:7] = omega_dot = wd + G u in general (`derivative`)."""
     for a in range(3):
         f[4 + a] = _general_accel(wd, u, p, a)
 
 
 @numba.njit(**LEAF)
 def _general_accel(wd: Array, u: Array, p: np.void, a: int) -> float:
-    """`control_accel` with products of inertia (out of line: the principal path stays small where it is inlined)."""
+    """`control_accel` in general (out of line: the per-axis path stays small where it is inlined)."""
     G = p.control_matrix
     return wd[a] + (G[a, 0] * u[0] + G[a, 1] * u[1] + G[a, 2] * u[2])
 
@@ -303,14 +304,14 @@ def rate_momentum(p: np.void, a: int) -> float:
 
 @numba.njit(**LEAF)
 def _general_rate_momentum(p: np.void, a: int) -> float:
-    """`rate_momentum` with products of inertia."""
+    """`rate_momentum` in general."""
     J = p.inertia_matrix
     return abs(J[a, 0]) + abs(J[a, 1]) + abs(J[a, 2])
 
 
 @numba.njit(**LEAF, inline="always")
 def control_error(p: np.void, e: Array, a: int) -> float:
-    """The most |(G v)_a| can be for |v_b| <= e_b (3,), rad/s^2: |G_a| e_a on principal axes, sum_b |G_ab| e_b."""
+    """The most |(G v)_a| can be for |v_b| <= e_b (3,), rad/s^2: |G_a| e_a where diagonal, sum_b |G_ab| e_b."""
     if p.diagonal:
         return abs(p.control_gain[a]) * e[a]
     return _general_control_error(p, e, a)
@@ -318,7 +319,7 @@ def control_error(p: np.void, e: Array, a: int) -> float:
 
 @numba.njit(**LEAF)
 def _general_control_error(p: np.void, e: Array, a: int) -> float:
-    """`control_error` with products of inertia."""
+    """`control_error` in general."""
     G = p.control_matrix
     return abs(G[a, 0]) * e[0] + abs(G[a, 1]) * e[1] + abs(G[a, 2]) * e[2]
 
