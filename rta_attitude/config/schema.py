@@ -208,9 +208,20 @@ class Spacecraft:
         return np.array(self.wheel_axes_body, dtype=float).T
 
     @property
-    def wheel_working(self) -> NDArray[np.float64]:
-        """1.0 for each working wheel, 0.0 for a failed one (`failed_wheels`), in joint order (3,)."""
-        return np.array([0.0 if name in self.failed_wheels else 1.0 for name in WHEEL_JOINTS])
+    def wheel_axes_inverse(self) -> NDArray[np.float64]:
+        """A^-1 (3, 3): the wheel accelerations of a body-axis vector (A^-1 tau / D: the wheels whose torque is
+        tau; A^-1 H / D: the speeds that hold the momentum H at rest)."""
+        return np.linalg.inv(self.wheel_axes)
+
+    @property
+    def wheel_rate_reach(self) -> float:
+        """max_i |a_i|_1: the most |a_i . omega| can be for |omega_j| <= 1 (1 with the wheels on the body axes)."""
+        return max(sum(abs(v) for v in a) for a in self.wheel_axes_body)
+
+    @property
+    def wheel_failed(self) -> NDArray[np.bool_]:
+        """Each wheel's drive failed (`failed_wheels`), in joint order (3,)."""
+        return np.array([name in self.failed_wheels for name in WHEEL_JOINTS])
 
     @property
     def control_lost(self) -> str:
@@ -962,9 +973,7 @@ class Config:
         L = self.limits
         if not L.wheel_speed_relative_to_body:
             return L.psi_max_rad_s
-        reach = 1.0 if self.spacecraft.wheels_on_body_axes else max(sum(abs(v) for v in a)
-                                                                     for a in self.spacecraft.wheel_axes_body)
-        return L.psi_max_rad_s - L.omega_max_rad_s * reach
+        return L.psi_max_rad_s - L.omega_max_rad_s * self.spacecraft.wheel_rate_reach
 
     @property
     def accel_limit_rad_s2(self) -> NDArray[np.float64]:
@@ -997,7 +1006,7 @@ class Config:
             dJ = np.abs(np.array([J[1] - J[2], J[2] - J[0], J[0] - J[1]]))
             accel = (J * L.omega_dot_max_rad_s2 - dJ * L.omega_max_rad_s**2) / sc.wheel_inertia_kgm2
             box = np.minimum(L.wheel_accel_max_rad_s2, accel)
-        return np.where(sc.wheel_working > 0.0, box, 0.0) if sc.failed_wheels else box
+        return np.where(sc.wheel_failed, 0.0, box)
 
     @property
     def slacked_constraints(self) -> tuple[str, ...]:

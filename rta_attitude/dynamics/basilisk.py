@@ -134,7 +134,7 @@ def _follow(x0: Array, sigma: Array, w: Array, Omega: Array, t0_s: float, h_s: f
             row[i] = row[i] / norm
         for a in range(3):
             row[4 + a] = w[j, a]
-        if p.diagonal:
+        if p.wheels_on_axes:
             for a in range(3):
                 row[7 + a] = -(Omega[j, a] + w[j, a])
         else:  # psi_i = -(Omega_i + a_i . omega), a_i wheel i's spin axis

@@ -85,6 +85,7 @@ PLANT_DTYPE = np.dtype([
     ("wheel_axes", np.float64, (3, 3)),        # A: wheel i's spin axis in body axes is column i
     ("wheel_axes_inverse", np.float64, (3, 3)),  # A^-1
     ("diagonal", np.uint8),                    # 1: principal axes, wheel i on body axis i (the per-axis arithmetic)
+    ("wheels_on_axes", np.uint8),              # 1: wheel i on body axis i (A = I; torques convert per axis)
     ("wheel_failed", np.uint8, (3,)),          # 1: the wheel's drive gives no torque (its acceleration held at 0)
 ])  # fmt: skip
 """The plant's parameters, in model units, as the compiled code reads them."""
@@ -132,12 +133,13 @@ def plant_record(cfg: Config, model: str | None = None) -> NDArray[np.void]:
     p["delay_substeps"] = cfg.delay_substeps
     vehicle = sc if true_J is None else replace(sc, inertia_kgm2=true_J)
     p["diagonal"] = vehicle.diagonal
+    p["wheels_on_axes"] = vehicle.wheels_on_body_axes
     p["inertia_matrix"] = vehicle.inertia_matrix
     p["inertia_inverse"] = vehicle.inertia_inverse
     p["control_matrix"] = vehicle.control_matrix
     p["wheel_axes"] = vehicle.wheel_axes
-    p["wheel_axes_inverse"] = np.linalg.inv(vehicle.wheel_axes)
-    p["wheel_failed"] = vehicle.wheel_working == 0.0
+    p["wheel_axes_inverse"] = vehicle.wheel_axes_inverse
+    p["wheel_failed"] = vehicle.wheel_failed
     return rec
 
 
@@ -307,6 +309,25 @@ def _general_rate_momentum(p: np.void, a: int) -> float:
     """`rate_momentum` in general."""
     J = p.inertia_matrix
     return abs(J[a, 0]) + abs(J[a, 1]) + abs(J[a, 2])
+
+
+@numba.njit(**LEAF, inline="always")
+def wheel_rate_momentum(p: np.void, i: int) -> float:
+    """The most |(A^-1 J w)_i| / |w|_inf can be, kg m^2: the momentum wheel i takes over from the body's rates
+    (`rate_momentum` where the wheels are on the body axes, sum_b |(A^-1 J)_ib| otherwise)."""
+    if p.wheels_on_axes:
+        return rate_momentum(p, i)
+    return _general_wheel_rate_momentum(p, i)
+
+
+@numba.njit(**LEAF)
+def _general_wheel_rate_momentum(p: np.void, i: int) -> float:
+    """`wheel_rate_momentum` with the wheels off the body axes."""
+    Ai, J = p.wheel_axes_inverse, p.inertia_matrix
+    rates = 0.0
+    for c in range(3):
+        rates += abs(Ai[i, 0] * J[0, c] + Ai[i, 1] * J[1, c] + Ai[i, 2] * J[2, c])
+    return rates
 
 
 @numba.njit(**LEAF, inline="always")
@@ -490,13 +511,6 @@ def torque_to_wheel_accel(tau_Nm: float, D_kgm2: float) -> float:
     return tau_Nm / D_kgm2
 
 
-@numba.njit(**LEAF, inline="always")
-def axes_aligned(p: np.void) -> bool:
-    """Wheel i spins about body axis i (A = I: its columns are unit vectors)."""
-    A = p.wheel_axes
-    return p.diagonal or (A[0, 0] == 1.0 and A[1, 1] == 1.0 and A[2, 2] == 1.0)
-
-
 @numba.njit(**LEAF)
 def _general_to_wheels(tau0: float, tau1: float, tau2: float, p: np.void, out: Array) -> None:
     """out := A^-1 tau / D (3,): the wheel accelerations whose torque D A u is tau."""
@@ -513,15 +527,20 @@ def _general_to_torque(u: Array, p: np.void, out: Array) -> None:
         out[a] = wheel_accel_to_torque(A[a, 0] * u[0] + A[a, 1] * u[1] + A[a, 2] * u[2], D)
 
 
+@numba.njit(**LEAF, inline="always")
+def _per_axis_round_trip(v: Array, D: float, out: Array) -> None:
+    """out := (v D) / D per axis: the round trip where the wheels are on the body axes."""
+    for a in range(3):
+        out[a] = torque_to_wheel_accel(wheel_accel_to_torque(v[a], D), D)
+
+
 @numba.njit(**LEAF)
 def torque_round_trip(u: Array, p: np.void, out: Array) -> None:
     """u -> tau = D A u -> u = A^-1 tau / D: the round trip every wheel command makes over DDS as a body torque
     (the nodes convert with `wheels_to_torque` and `torque_to_wheels`, which run these kernels, so a lockstep run
     over DDS equals the in-process one bit for bit); with the wheels on the body axes tau = D u per axis."""
-    D = p.wheel_inertia_kgm2
-    if axes_aligned(p):
-        for a in range(3):
-            out[a] = torque_to_wheel_accel(wheel_accel_to_torque(u[a], D), D)
+    if p.wheels_on_axes:
+        _per_axis_round_trip(u, p.wheel_inertia_kgm2, out)
         return
     _general_to_torque(u, p, out)
     _general_to_wheels(out[0], out[1], out[2], p, out)
@@ -533,18 +552,11 @@ def demand_round_trip(v: Array, p: np.void, out: Array) -> None:
     -> the wheel accelerations u = A^-1 tau / D that give it: the controller's torque_des reaching the filter as
     its u_des (the nodes: `wheel_accel_to_torque`, then `torque_to_wheels`)."""
     D = p.wheel_inertia_kgm2
-    if axes_aligned(p):
-        for a in range(3):
-            out[a] = torque_to_wheel_accel(wheel_accel_to_torque(v[a], D), D)
+    if p.wheels_on_axes:
+        _per_axis_round_trip(v, D, out)
         return
     _general_to_wheels(wheel_accel_to_torque(v[0], D), wheel_accel_to_torque(v[1], D),
                        wheel_accel_to_torque(v[2], D), p, out)
-
-
-def on_body_axes(p: NDArray[np.void]) -> bool:
-    """The record's wheels spin about the body axes (wheel i on axis i): torques and wheel commands convert per
-    axis."""
-    return bool(np.array_equal(p[0]["wheel_axes"], np.eye(3)))
 
 
 def wheels_to_torque(u: Array, p: NDArray[np.void]) -> Array:
@@ -563,7 +575,7 @@ def _convert(v: Array, p: NDArray[np.void], per_axis: Any, kernel: Any) -> Array
     """v (..., 3) through the torque interface: per axis (a ufunc with D) where the wheels are on the body axes,
     else the compiled kernel row by row."""
     v = np.asarray(v, dtype=float)
-    if on_body_axes(p):
+    if p[0]["wheels_on_axes"]:
         return per_axis(v, float(p[0]["wheel_inertia_kgm2"]))
     V = np.ascontiguousarray(v.reshape(-1, 3))
     out = np.empty_like(V)
@@ -679,6 +691,6 @@ __all__ = [
     "omega_drift", "plant_record", "positive_part", "rk4_delayed", "rk4_hold", "rk4_work", "saturate", "saturated",
     "state_derivative",
     "thermal_rate",
-    "axes_aligned", "demand_round_trip", "on_body_axes", "torque_round_trip", "torque_to_wheel_accel",
-    "torque_to_wheels", "wheel_accel_to_torque", "wheel_vector", "wheels_to_torque",
+    "demand_round_trip", "torque_round_trip", "torque_to_wheel_accel", "torque_to_wheels", "wheel_accel_to_torque",
+    "wheel_rate_momentum", "wheel_vector", "wheels_to_torque",
 ]  # fmt: skip

@@ -236,6 +236,7 @@ class AsifFilter:
         flight (`reset`: the filter starts over from the next state)."""
         self.cfg = cfg
         self.record[:] = filter_record(cfg)
+        self.constraints = ConstraintSet(cfg)  # (its box too: `evaluate` answers as the filter does)
         self.u_max = cfg.u_max_rad_s2
         self.reset()
 

@@ -126,7 +126,7 @@ def unavoidable(x0: Array, cfg: Config, duration_s: float = math.inf) -> dict[st
     sign = sc.torque_sign
     w0 = x0[:, OMEGA]
     Jw = sc.J * w0 if sc.principal else w0 @ sc.inertia_matrix.T
-    psi_stop = x0[:, PSI] - sign * (Jw if sc.wheels_on_body_axes else Jw @ np.linalg.inv(sc.wheel_axes).T) / D
+    psi_stop = x0[:, PSI] - sign * (Jw @ sc.wheel_axes_inverse.T) / D  # A^-1 (J w): per wheel
     must_stop = np.abs(w0) > L.omega_max_rad_s
     wheels = [c.row for c in reg if c.kind == "wheel_speed"]
     for a, i in enumerate(wheels):

@@ -85,8 +85,7 @@ class FilterNode(RtaNode):
         with spin.interruptible():
             self.filter = AsifFilter(self.cfg)  # compiles (or loads) numba's kernels before we subscribe
         self.get_logger().info(f"filter ready in {time.perf_counter() - t0:.2f} s")
-        if self.cfg.spacecraft.control_lost:
-            self.get_logger().error(f"{self.cfg.spacecraft.control_lost}: the filter holds what the others can")
+        self._say_wheels()
         self.slacked = tuple(n for n, s in zip(self.filter.names, self.filter.slacked) if s)
         self.status_builder = convert.FilterStatusBuilder(self.filter.names, self.cfg.spacecraft.control_lost)
         self.diagnostics = DiagnosticsPublisher(self, "filter")
@@ -244,9 +243,13 @@ class FilterNode(RtaNode):
         the filter leaves it out from the next state on and says so."""
         self.filter.fail_wheels(self.cfg)
         self.status_builder.wheels = self.cfg.spacecraft.control_lost
+        self._say_wheels(changed=True)
+
+    def _say_wheels(self, changed: bool = False) -> None:
+        """One log line: what the failed wheels take away (an ERROR), or, after a change, that all work."""
         if self.cfg.spacecraft.control_lost:
             self.get_logger().error(f"{self.cfg.spacecraft.control_lost}: the filter holds what the others can")
-        else:
+        elif changed:
             self.get_logger().info("every wheel working")
 
     def on_clock_jump(self) -> None:

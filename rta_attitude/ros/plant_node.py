@@ -242,9 +242,8 @@ class PlantNode(RtaNode):
         """A wheel fails (or is repaired) while running, `ros2 param set <ns>/plant spacecraft.failed_wheels
         wheel_x`: from the next step its drive gives no torque (the fault injection; the filter is told the same
         way)."""
-        failed = self.cfg.spacecraft.wheel_working == 0.0
         for record in (self.plant, self.simulator.record):
-            record[0]["wheel_failed"] = failed
+            record[0]["wheel_failed"] = self.cfg.spacecraft.wheel_failed
         self.get_logger().warning(f"wheels failed: {', '.join(self.cfg.spacecraft.failed_wheels) or 'none'}")
 
     def _step(self, tau_Nm: np.ndarray) -> None:

@@ -37,7 +37,13 @@ from rta_attitude.constraints.geometry import angle_between
 from rta_attitude.constraints.windows import OFF, window_at
 from rta_attitude.dynamics.environment import sun_hill, target_hill
 from rta_attitude.dynamics.quaternion import attitude_matrix, error_vector, from_matrix, product
-from rta_attitude.dynamics.spacecraft import angular_momentum, axes_aligned, control_accel, omega_drift, rate_momentum
+from rta_attitude.dynamics.spacecraft import (
+    angular_momentum,
+    control_accel,
+    omega_drift,
+    rate_momentum,
+    wheel_rate_momentum,
+)
 from rta_attitude.dynamics.state import ENERGY, OMEGA, STATE_SIZE, THETA_S
 from rta_attitude.jit import LEAF
 
@@ -124,7 +130,7 @@ def _wheel_load(T: Array, Hh: Array, p: np.void, b: np.void, share: float = 1.0)
     """The largest wheel speed the momentum Hh (Hill, 3) needs at rest in the attitude T (rows i_B, j_B,
     k_B in Hill), plus J_a share w_max / D (the rates the law may still command), minus psi_max: > 0 means
     the wheels cannot hold it."""
-    if not axes_aligned(p):
+    if not p.wheels_on_axes:
         return _general_wheel_load(T, Hh, p, b, share)
     worst = -np.inf
     for a in range(3):
@@ -137,18 +143,15 @@ def _wheel_load(T: Array, Hh: Array, p: np.void, b: np.void, share: float = 1.0)
 @numba.njit(**LEAF)
 def _general_wheel_load(T: Array, Hh: Array, p: np.void, b: np.void, share: float) -> float:
     """`_wheel_load` with the wheels off the body axes: wheel i holds (A^-1 H_body)_i / D at rest, and
-    sum_b |(A^-1 J)_ib| share w_max / D for the rates."""
-    Ai, J = p.wheel_axes_inverse, p.inertia_matrix
+    `wheel_rate_momentum` share w_max / D for the rates."""
+    Ai = p.wheel_axes_inverse
     H0 = T[0, 0] * Hh[0] + T[0, 1] * Hh[1] + T[0, 2] * Hh[2]
     H1 = T[1, 0] * Hh[0] + T[1, 1] * Hh[1] + T[1, 2] * Hh[2]
     H2 = T[2, 0] * Hh[0] + T[2, 1] * Hh[1] + T[2, 2] * Hh[2]
     worst = -np.inf
     for i in range(3):
         hi = abs(Ai[i, 0] * H0 + Ai[i, 1] * H1 + Ai[i, 2] * H2)
-        rates = 0.0
-        for c in range(3):
-            rates += abs(Ai[i, 0] * J[0, c] + Ai[i, 1] * J[1, c] + Ai[i, 2] * J[2, c])
-        worst = max(worst, (hi + rates * share * b.omega_max_rad_s) / p.wheel_inertia_kgm2)
+        worst = max(worst, (hi + wheel_rate_momentum(p, i) * share * b.omega_max_rad_s) / p.wheel_inertia_kgm2)
     return worst - b.psi_limit_rad_s
 
 

@@ -22,7 +22,7 @@ from rta_attitude.dynamics.spacecraft import (
     PLANT_DTYPE,
     RK4_WORK_ROWS,
     plant_record,
-    rate_momentum,
+    wheel_rate_momentum,
 )
 from rta_attitude.dynamics.state import STATE_SIZE
 from rta_attitude.filter.gatekeeper.law import (
@@ -189,14 +189,12 @@ def backup_record(cfg: Config) -> NDArray[np.void]:
     b["law_quat"] = q
     perm = np.abs(P)
     plant = plant_record(cfg, o.model)[0]
-    most = max(rate_momentum(plant, a) for a in range(3))  # the largest |(J w)_a| / w_max (any axis order)
-    D = cfg.spacecraft.wheel_inertia_kgm2
-    if cfg.spacecraft.wheels_on_body_axes:
-        b["momentum_variant_rad_s"] = cfg.psi_keep_rad_s - most * L.omega_max_rad_s / D
-    else:  # wheel i holds (A^-1 H)_i / D at rest: every |H| up to this fits every wheel in any attitude
-        Ai = np.linalg.inv(cfg.spacecraft.wheel_axes)
-        rates = float(np.max(np.abs(Ai @ cfg.spacecraft.inertia_matrix).sum(axis=1))) * L.omega_max_rad_s / D
-        b["momentum_variant_rad_s"] = (cfg.psi_keep_rad_s - rates) / float(np.max(np.linalg.norm(Ai, axis=1)))
+    # wheel i holds (A^-1 H)_i / D at rest, plus its rates' share: every |H| up to this fits every wheel in any
+    # attitude (the largest row norm of A^-1 is 1 with the wheels on the body axes)
+    most = max(wheel_rate_momentum(plant, i) for i in range(3))  # the largest over the wheels (any axis order)
+    spread = float(np.max(np.linalg.norm(cfg.spacecraft.wheel_axes_inverse, axis=1)))
+    b["momentum_variant_rad_s"] = (cfg.psi_keep_rad_s
+                                   - most * L.omega_max_rad_s / cfg.spacecraft.wheel_inertia_kgm2) / spread
     # wheels on the body axes turn with the frame (each stays on its axis); other wheels keep their order, and
     # their axes turn instead (A' = P A, G' = P G)
     b["permute_wheels"] = b["permuted"] and cfg.spacecraft.wheels_on_body_axes

@@ -252,7 +252,7 @@ def apply_measurement_margins(rec: NDArray[np.void], cfg: Config) -> None:
         b["rate_limit_rad_s"] = min(float(b["rate_limit_rad_s"][0]), RATE_LIMIT_FRACTION * w_left)
     if speed_margin > 0.0:
         top = math.sqrt(max(0.0, psi_max * psi_max - speed_margin))  # |v| within it keeps h's margin
-        reach = float(np.max(np.sum(np.abs(c["wheel_axes"]), axis=0)))  # max_i |a_i|_1: |a_i . omega| <= w_max it
+        reach = cfg.spacecraft.wheel_rate_reach  # |a_i . omega| <= w_max reach
         b["psi_limit_rad_s"] = max(0.0, top - w_max * reach) if c["wheel_speed_relative"] else top  # v = psi + a.w
         e = max(wheel_speed_error(c, a) for a in range(3))
         b["psi_hold_rad_s"] = max(0.0, float(b["psi_limit_rad_s"][0]) - e)
