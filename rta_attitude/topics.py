@@ -50,7 +50,8 @@ BODY_FRAME = "body"
 HILL_FRAME = "hill"
 """frame_id of Hill-frame quantities (Odometry pose, sun vector)."""
 WHEEL_JOINTS: tuple[str, ...] = ("wheel_x", "wheel_y", "wheel_z")
-"""JointState.name of the reaction wheels on `joint_states` (the wheels on the body's x, y, z axes)."""
+"""The paper's wheels' names (on the body's x, y, z axes), the default array: JointState.name on `joint_states`
+is the configured wheels' (`Spacecraft.wheel_names`)."""
 
 # ----------------------------------------------------------------------------- QoS
 
@@ -165,8 +166,8 @@ TOPICS: dict[str, TopicSpec] = {
                   "attitude (body in Hill: frame hill, child body), body rates, CW position (Hill) and velocity "
                   "(body), as measured; stamp = t_k"),
         TopicSpec(WHEELS, "sensor_msgs/msg/JointState", STREAM_QOS, PLANT, ((FILTER, True, False), *_ALL),
-                  "reaction wheels: name = WHEEL_JOINTS, velocity = rotor speed [rad/s] as measured, effort = "
-                  "motor torque of the last hold [N m]"),
+                  "reaction wheels: name = the configured wheels' names, velocity = rotor speed [rad/s] as measured, "
+                  "effort = motor torque of the last hold [N m]"),
         TopicSpec(TEMPERATURE, "sensor_msgs/msg/Temperature", STREAM_QOS, PLANT, ((FILTER, True, False), *_ALL),
                   "-j_B face temperature [degC], as measured"),
         TopicSpec(BATTERY, "sensor_msgs/msg/BatteryState", STREAM_QOS, PLANT, ((FILTER, True, False), *_ALL),

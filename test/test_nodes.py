@@ -262,6 +262,31 @@ def test_lockstep_with_a_vehicle_option_equals_the_in_process_run(option: str, t
     assert np.array_equal(run.x, ref.x) and run.reintegration_residual < 1e-9
 
 
+@pytest.mark.slow
+def test_lockstep_with_named_wheels_names_them_on_joint_states(tmp_path: Path) -> None:
+    """A user's file names its (skewed) wheels: joint_states carries those names, the filter reads them, and the
+    run over DDS equals `simulate` bit for bit."""
+    from rosbags.highlevel import AnyReader
+
+    from rta_attitude.simulation.closed_loop import simulate
+
+    path = tmp_path / "named.yaml"
+    axes = {"rw_a": [0.9592, 0.1998, -0.1998], "rw_b": [0.3, 0.9, 0.3162], "rw_c": [-0.2506, 0.3509, 0.9023]}
+    path.write_text("/**:\n  ros__parameters:\n    spacecraft:\n      wheel_spin_axes_body:\n"
+                    + "".join(f"        {k}: {v}\n" for k, v in axes.items()))
+    named = config.load(path)
+    assert named.spacecraft.wheel_names == tuple(axes)
+    ref = simulate(named, "paper-example")
+    out = run_nodes(tmp_path, params={"config_file": str(path)})
+    assert out["plant"].exit_code == 0 and out["plant"].k == ref.steps
+    assert out["nodes"][topics.FILTER].counts.get("state_rejected", 0) == 0
+    with AnyReader([out["bag"]]) as reader:
+        msgs = [(c.topic, reader.deserialize(raw, c.msgtype)) for c, _, raw in reader.messages()
+                if c.topic in (_topic(topics.STATE), _topic(topics.WHEELS))]
+    assert {tuple(m.name) for t, m in msgs if t == _topic(topics.WHEELS)} == {tuple(axes)}
+    assert np.array_equal(np.array([m.position for t, m in msgs if t == _topic(topics.STATE)]), ref.x)
+
+
 # ----------------------------------------------------------------------------- real time
 
 

@@ -36,6 +36,7 @@ def run(args: argparse.Namespace) -> int:
     from rta_attitude.constraints.windows import ramp_start
 
     cfg = load(args)
+    cfg.spacecraft.require_three_wheels("the filter")  # what follows derives the filter's margins
     print(f"{cfg.source}: ok")
     print(f"  preset {cfg.filter.preset}, fallback {cfg.filter.fallback}, dt {cfg.filter.sample_time_s} s, "
           f"{cfg.substeps} RK4 substeps")

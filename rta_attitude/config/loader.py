@@ -5,9 +5,10 @@ file with `--ros-args --params-file`. Unknown keys, wrong types and out-of-range
 `ConfigError` with one line naming the key, the value and what is allowed.
 
 Overlays. A user's file holds only what differs from the package's defaults (config/rta_attitude.yaml): it is
-merged onto them (`merge`: mappings key by key, recursively; a list or a value replaces; a key set to null
-removes the default's entry, e.g. a pointing constraint) and the result is validated as one. `-p KEY=VALUE`
-(`parse_overrides`, `apply_overrides`) sets one dotted key on top, as on the nodes' command line.
+merged onto them (`merge`: mappings key by key, recursively, but a wheel array replaces the default's; a list or
+a value replaces; a key set to null removes the default's entry, e.g. a pointing constraint) and the result is
+validated as one. `-p KEY=VALUE` (`parse_overrides`, `apply_overrides`) sets one dotted key on top, as on the
+nodes' command line.
 
 Scenarios are checked one by one: an error in one names it and is raised when that scenario is used
 (`Config.scenario`), so the others still run.
@@ -97,15 +98,20 @@ def read_parameters(path: str | os.PathLike[str] | None = None) -> tuple[dict[st
     return params, file
 
 
-def merge(base: Mapping[str, Any], overlay: Mapping[str, Any]) -> dict[str, Any]:
-    """overlay merged onto base: mappings key by key (recursively); a list or a value replaces the base's; a key
-    set to null (None) removes the base's entry."""
+WHOLE_SECTIONS = frozenset({"spacecraft.wheel_spin_axes_body"})
+"""Sections an overlay replaces as a whole: a vehicle's wheel array is its own, not added to the paper's three."""
+
+
+def merge(base: Mapping[str, Any], overlay: Mapping[str, Any], _path: str = "") -> dict[str, Any]:
+    """overlay merged onto base: mappings key by key (recursively; a WHOLE_SECTIONS mapping replaces the base's);
+    a list or a value replaces the base's; a key set to null (None) removes the base's entry."""
     out = dict(base)
     for key, value in overlay.items():
+        path = f"{_path}{key}"
         if value is None:
             out.pop(key, None)
-        elif isinstance(value, Mapping) and isinstance(out.get(key), Mapping):
-            out[key] = merge(out[key], value)
+        elif isinstance(value, Mapping) and isinstance(out.get(key), Mapping) and path not in WHOLE_SECTIONS:
+            out[key] = merge(out[key], value, path + ".")
         else:
             out[key] = value
     return out
@@ -288,19 +294,17 @@ def _barrier(s: _Section, second_order: bool, derive: bool = False) -> BarrierGa
     return gains
 
 
-def _wheel_axes(sc: _Section) -> tuple[tuple[float, float, float], ...]:
-    """`spacecraft.wheel_spin_axes_body`: a unit vector per wheel, keyed by its joint name (`topics.WHEEL_JOINTS`,
-    all of them); missing: the body axes."""
+def _wheels(sc: _Section) -> tuple[tuple[str, ...], tuple[tuple[float, float, float], ...]]:
+    """`spacecraft.wheel_spin_axes_body`: (names, unit spin axes), a vector per wheel keyed by its joint name, in
+    the order written (the paper's three, `topics.WHEEL_JOINTS`, in theirs); missing: the paper's wheels."""
     sc.used.add("wheel_spin_axes_body")
     if "wheel_spin_axes_body" not in sc.data:
-        return BODY_AXES
+        return WHEEL_JOINTS, BODY_AXES
     ws = sc.section("wheel_spin_axes_body")
-    if set(ws.data) != set(WHEEL_JOINTS):
-        raise ConfigError(f"{ws.where} must give one spin axis for each of the wheels {', '.join(WHEEL_JOINTS)}, got "
-                          f"{', '.join(map(str, ws.data)) or 'none'}")
-    axes = tuple(unit_vector(f"{ws.where}.{name}", ws.vector(name, 3)) for name in WHEEL_JOINTS)
+    names = WHEEL_JOINTS if set(ws.data) == set(WHEEL_JOINTS) else tuple(str(name) for name in ws.data)
+    axes = tuple(unit_vector(f"{ws.where}.{name}", ws.vector(name, 3)) for name in names)
     ws.done()
-    return axes  # type: ignore[return-value]
+    return names, axes  # type: ignore[return-value]
 
 
 def _pointing(name: str, s: _Section) -> PointingConstraint:
@@ -374,11 +378,12 @@ def from_parameters(params: Mapping[str, Any], source: str = "<memory>") -> Conf
     """
     root = _Section(params, "parameters")
     sc = root.section("spacecraft")
+    wheel_names, wheel_axes = _wheels(sc)
     spacecraft = Spacecraft(sc.vector("inertia_kgm2", 3), sc.number("wheel_inertia_kgm2"),  # type: ignore[arg-type]
                             sc.number("torque_sign", 1.0), sc.text("model", "gyrostat"),
                             sc.number("inertia_uncertainty", 0.0), sc.number("transport_delay_s", 0.0),
                             sc.vector("products_of_inertia_kgm2", 3, (0.0, 0.0, 0.0)),  # type: ignore[arg-type]
-                            _wheel_axes(sc), sc.names("failed_wheels"))
+                            wheel_axes, sc.names("failed_wheels"), wheel_names)
     sc.done()
     ev = root.section("environment")
     environment = Environment(

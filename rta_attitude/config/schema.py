@@ -8,6 +8,7 @@ from __future__ import annotations
 import datetime as _dt
 import importlib.util
 import math
+import re
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -118,6 +119,18 @@ def _choice(where: str, value: str, allowed: tuple[str, ...]) -> None:
 
 BODY_AXES: tuple[tuple[float, float, float], ...] = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))
 """The paper's wheels' spin axes: one wheel on each body axis."""
+WHEEL_NAME = re.compile(r"[A-Za-z][A-Za-z0-9_]*")
+"""A wheel's name: a ROS joint name that is also a parameter name's part."""
+
+
+def spanning(axes: NDArray[np.float64]) -> float:
+    """The smallest singular value of the (3, k) matrix of spin axes as columns: 0 where they do not span the body's
+    three axes (fewer than three, or all in a plane)."""
+    if axes.shape[1] < 3:
+        return 0.0
+    return float(np.linalg.svd(axes, compute_uv=False)[2])
+
+
 WHEEL_CONDITION_MIN = 1e-3
 """The wheels' spin axes must span the body's three axes: the matrix of their axes' smallest singular value at
 least this (below it one axis is all but out of their reach)."""
@@ -125,7 +138,7 @@ least this (below it one axis is all but out of their reach)."""
 
 @dataclass(frozen=True)
 class Spacecraft:
-    """Rigid body with three reaction wheels (`wheel_axes_body`: on its body axes unless configured)."""
+    """Rigid body with N >= 3 reaction wheels (`wheel_axes_body`: three on its body axes unless configured)."""
 
     inertia_kgm2: tuple[float, float, float]
     """The inertia tensor's diagonal J_xx, J_yy, J_zz in body axes (the principal moments where the products are
@@ -149,13 +162,16 @@ class Spacecraft:
     """The tensor's off-diagonal entries J_xy, J_xz, J_yz (J_xy = -int x y dm), kg m^2 (`config.inertia`); zero:
     the body axes are principal."""
     wheel_axes_body: tuple[tuple[float, float, float], ...] = BODY_AXES
-    """Each wheel's spin axis, a unit vector in body axes, in the order of `topics.WHEEL_JOINTS` (wheel i's speed is
-    psi_i, its acceleration u_i): the body's angular acceleration is G u with G = s D J^-1 A, A's columns these
-    axes, and the wheels' momentum -s D A psi (docs/conventions.md, "Wheels")."""
+    """Each wheel's spin axis, a unit vector in body axes, in the order of `wheel_names` (wheel i's speed is
+    psi_i, its acceleration u_i): the body's angular acceleration is G u with G = s D J^-1 A, A (3, N) with these
+    axes as columns, and the wheels' momentum -s D A psi (docs/conventions.md, "Wheels")."""
     failed_wheels: tuple[str, ...] = ()
     """Wheels (by joint name) whose drive gives no torque: the plant holds their acceleration at 0 (each coasts at
-    its speed, its momentum still in Euler's equations) and the filter's box is 0 on them. With three wheels one
-    failure loses 3-axis control ("Wheels", docs/conventions.md)."""
+    its speed, its momentum still in Euler's equations) and the filter's box is 0 on them. 3-axis control is lost
+    when the wheels left no longer span the body's axes (with three wheels, at the first failure; "Wheels",
+    docs/conventions.md)."""
+    wheel_names: tuple[str, ...] = WHEEL_JOINTS
+    """The wheels' joint names, in wheel order (the keys of `spacecraft.wheel_spin_axes_body`)."""
 
     def __post_init__(self) -> None:
         _choice("spacecraft.model", self.model, PLANT_MODELS)
@@ -173,24 +189,42 @@ class Spacecraft:
         if not self.principal and self.inertia_uncertainty > 0.0:
             raise ConfigError("spacecraft.inertia_uncertainty is for principal moments: set it to 0 with "
                               "spacecraft.products_of_inertia_kgm2 (docs/conventions.md, \"Inertia\")")
-        if len(self.wheel_axes_body) != 3:
-            raise ConfigError(f"spacecraft.wheel_spin_axes_body must give 3 wheels, got {len(self.wheel_axes_body)}")
-        for i, a in enumerate(self.wheel_axes_body):
-            unit_vector(f"spacecraft.wheel_spin_axes_body[{i}]", a)
-        smallest = float(np.linalg.svd(self.wheel_axes, compute_uv=False)[-1])
+        n = len(self.wheel_axes_body)
+        if n < 3:
+            raise ConfigError(f"spacecraft.wheel_spin_axes_body must give at least 3 wheels, got {n}")
+        if len(self.wheel_names) != n:
+            raise ConfigError(f"spacecraft: {len(self.wheel_names)} wheel names for {n} spin axes")
+        for name in self.wheel_names:
+            if not WHEEL_NAME.fullmatch(name):
+                raise ConfigError(f"spacecraft.wheel_spin_axes_body: a wheel's name must be a letter then letters, "
+                                  f"digits or '_' (a ROS joint and parameter name), got {name!r}")
+        if len(set(self.wheel_names)) != n:
+            raise ConfigError(f"spacecraft.wheel_spin_axes_body names a wheel twice: {list(self.wheel_names)!r}")
+        for name, a in zip(self.wheel_names, self.wheel_axes_body):
+            unit_vector(f"spacecraft.wheel_spin_axes_body.{name}", a)
+        smallest = spanning(self.wheel_axes)
         if not smallest >= WHEEL_CONDITION_MIN:
             raise ConfigError(f"spacecraft.wheel_spin_axes_body: the wheels' axes must span the three body axes "
                               f"(3-axis control); their smallest singular value is {smallest:.3g}, below "
                               f"{WHEEL_CONDITION_MIN}")
         for name in self.failed_wheels:
-            if name not in WHEEL_JOINTS:
+            if name not in self.wheel_names:
                 raise ConfigError(f"spacecraft.failed_wheels: unknown wheel {name!r}; the wheels are "
-                                  f"{', '.join(WHEEL_JOINTS)}")
+                                  f"{', '.join(self.wheel_names)}")
         if len(set(self.failed_wheels)) != len(self.failed_wheels):
             raise ConfigError(f"spacecraft.failed_wheels names a wheel twice: {list(self.failed_wheels)!r}")
         if not self.wheels_on_body_axes and self.inertia_uncertainty > 0.0:
             raise ConfigError("spacecraft.inertia_uncertainty is for wheels on the body axes: set it to 0 with "
                               "spacecraft.wheel_spin_axes_body (docs/conventions.md, \"Inertia\")")
+
+    def require_three_wheels(self, what: str) -> None:
+        """Raise ConfigError (one line naming `what`) for an array of more than three wheels: the plant model and
+        Basilisk take any array, the filter, the controller's closed loop, the nodes' messages and the Monte Carlo
+        take three so far."""
+        if self.n_wheels != 3:
+            raise ConfigError(f"{what} takes three reaction wheels; spacecraft.wheel_spin_axes_body gives "
+                              f"{self.n_wheels} ({', '.join(self.wheel_names)}), which the plant model "
+                              f"(rta_attitude.dynamics.plant) and Basilisk take (docs/conventions.md, \"Wheels\")")
 
     @property
     def J(self) -> NDArray[np.float64]:
@@ -203,15 +237,24 @@ class Spacecraft:
         return is_principal(self.products_of_inertia_kgm2)
 
     @property
+    def n_wheels(self) -> int:
+        """N, the number of wheels."""
+        return len(self.wheel_axes_body)
+
+    @property
     def wheel_axes(self) -> NDArray[np.float64]:
-        """A (3, 3): wheel i's spin axis in body axes is column i."""
-        return np.array(self.wheel_axes_body, dtype=float).T
+        """A (3, N): wheel i's spin axis in body axes is column i."""
+        return np.array(self.wheel_axes_body, dtype=float).reshape(-1, 3).T
 
     @property
     def wheel_axes_inverse(self) -> NDArray[np.float64]:
-        """A^-1 (3, 3): the wheel accelerations of a body-axis vector (A^-1 tau / D: the wheels whose torque is
-        tau; A^-1 H / D: the speeds that hold the momentum H at rest)."""
-        return np.linalg.inv(self.wheel_axes)
+        """A^-1 (3, 3) of three wheels, the right inverse A^T (A A^T)^-1 (N, 3) of more: the wheel accelerations of a
+        body-axis vector, the smallest (2-norm) where there are many (A^-1 tau / D: the wheels whose torque is tau;
+        A^-1 H / D: the speeds that hold the momentum H at rest)."""
+        A = self.wheel_axes
+        if self.n_wheels == 3:
+            return np.linalg.inv(A)
+        return A.T @ np.linalg.inv(A @ A.T)
 
     @property
     def wheel_rate_reach(self) -> float:
@@ -220,15 +263,15 @@ class Spacecraft:
 
     @property
     def wheel_failed(self) -> NDArray[np.bool_]:
-        """Each wheel's drive failed (`failed_wheels`), in joint order (3,)."""
-        return np.array([name in self.failed_wheels for name in WHEEL_JOINTS])
+        """Each wheel's drive failed (`failed_wheels`), in wheel order (N,)."""
+        return np.array([name in self.failed_wheels for name in self.wheel_names])
 
     @property
     def control_lost(self) -> str:
-        """'' with every wheel working; else one line saying what the failed wheels take away."""
-        if not self.failed_wheels:
+        """'' while the working wheels span the body's axes; else one line saying what the failed wheels take away."""
+        if not self.failed_wheels or spanning(self.wheel_axes[:, ~self.wheel_failed]) >= WHEEL_CONDITION_MIN:
             return ""
-        left = len(WHEEL_JOINTS) - len(self.failed_wheels)
+        left = self.n_wheels - len(self.failed_wheels)
         return (f"lost 3-axis control: {', '.join(self.failed_wheels)} failed, {left} wheel{'s' if left != 1 else ''} "
                 "left")
 
@@ -989,16 +1032,19 @@ class Config:
 
     @property
     def u_max_rad_s2(self) -> NDArray[np.float64]:
-        """Bounds of the admissible set U (3,), rad/s^2: actuator and angular-acceleration limits.
+        """Bounds of the admissible set U (N,), rad/s^2: actuator and angular-acceleration limits.
 
         |u_i| <= min(psi_dot_max, (J_i omega_dot_max - |J_j - J_k| omega_max^2) / D) on principal axes with the
         wheels on them. Otherwise every wheel turns every axis: U is the polytope |(G u)_i| <= b_i
         (`accel_limit_rad_s2`, rows of the QP) within the actuator's box, and this is the box that bounds it,
-        |u_j| <= min(psi_dot_max, sum_i |(G^-1)_ji| b_i) (what the wheel needs to give every axis its b_i).
+        |u_j| <= min(psi_dot_max, sum_i |(G^-1)_ji| b_i) (what the wheel needs to give every axis its b_i); with
+        more than three wheels the polytope reaches every wheel's own limit (along the null space), psi_dot_max.
         A failed wheel's bound is 0 (`Spacecraft.failed_wheels`).
         """
         sc, L = self.spacecraft, self.limits
-        if not sc.diagonal:
+        if sc.n_wheels > 3:  # every wheel direction but the body's is the null space: the rows bound the rest
+            box = np.full(sc.n_wheels, L.wheel_accel_max_rad_s2)
+        elif not sc.diagonal:
             reach = np.abs(np.linalg.inv(sc.control_matrix)) @ self.accel_limit_rad_s2
             box = np.minimum(L.wheel_accel_max_rad_s2, reach)
         else:

@@ -137,6 +137,7 @@ def constraint_record(cfg: Config) -> NDArray[np.void]:
     from rta_attitude.constraints.margins import sampled_data_margin
     from rta_attitude.constraints.windows import ramp_rate, ramp_start
 
+    cfg.spacecraft.require_three_wheels("the filter")
     robust = cfg.filter.preset == "robust"
     L, aug = cfg.limits, cfg.augmentation
     rec = np.zeros(1, CONSTRAINT_DTYPE)

@@ -1,8 +1,8 @@
 """Basilisk (AVS Lab, the optional `bsk` package) as an independent truth plant: the module that
 imports Basilisk, and only when a `BasiliskPlant` is built (`plant.simulator: basilisk`).
 
-What Basilisk integrates: a rigid hub with three balanced reaction wheels (`BalancedWheels`) on the
-configured spin axes a_i (`spacecraft.wheel_spin_axes_body`, A's columns), torque-commanded, RK4 at
+What Basilisk integrates: a rigid hub with the configured balanced reaction wheels (`BalancedWheels`, N >= 3) on
+their spin axes a_i (`spacecraft.wheel_spin_axes_body`, A's columns), torque-commanded, RK4 at
 h = dt / substeps (its `svIntegratorRK4`), optionally the gravity-gradient torque of a point-mass Earth
 (`GravityGradientEffector`) and a circular orbit (rotating Hill frame). Its equations carry the wheels'
 gyroscopic torque always, so it is the `gyrostat` model whatever `spacecraft.model` says (the filter keeps
@@ -48,9 +48,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from rta_attitude.config.schema import Config
+from rta_attitude.dynamics.plant import initial_state
 from rta_attitude.dynamics.quaternion import product
 from rta_attitude.dynamics.spacecraft import RK4_WORK_ROWS, plant_record, rk4_hold, saturated
-from rta_attitude.dynamics.state import STATE_SIZE
+from rta_attitude.dynamics.state import STATE_SIZE, wheel_column
 from rta_attitude.errors import ConfigError
 from rta_attitude.jit import LEAF
 
@@ -62,7 +63,8 @@ HUB_MASS_KG = 12.0
 """Hub mass of a 6U CubeSat; no effect on the attitude (centre of mass at B, no translation coupling)."""
 NS_PER_S = 1_000_000_000
 BASILISK_ROWS = 10
-"""Entries of the state that Basilisk integrates: q (4), omega (3), psi (3)."""
+"""Entries of the state that Basilisk integrates: q (4), omega (3), psi (the first three wheels; wheels past the
+third are entries 19.., `state.wheel_column`)."""
 
 
 # ----------------------------------------------------------------------------- frame conversions
@@ -109,8 +111,8 @@ def mrp_to_quaternion(sigma: Array) -> Array:
 @numba.njit(**LEAF)
 def _follow(x0: Array, sigma: Array, w: Array, Omega: Array, t0_s: float, h_s: float, frame_rate: float, u: Array,
             pa: NDArray[np.void], out: Array, one: Array, quats: Array, work: Array) -> None:
-    """The states (S, 19) after each of S substeps into out, from Basilisk's sigma_BN, omega_BN_B and
-    wheel speeds Omega (S, 3) at t0 + (j + 1) h and the state x0 (19,) at t0: q_BH (sign continuous
+    """The states (S, 16 + N) after each of S substeps into out, from Basilisk's sigma_BN, omega_BN_B and
+    wheel speeds Omega (S, N) at t0 + (j + 1) h and the state x0 (16 + N,) at t0: q_BH (sign continuous
     with x0's), omega, psi = -(Omega + omega) from Basilisk; T, E, theta_S, CW by one RK4 step of the
     compiled model (record pa (1,)) over each substep from Basilisk's state at its start, with u held.
     one (1, 19), quats (2, 4), work (RK4_WORK_ROWS, 19): scratch."""
@@ -121,7 +123,7 @@ def _follow(x0: Array, sigma: Array, w: Array, Omega: Array, t0_s: float, h_s: f
     for j in range(sigma.shape[0]):
         rk4_hold(prev, u, h_s, 1, p, one, work)  # T, E, theta_S, CW over the substep (uses work rows 0-7)
         row = out[j]
-        for i in range(BASILISK_ROWS, STATE_SIZE):
+        for i in range(BASILISK_ROWS, STATE_SIZE):  # T, E, theta_S, CW
             row[i] = one[0, i]
         mrp_quaternion(sigma[j, 0], sigma[j, 1], sigma[j, 2], q_bn)
         half = 0.5 * frame_rate * (t0_s + (j + 1) * h_s)
@@ -139,8 +141,9 @@ def _follow(x0: Array, sigma: Array, w: Array, Omega: Array, t0_s: float, h_s: f
                 row[7 + a] = -(Omega[j, a] + w[j, a])
         else:  # psi_i = -(Omega_i + a_i . omega), a_i wheel i's spin axis
             A = p.wheel_axes
-            for i in range(3):
-                row[7 + i] = -(Omega[j, i] + (A[0, i] * w[j, 0] + A[1, i] * w[j, 1] + A[2, i] * w[j, 2]))
+            for i in range(A.shape[1]):
+                col = 7 + i if i < 3 else 16 + i  # `state.wheel_column`
+                row[col] = -(Omega[j, i] + (A[0, i] * w[j, 0] + A[1, i] * w[j, 1] + A[2, i] * w[j, 2]))
         prev = row
 
 
@@ -158,7 +161,7 @@ class BasiliskPlant:
     Args:
         cfg: configuration: spacecraft (J, D; torque_sign must be 1), environment (mean motion,
             rotating_hill, gravity_gradient), limits.wheel_accel_max_rad_s2, integrator.substeps.
-        x0: initial state (19,).
+        x0: initial state (16 + N,).
         dt_s: hold time of one step, s (default filter.sample_time_s); dt_s / substeps must be a whole
             number of nanoseconds (Basilisk's clock).
 
@@ -167,9 +170,7 @@ class BasiliskPlant:
     """
 
     def __init__(self, cfg: Config, x0: Array, dt_s: float | None = None) -> None:
-        x = np.array(x0, dtype=float)
-        if x.shape != (STATE_SIZE,):
-            raise ValueError(f"a plant starts from one state ({STATE_SIZE},), got {x.shape}")
+        x = initial_state(cfg, x0)
         dt = float(cfg.filter.sample_time_s if dt_s is None else dt_s)
         self.substeps = cfg.substeps
         self.h_ns = round(dt * NS_PER_S / self.substeps)
@@ -191,10 +192,11 @@ class BasiliskPlant:
         self.x[0:4] /= np.linalg.norm(self.x[0:4])
         self.t_ns = 0
         self.delay_substeps = cfg.delay_substeps
-        self._us = np.zeros(3)  # the command the wheels hold (over the next step's delay too)
-        self._one = np.empty((1, STATE_SIZE))
+        self.n_wheels = cfg.spacecraft.n_wheels
+        self._us = np.zeros(self.n_wheels)  # the command the wheels hold (over the next step's delay too)
+        self._one = np.empty((1, x.shape[0]))
         self._quats = np.empty((2, 4))
-        self._work = np.zeros((RK4_WORK_ROWS, STATE_SIZE))
+        self._work = np.zeros((RK4_WORK_ROWS, x.shape[0]))
         self._closed = False
         self._build(self.x)
 
@@ -236,11 +238,12 @@ class BasiliskPlant:
         sc.hub.v_CN_NInit = [[0.0], [self.n_rad_s * r if self.rotating_hill else 0.0], [0.0]]
 
         factory = simIncludeRW.rwFactory()
-        for a in range(3):
+        for a in range(self.n_wheels):
             axis = [float(v) for v in A[:, a]]
             rw = factory.create("custom", axis, Js=float(self.D), u_max=float(self.D * self.u_max),
                                 RWModel=messaging.BalancedWheels, useMaxTorque=True)
-            rw.Omega = float(-x[7 + a] - A[:, a] @ w0)  # rad/s (create() takes RPM); psi = -(Omega + a . omega)
+            # rad/s (create() takes RPM); psi = -(Omega + a . omega)
+            rw.Omega = float(-x[wheel_column(a)] - A[:, a] @ w0)
         wheels = reactionWheelStateEffector.ReactionWheelStateEffector()
         factory.addToSpacecraft("wheels", wheels, sc)
         self._command = messaging.ArrayMotorTorqueMsgPayload()
@@ -280,14 +283,14 @@ class BasiliskPlant:
         self._sim.TotalSim.StepUntilStop(0, -1)  # the t = 0 tick: writes the initial messages
 
     def _write_torque(self, us: Array) -> None:
-        self._command.motorTorque = [float(-self.D * us[0]), float(-self.D * us[1]), float(-self.D * us[2])]
+        self._command.motorTorque = [float(-self.D * v) for v in us]
         self._command_msg.write(self._command)
 
     def step(self, u: Array) -> tuple[Array, Array]:
-        """Saturate u (3,), rad/s^2, at the actuator limit and hold it over dt_s in Basilisk.
+        """Saturate u (N,), rad/s^2, at the actuator limit and hold it over dt_s in Basilisk.
 
         Returns:
-            (x(t + dt) (19,), the states after each substep (substeps, 19)).
+            (x(t + dt) (16 + N,), the states after each substep (substeps, 16 + N)).
 
         Raises:
             ValueError: u is not finite (Basilisk would integrate NaN torques), or the plant is closed.
@@ -295,8 +298,8 @@ class BasiliskPlant:
         if self._closed:
             raise ValueError("the Basilisk plant is closed")
         u = np.ascontiguousarray(u, dtype=float)
-        if u.shape != (3,) or not np.all(np.isfinite(u)):
-            raise ValueError(f"u must be 3 finite wheel accelerations, got {u!r}")
+        if u.shape != (self.n_wheels,) or not np.all(np.isfinite(u)):
+            raise ValueError(f"u must be {self.n_wheels} finite wheel accelerations, got {u!r}")
         t0_ns = self.t_ns
         # StepUntilStop is ConfigureStopTime + ExecuteSimulation without the Python event loop (the same
         # states, less time per step)
@@ -310,12 +313,12 @@ class BasiliskPlant:
         new = times > t0_ns  # the recorder also holds the t = 0 record once
         sigma = np.ascontiguousarray(np.asarray(self._states.sigma_BN)[new])
         w = np.ascontiguousarray(np.asarray(self._states.omega_BN_B)[new])
-        Omega = np.ascontiguousarray(np.asarray(self._speeds.wheelSpeeds)[new][:, :3])
+        Omega = np.ascontiguousarray(np.asarray(self._speeds.wheelSpeeds)[new][:, :self.n_wheels])
         self._states.clear()
         self._speeds.clear()
         if sigma.shape[0] != self.substeps:
             raise RuntimeError(f"Basilisk recorded {sigma.shape[0]} substeps, expected {self.substeps}")
-        subs = np.empty((self.substeps, STATE_SIZE))
+        subs = np.empty((self.substeps, self.x.shape[0]))
         _follow(self.x, sigma, w, Omega, t0_ns / NS_PER_S, self.h_s, self.frame_rate_rad_s, self._us,
                 self.record, subs, self._one, self._quats, self._work)
         self.x = subs[-1].copy()

@@ -2,9 +2,9 @@
 (`plant.simulator`): `CompiledPlant` (the package's RK4 of `dynamics.spacecraft`) or
 `dynamics.basilisk.BasiliskPlant` (Basilisk, imported only when chosen).
 
-    plant = make_plant(cfg, x0)          # x0 (19,), the state layout of `dynamics.state`
-    x_next, subs = plant.step(u)         # u (3,) rad/s^2, saturated at the actuator, held over dt_s;
-                                         # subs (substeps, 19): the state after each substep, subs[-1] = x_next
+    plant = make_plant(cfg, x0)          # x0 (16 + N,), the state layout of `dynamics.state` (19 with 3 wheels)
+    x_next, subs = plant.step(u)         # u (N,) rad/s^2, saturated at the actuator, held over dt_s;
+                                         # subs (substeps, 16 + N): the state after each substep, subs[-1] = x_next
     plant.close()                        # also a context manager
 
 `CompiledPlant.step` is `spacecraft.integrate` of the plant's own state, so a loop over it equals the
@@ -20,7 +20,7 @@ from numpy.typing import NDArray
 
 from rta_attitude.config.schema import Config
 from rta_attitude.dynamics.spacecraft import integrate, plant_record, saturated
-from rta_attitude.dynamics.state import STATE_SIZE
+from rta_attitude.dynamics.state import state_size
 
 Array = NDArray[np.float64]
 
@@ -39,7 +39,7 @@ class Plant(Protocol):
         ...
 
     def step(self, u: Array) -> tuple[Array, Array]:
-        """Saturate u (3,) and hold it over dt_s (with `spacecraft.transport_delay_s`, from the delay on: the
+        """Saturate u (N,) and hold it over dt_s (with `spacecraft.transport_delay_s`, from the delay on: the
         previous step's command holds before); returns (x(t + dt) (19,), substep states (substeps, 19))."""
         ...
 
@@ -65,9 +65,9 @@ class CompiledPlant:
         self.record = plant_record(cfg)
         self.substeps = cfg.substeps
         self.dt_s = float(cfg.filter.sample_time_s if dt_s is None else dt_s)
-        self.x = _initial_state(x0)
+        self.x = initial_state(cfg, x0)
         self.t_s = 0.0
-        self.u_inflight = np.zeros(3)  # the last command as the wheels hold it: over the next step's delay
+        self.u_inflight = np.zeros(cfg.spacecraft.n_wheels)  # the last command as the wheels hold it (next delay)
 
     def step(self, u: Array) -> tuple[Array, Array]:
         """`spacecraft.integrate` from the current state; see `Plant.step`."""
@@ -87,10 +87,12 @@ class CompiledPlant:
         self.close()
 
 
-def _initial_state(x0: Array) -> Array:
+def initial_state(cfg: Config, x0: Array) -> Array:
+    """A copy of x0 as the plant's first state, checked to have the configured wheels' size (16 + N)."""
     x = np.array(x0, dtype=float)
-    if x.shape != (STATE_SIZE,):
-        raise ValueError(f"a plant starts from one state ({STATE_SIZE},), got {x.shape}")
+    size = state_size(cfg.spacecraft.n_wheels)
+    if x.shape != (size,):
+        raise ValueError(f"a plant starts from one state ({size},), got {x.shape}")
     return x
 
 

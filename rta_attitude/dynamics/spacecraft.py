@@ -45,49 +45,56 @@ from rta_attitude.config import inertia
 from rta_attitude.config.schema import Config
 from rta_attitude.dynamics.environment import EARTH_HILL, sun_hill, sunlit
 from rta_attitude.dynamics.quaternion import attitude_matrix
-from rta_attitude.dynamics.state import STATE_SIZE
+from rta_attitude.dynamics.state import STATE_SIZE, state_size
 from rta_attitude.jit import LEAF
 
 Array = NDArray[np.float64]
 
-PLANT_DTYPE = np.dtype([
-    ("inertia_kgm2", np.float64, (3,)),        # J1 J2 J3
-    ("wheel_inertia_kgm2", np.float64),        # D
-    ("torque_sign", np.float64),               # s: the wheels' body torque is s D u, their momentum -s D psi
-    ("control_gain", np.float64, (3,)),        # d omega_dot / d u = D / J_i
-    ("wheel_gyroscopic", np.uint8),            # 1: gyrostat term -omega x (-D psi); 0: the paper's model
-    ("frame_rate_rad_s", np.float64),          # n_f, rate of the Hill frame in the kinematics (0: inertial)
-    ("gravity_gradient", np.uint8),            # 1: tau_gg = 3 n^2 r x J r
-    ("mean_motion_rad_s", np.float64),         # n: sun motion, CW, gravity gradient
-    ("heat_capacity_J_K", np.float64),         # m c_p
-    ("earth_view_factor", np.float64),         # F
-    ("clamp_view_factor", np.uint8),           # F_E = F max(0, c_E) (1) or F c_E (0)
-    ("sigma_eps_A_W_K4", np.float64),          # sigma eps A
-    ("solar_W", np.float64),                   # alpha A S
-    ("albedo_W", np.float64),                  # alpha A S A_f
-    ("earth_T4_K4", np.float64),               # T_E^4
-    ("panel_peak_W", np.float64),              # P_I I_d A_p
-    ("load_W", np.float64),                    # P_out
-    ("wheel_accel_max_rad_s2", np.float64),    # actuator saturation of u
-    ("sun_cos_beta", np.float64),              # the sun's beta angle (`dynamics.environment.sun_hill`)
-    ("sun_sin_beta", np.float64),
-    ("shadow_sx", np.float64),                 # r_S . x_Hill below it: the Earth's shadow (-inf: no eclipse)
-    ("eclipse_half_arc_rad", np.float64),      # half the theta_S arc in the shadow (0: none)
-    ("eclipse_ramp_W", np.float64),            # the battery floor's rise over the sunlit arc (`battery`)
-    ("face_normal", np.float64, (3,)),         # the thermal node's face, outward normal, body axes
-    ("panel_normal", np.float64, (3,)),        # the solar panel's normal, body axes
-    ("face_axis", np.int64),                   # `signed_axis` of face_normal: i if it is +-e_i, else -1
-    ("panel_axis", np.int64),                  # the same of panel_normal
-    ("delay_substeps", np.int64),              # substeps of a sample the previous command still holds
-    ("inertia_matrix", np.float64, (3, 3)),    # J, body axes (diag(inertia_kgm2) where principal)
-    ("inertia_inverse", np.float64, (3, 3)),   # J^-1
-    ("control_matrix", np.float64, (3, 3)),    # G = d omega_dot / d u = s D J^-1 A
-    ("wheel_axes", np.float64, (3, 3)),        # A: wheel i's spin axis in body axes is column i
-    ("wheel_axes_inverse", np.float64, (3, 3)),  # A^-1
-    ("diagonal", np.uint8),                    # 1: principal axes, wheel i on body axis i (the per-axis arithmetic)
-    ("wheels_on_axes", np.uint8),              # 1: wheel i on body axis i (A = I; torques convert per axis)
-    ("wheel_failed", np.uint8, (3,)),          # 1: the wheel's drive gives no torque (its acceleration held at 0)
-])  # fmt: skip
+
+def plant_dtype(n_wheels: int) -> np.dtype:
+    """The PLANT_DTYPE of an array of n_wheels wheels (its wheel fields sized N; compiled code is specialised per
+    dtype, so the three-wheel kernels are the paper's as they were)."""
+    return np.dtype([
+        ("inertia_kgm2", np.float64, (3,)),        # J1 J2 J3
+        ("wheel_inertia_kgm2", np.float64),        # D
+        ("torque_sign", np.float64),               # s: the wheels' body torque is s D u, their momentum -s D psi
+        ("control_gain", np.float64, (3,)),        # d omega_dot / d u = D / J_i
+        ("wheel_gyroscopic", np.uint8),            # 1: gyrostat term -omega x (-D psi); 0: the paper's model
+        ("frame_rate_rad_s", np.float64),          # n_f, rate of the Hill frame in the kinematics (0: inertial)
+        ("gravity_gradient", np.uint8),            # 1: tau_gg = 3 n^2 r x J r
+        ("mean_motion_rad_s", np.float64),         # n: sun motion, CW, gravity gradient
+        ("heat_capacity_J_K", np.float64),         # m c_p
+        ("earth_view_factor", np.float64),         # F
+        ("clamp_view_factor", np.uint8),           # F_E = F max(0, c_E) (1) or F c_E (0)
+        ("sigma_eps_A_W_K4", np.float64),          # sigma eps A
+        ("solar_W", np.float64),                   # alpha A S
+        ("albedo_W", np.float64),                  # alpha A S A_f
+        ("earth_T4_K4", np.float64),               # T_E^4
+        ("panel_peak_W", np.float64),              # P_I I_d A_p
+        ("load_W", np.float64),                    # P_out
+        ("wheel_accel_max_rad_s2", np.float64),    # actuator saturation of u
+        ("sun_cos_beta", np.float64),              # the sun's beta angle (`dynamics.environment.sun_hill`)
+        ("sun_sin_beta", np.float64),
+        ("shadow_sx", np.float64),                 # r_S . x_Hill below it: the Earth's shadow (-inf: no eclipse)
+        ("eclipse_half_arc_rad", np.float64),      # half the theta_S arc in the shadow (0: none)
+        ("eclipse_ramp_W", np.float64),            # the battery floor's rise over the sunlit arc (`battery`)
+        ("face_normal", np.float64, (3,)),         # the thermal node's face, outward normal, body axes
+        ("panel_normal", np.float64, (3,)),        # the solar panel's normal, body axes
+        ("face_axis", np.int64),                   # `signed_axis` of face_normal: i if it is +-e_i, else -1
+        ("panel_axis", np.int64),                  # the same of panel_normal
+        ("delay_substeps", np.int64),              # substeps of a sample the previous command still holds
+        ("inertia_matrix", np.float64, (3, 3)),    # J, body axes (diag(inertia_kgm2) where principal)
+        ("inertia_inverse", np.float64, (3, 3)),   # J^-1
+        ("control_matrix", np.float64, (3, n_wheels)),  # G = d omega_dot / d u = s D J^-1 A
+        ("wheel_axes", np.float64, (3, n_wheels)),  # A: wheel i's spin axis in body axes is column i
+        ("wheel_axes_inverse", np.float64, (n_wheels, 3)),  # A^-1, the right inverse of more than three
+        ("diagonal", np.uint8),                    # 1: principal axes, wheel i on body axis i (the per-axis arithmetic)
+        ("wheels_on_axes", np.uint8),              # 1: wheel i on body axis i (A = I; torques convert per axis)
+        ("wheel_failed", np.uint8, (n_wheels,)),   # 1: the wheel's drive gives no torque (its acceleration held at 0)
+    ])  # fmt: skip
+
+
+PLANT_DTYPE = plant_dtype(3)
 """The plant's parameters, in model units, as the compiled code reads them."""
 
 
@@ -101,7 +108,7 @@ def plant_record(cfg: Config, model: str | None = None) -> NDArray[np.void]:
             where set). The filter's model of the plant is `plant_record(cfg, cfg.filter.model)`.
     """
     sc, th, env, pw = cfg.spacecraft, cfg.thermal, cfg.environment, cfg.power
-    rec = np.zeros(1, PLANT_DTYPE)
+    rec = np.zeros(1, PLANT_DTYPE if sc.n_wheels == 3 else plant_dtype(sc.n_wheels))
     p = rec[0]
     true_J = cfg.plant.inertia_kgm2 if model is None else None  # the simulated vehicle's, where it differs
     p["inertia_kgm2"] = sc.inertia_kgm2 if true_J is None else true_J
@@ -269,7 +276,10 @@ def _general_accels(wd: Array, u: Array, p: np.void, f: Array) -> None:
 def _general_accel(wd: Array, u: Array, p: np.void, a: int) -> float:
     """`control_accel` in general (out of line: the per-axis path stays small where it is inlined)."""
     G = p.control_matrix
-    return wd[a] + (G[a, 0] * u[0] + G[a, 1] * u[1] + G[a, 2] * u[2])
+    v = G[a, 0] * u[0] + G[a, 1] * u[1] + G[a, 2] * u[2]
+    for i in range(3, G.shape[1]):  # wheels past the third
+        v += G[a, i] * u[i]
+    return wd[a] + v
 
 
 @numba.njit(**LEAF, inline="always")
@@ -293,7 +303,10 @@ def wheel_vector(p: np.void, x: Array, a: int) -> float:
     """(A psi)_a of the state x (19,), rad/s: the wheels' speeds summed along body axis a (their momentum on it is
     -s D (A psi)_a); psi_a where wheel a is on body axis a."""
     A = p.wheel_axes
-    return A[a, 0] * x[7] + A[a, 1] * x[8] + A[a, 2] * x[9]
+    v = A[a, 0] * x[7] + A[a, 1] * x[8] + A[a, 2] * x[9]
+    for i in range(3, A.shape[1]):  # wheels past the third, after z_dot (`state.wheel_column`)
+        v += A[a, i] * x[16 + i]
+    return v
 
 
 @numba.njit(**LEAF, inline="always")
@@ -409,6 +422,8 @@ def derivative(x: Array, u: Array, p: np.void, A: Array, wd: Array, f: Array) ->
     f[7] = 0.0 + u[0]
     f[8] = 0.0 + u[1]
     f[9] = 0.0 + u[2]
+    for i in range(3, p.wheel_failed.shape[0]):  # wheels past the third, after z_dot (`state.wheel_column`)
+        f[16 + i] = 0.0 + u[i]
     lit = sunlit(sx, p.shadow_sx)
     f[10] = thermal_rate(cos_sun, cos_earth, x[10], lit, p)
     f[11] = net_power(c_panel, lit, p)
@@ -424,7 +439,7 @@ def saturate(u: Array, p: np.void, out: Array) -> None:
     """The actuator: each wheel acceleration clipped to +-wheel_accel_max (NaN passes as in numpy.clip); a failed
     wheel's (`spacecraft.failed_wheels`) held at 0."""
     lim = p.wheel_accel_max_rad_s2
-    for a in range(3):
+    for a in range(p.wheel_failed.shape[0]):
         v = u[a]
         out[a] = 0.0 if p.wheel_failed[a] else (-lim if v < -lim else (lim if v > lim else v))
 
@@ -433,9 +448,15 @@ RK4_WORK_ROWS = 8
 """Rows of `rk4_hold`'s scratch (RK4_WORK_ROWS, 19): x, k1..k4, the stage state, A(q) (9), omega drift (3)."""
 
 
-def rk4_work() -> Array:
-    """A scratch array for `rk4_hold` (one per caller; its contents do not carry over between calls)."""
-    return np.zeros((RK4_WORK_ROWS, STATE_SIZE))
+def rk4_work(n_state: int = STATE_SIZE) -> Array:
+    """A scratch array for `rk4_hold` of states of n_state entries (one per caller; its contents do not carry over
+    between calls)."""
+    return np.zeros((RK4_WORK_ROWS, n_state))
+
+
+def record_wheels(p: NDArray[np.void]) -> int:
+    """N, the wheels of a PLANT_DTYPE record (`plant_dtype`)."""
+    return int(p.dtype["wheel_failed"].shape[0])
 
 
 @numba.njit(**LEAF)
@@ -513,18 +534,21 @@ def torque_to_wheel_accel(tau_Nm: float, D_kgm2: float) -> float:
 
 @numba.njit(**LEAF)
 def _general_to_wheels(tau0: float, tau1: float, tau2: float, p: np.void, out: Array) -> None:
-    """out := A^-1 tau / D (3,): the wheel accelerations whose torque D A u is tau."""
+    """out := A^-1 tau / D (N,): the wheel accelerations whose torque D A u is tau (the smallest with N > 3)."""
     Ai, D = p.wheel_axes_inverse, p.wheel_inertia_kgm2
-    for a in range(3):
+    for a in range(Ai.shape[0]):
         out[a] = torque_to_wheel_accel(Ai[a, 0] * tau0 + Ai[a, 1] * tau1 + Ai[a, 2] * tau2, D)
 
 
 @numba.njit(**LEAF)
 def _general_to_torque(u: Array, p: np.void, out: Array) -> None:
-    """out := D A u (3,): the body torque of wheel accelerations u."""
+    """out := D A u (3,): the body torque of wheel accelerations u (N,)."""
     A, D = p.wheel_axes, p.wheel_inertia_kgm2
     for a in range(3):
-        out[a] = wheel_accel_to_torque(A[a, 0] * u[0] + A[a, 1] * u[1] + A[a, 2] * u[2], D)
+        v = A[a, 0] * u[0] + A[a, 1] * u[1] + A[a, 2] * u[2]
+        for i in range(3, A.shape[1]):
+            v += A[a, i] * u[i]
+        out[a] = wheel_accel_to_torque(v, D)
 
 
 @numba.njit(**LEAF, inline="always")
@@ -577,10 +601,11 @@ def _convert(v: Array, p: NDArray[np.void], per_axis: Any, kernel: Any) -> Array
     v = np.asarray(v, dtype=float)
     if p[0]["wheels_on_axes"]:
         return per_axis(v, float(p[0]["wheel_inertia_kgm2"]))
-    V = np.ascontiguousarray(v.reshape(-1, 3))
-    out = np.empty_like(V)
+    n_in, n_out = (record_wheels(p), 3) if kernel is _to_torque_all else (3, record_wheels(p))
+    V = np.ascontiguousarray(v.reshape(-1, n_in))
+    out = np.empty((V.shape[0], n_out))
     kernel(V, p, out)
-    return out.reshape(v.shape)
+    return out.reshape((*v.shape[:-1], n_out))
 
 
 @numba.njit(**LEAF)
@@ -632,30 +657,35 @@ def saturated(u: Array, p: NDArray[np.void]) -> Array:
     """What the actuator holds of wheel accelerations u (..., 3), rad/s^2: `saturate` for Python callers
     (the plant node, `simulate`'s record, the analysis of a bag, the Basilisk plant), a new array."""
     u = np.asarray(u, dtype=float)
-    U = np.ascontiguousarray(u.reshape(-1, 3))
+    U = np.ascontiguousarray(u.reshape(-1, record_wheels(p)))
     out = np.empty_like(U)
     _saturate_all(U, p, out)
     return out.reshape(u.shape)
 
 
 def omega_dot(x: Array, u: Array, p: NDArray[np.void]) -> Array:
-    """Body angular accelerations (..., 3), rad/s^2, of states x (..., 19) under wheel accelerations u."""
-    x = np.asarray(x, dtype=float)
-    X = np.ascontiguousarray(x.reshape(-1, STATE_SIZE))
-    U = np.ascontiguousarray(np.broadcast_to(np.asarray(u, dtype=float), (*x.shape[:-1], 3)).reshape(-1, 3))
+    """Body angular accelerations (..., 3), rad/s^2, of states x (..., 16 + N) under wheel accelerations u (..., N)."""
+    X, U = _batch(x, u, p)
     W = np.empty((X.shape[0], 3))
-    _omega_dots(X, U, p, W, rk4_work())
+    _omega_dots(X, U, p, W, rk4_work(X.shape[1]))
     return W.reshape((*x.shape[:-1], 3))
 
 
 def state_derivative(x: Array, u: Array, p: NDArray[np.void]) -> Array:
-    """x_dot (..., 19) of states x (..., 19) with wheel accelerations u (..., 3) held (no saturation)."""
-    x = np.asarray(x, dtype=float)
-    X = np.ascontiguousarray(x.reshape(-1, STATE_SIZE))
-    U = np.ascontiguousarray(np.broadcast_to(np.asarray(u, dtype=float), (*x.shape[:-1], 3)).reshape(-1, 3))
+    """x_dot (..., 16 + N) of states x (..., 16 + N) with wheel accelerations u (..., N) held (no saturation)."""
+    X, U = _batch(x, u, p)
     F = np.empty_like(X)
-    _derivatives(X, U, p, F, rk4_work())
-    return F.reshape(x.shape)
+    _derivatives(X, U, p, F, rk4_work(X.shape[1]))
+    return F.reshape(np.shape(x))
+
+
+def _batch(x: Array, u: Array, p: NDArray[np.void]) -> tuple[Array, Array]:
+    """States (k, 16 + N) and wheel accelerations (k, N) of x (..., 16 + N) and u (..., N) (broadcast)."""
+    n = record_wheels(p)
+    x = np.asarray(x, dtype=float)
+    X = np.ascontiguousarray(x.reshape(-1, state_size(n)))
+    U = np.ascontiguousarray(np.broadcast_to(np.asarray(u, dtype=float), (*x.shape[:-1], n)).reshape(-1, n))
+    return X, U
 
 
 def integrate(x: Array, u: Array, dt_s: float, p: NDArray[np.void], substeps: int,
@@ -663,8 +693,8 @@ def integrate(x: Array, u: Array, dt_s: float, p: NDArray[np.void], substeps: in
     """Saturate u and hold it over dt_s from one state (Python face of `saturate` + `rk4_delayed`).
 
     Args:
-        x: state (19,).
-        u: wheel accelerations (3,), rad/s^2 (saturated here at the actuator limit).
+        x: state (16 + N,; 19 with three wheels).
+        u: wheel accelerations (N,), rad/s^2 (saturated here at the actuator limit).
         dt_s: hold time, s.
         p: the PLANT_DTYPE record array (1,) of `plant_record`.
         substeps: RK4 substeps.
@@ -675,13 +705,17 @@ def integrate(x: Array, u: Array, dt_s: float, p: NDArray[np.void], substeps: in
         (x at t + dt (19,), the substep states (substeps, 19)).
     """
     x = np.ascontiguousarray(x, dtype=float)
-    if x.shape != (STATE_SIZE,):
-        raise ValueError(f"integrate takes one state ({STATE_SIZE},), got {x.shape}")
-    us = np.empty(3)
-    out = np.empty((substeps, STATE_SIZE))
-    prev = np.zeros(3) if u_prev is None else np.ascontiguousarray(u_prev, dtype=float)
+    n = record_wheels(p)
+    if x.shape != (state_size(n),):
+        raise ValueError(f"integrate takes one state ({state_size(n)},), got {x.shape}")
+    u = np.ascontiguousarray(u, dtype=float)
+    if u.shape != (n,):
+        raise ValueError(f"integrate takes {n} wheel accelerations, got {u.shape}")
+    us = np.empty(n)
+    out = np.empty((substeps, x.shape[0]))
+    prev = np.zeros(n) if u_prev is None else np.ascontiguousarray(u_prev, dtype=float)
     # record arrays, not record scalars, cross into compiled code (numba types a scalar at every call)
-    _integrate(x, np.ascontiguousarray(u, dtype=float), prev, float(dt_s), substeps, p, us, out, rk4_work())
+    _integrate(x, u, prev, float(dt_s), substeps, p, us, out, rk4_work(x.shape[0]))
     return out[-1].copy(), out
 
 

@@ -15,6 +15,11 @@ theta_S and the 6 Clohessy-Wiltshire entries adds up to 19; see docs/decisions.m
 | x_dot y_dot z_dot  | deputy velocity relative to the chief (Hill)   | m/s       |
 
 Every function takes a batch `(..., 19)`; a single state is a batch of one.
+
+**Arrays of more than three wheels** (`spacecraft.wheel_spin_axes_body`) keep this layout and append the
+speeds of wheels 4..N after z_dot: the state has 16 + N entries, wheel i's speed is entry `wheel_column(i)`
+(7, 8, 9, then 19, 20, ...). Every entry of the three-wheel layout keeps its index, so the paper's state,
+its messages and its bags are one case of the general one.
 """
 
 from __future__ import annotations
@@ -55,6 +60,21 @@ VEL = slice(16, 19)
 CW = slice(13, 19)
 
 AXES: tuple[str, ...] = ("x", "y", "z")
+
+
+def state_size(n_wheels: int) -> int:
+    """Entries of the state of an array of n_wheels wheels: 16 + n_wheels (STATE_SIZE for three)."""
+    return STATE_SIZE + n_wheels - 3
+
+
+def wheel_column(i: int) -> int:
+    """The state entry of wheel i's speed: 7 + i for the first three, 16 + i after (appended after z_dot)."""
+    return PSI.start + i if i < 3 else STATE_SIZE + i - 3
+
+
+def wheel_columns(n_wheels: int) -> tuple[int, ...]:
+    """The state entries of the wheel speeds of an array of n_wheels, in wheel order (`wheel_column`)."""
+    return tuple(wheel_column(i) for i in range(n_wheels))
 
 
 def make_state(
@@ -99,5 +119,6 @@ def as_dict(x: NDArray[np.float64]) -> dict[str, float]:
 
 __all__ = [
     "AXES", "CONTROL_SIZE", "CW", "ENERGY", "OMEGA", "POS", "PSI", "Q", "STATE_NAMES",
-    "STATE_SIZE", "STATE_UNITS", "TEMP", "THETA_S", "VEL", "as_dict", "make_state",
+    "STATE_SIZE", "STATE_UNITS", "TEMP", "THETA_S", "VEL", "as_dict", "make_state", "state_size", "wheel_column",
+    "wheel_columns",
 ]  # fmt: skip

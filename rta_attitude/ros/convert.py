@@ -232,13 +232,13 @@ def odometry_msg(f: Array, t_ns: int) -> Odometry:
     return msg
 
 
-def wheels_msg(f: Array, t_ns: int, effort_Nm: Array) -> JointState:
-    """The reaction wheels as joints (`topics.WHEEL_JOINTS`): velocity = rotor speed [rad/s] (fields f),
-    effort = the motor torque on each rotor over the hold that ended at t [N m]; no position (the rotors'
-    angles are not modelled)."""
+def wheels_msg(f: Array, t_ns: int, effort_Nm: Array, names: Sequence[str] = topics.WHEEL_JOINTS) -> JointState:
+    """The reaction wheels as joints named as configured (`Spacecraft.wheel_names`; the paper's
+    `topics.WHEEL_JOINTS`): velocity = rotor speed [rad/s] (fields f), effort = the motor torque on each rotor over
+    the hold that ended at t [N m]; no position (the rotors' angles are not modelled)."""
     msg = JointState()
     _header(msg, t_ns, topics.BODY_FRAME)
-    msg.name = list(topics.WHEEL_JOINTS)
+    msg.name = list(names)
     msg.velocity = [float(c) for c in f[F_WHEEL:F_WHEEL + 3]]
     msg.effort = [float(c) for c in effort_Nm]
     return msg
@@ -275,15 +275,16 @@ def sun_vector_msg(f: Array, t_ns: int) -> Vector3Stamped:
     return vector_msg(f[F_SUN:F_SUN + 3], t_ns, topics.HILL_FRAME)
 
 
-def state_messages(f: Array, t_ns: int, voltage_V: float, current_A: float, effort_Nm: Array) -> dict[str, Any]:
+def state_messages(f: Array, t_ns: int, voltage_V: float, current_A: float, effort_Nm: Array,
+                   wheel_names: Sequence[str] = topics.WHEEL_JOINTS) -> dict[str, Any]:
     """The messages of `topics.STATE_INPUTS` that carry one state's fields f (`sensors.encode`), by topic."""
-    return {topics.ODOMETRY: odometry_msg(f, t_ns), topics.WHEELS: wheels_msg(f, t_ns, effort_Nm),
+    return {topics.ODOMETRY: odometry_msg(f, t_ns), topics.WHEELS: wheels_msg(f, t_ns, effort_Nm, wheel_names),
             topics.TEMPERATURE: temperature_msg(f, t_ns), topics.BATTERY: battery_msg(f, t_ns, voltage_V, current_A),
             topics.SUN_VECTOR: sun_vector_msg(f, t_ns)}
 
 
-def state_messages_cdr(f: Array, t_ns: int, voltage_V: float, current_A: float, effort_Nm: Array
-                       ) -> dict[str, bytes]:  # fmt: skip
+def state_messages_cdr(f: Array, t_ns: int, voltage_V: float, current_A: float, effort_Nm: Array,
+                       wheel_names: Sequence[str] = topics.WHEEL_JOINTS) -> dict[str, bytes]:  # fmt: skip
     """`state_messages` serialized (`CdrLayout`): the same bytes rclpy makes of those messages, by topic."""
     L = layouts()
     status = (BatteryState.POWER_SUPPLY_STATUS_CHARGING if current_A > 0
@@ -291,7 +292,8 @@ def state_messages_cdr(f: Array, t_ns: int, voltage_V: float, current_A: float, 
     fl = f.tolist()
     return {topics.ODOMETRY: L.odometry.pack(t_ns, fl[F_Q:F_Q + 4], fl[F_POS:F_POS + 3],
                                              fl[F_VEL_BODY:F_VEL_BODY + 3], fl[F_OMEGA:F_OMEGA + 3]),
-            topics.WHEELS: L.wheels.pack(t_ns, fl[F_WHEEL:F_WHEEL + 3], [float(c) for c in effort_Nm]),
+            topics.WHEELS: L.wheels_named(wheel_names).pack(t_ns, fl[F_WHEEL:F_WHEEL + 3],
+                                                            [float(c) for c in effort_Nm]),
             topics.TEMPERATURE: L.temperature.pack(t_ns, (fl[F_TEMP_C],)),
             topics.BATTERY: L.battery.pack(t_ns, (float(voltage_V),), (float(current_A), fl[F_CHARGE_AH]), (status,)),
             topics.SUN_VECTOR: L.sun.pack(t_ns, fl[F_SUN:F_SUN + 3])}
@@ -363,20 +365,20 @@ _VIEWS: tuple[tuple[str, str, str, str, slice, Callable[[Any], Any], Callable[[A
 where in the fields, the value from the layout's slots, the value from a message)."""
 
 
-def state_fields(msgs: Mapping[str, Any]) -> Array:
+def state_fields(msgs: Mapping[str, Any], wheel_names: Sequence[str] = topics.WHEEL_JOINTS) -> Array:
     """The message fields (FIELD_SIZE,) of one state from its `topics.STATE_INPUTS` messages (by topic),
-    for `sensors.decode`. MessageError (one line) if a frame, a joint name or a size is wrong, or a value
-    is not finite."""
+    for `sensors.decode`; the wheels' joints are wheel_names, in order. MessageError (one line) if a frame, a joint
+    name or a size is wrong, or a value is not finite."""
     f = np.empty(FIELD_SIZE)
     odometry_fields(msgs[topics.ODOMETRY], f)
     L = layouts()
-    got, wheels = _read(L.wheels, msgs[topics.WHEELS])
+    got, wheels = _read(L.wheels_named(wheel_names), msgs[topics.WHEELS])
     if got is not None:
         f[F_WHEEL:F_WHEEL + 3] = got[1][0]
     else:
         _frame(wheels, "wheels", topics.BODY_FRAME)
-        if list(wheels.name) != list(topics.WHEEL_JOINTS) or len(wheels.velocity) != 3:
-            raise MessageError(f"wheels must be joints {topics.WHEEL_JOINTS} with a velocity each, got "
+        if list(wheels.name) != list(wheel_names) or len(wheels.velocity) != 3:
+            raise MessageError(f"wheels must be joints {tuple(wheel_names)} with a velocity each, got "
                                f"{tuple(wheels.name)} with {len(wheels.velocity)} velocities")
         f[F_WHEEL:F_WHEEL + 3] = wheels.velocity
     for topic, layout, what, frame, at, from_bytes, from_msg in _VIEWS:
@@ -596,6 +598,7 @@ class Layouts:
 
     def __init__(self) -> None:
         f, zero = np.zeros(FIELD_SIZE), np.zeros(3)
+        self._wheels: dict[tuple[str, ...], CdrLayout] = {}
         self.clock = CdrLayout(lambda: clock_msg(0), {})
         self.state = CdrLayout(lambda: state_msg(np.zeros(STATE_SIZE), 0),
                                {"position": (f"{STATE_SIZE}d", _seq("position"))})
@@ -606,8 +609,7 @@ class Layouts:
             "position": ("3d", _set("pose.pose.position", "x y z")),
             "linear": ("3d", _set("twist.twist.linear", "x y z")),
             "angular": ("3d", _set("twist.twist.angular", "x y z"))})
-        self.wheels = CdrLayout(lambda: wheels_msg(f, 0, zero),
-                                {"velocity": ("3d", _seq("velocity")), "effort": ("3d", _seq("effort"))})
+        self.wheels = self.wheels_named(topics.WHEEL_JOINTS)
         self.temperature = CdrLayout(lambda: temperature_msg(f, 0), {"temperature": ("d", _set("", "temperature"))})
 
         def status(msg: Any, vals: Sequence[Any]) -> None:
@@ -622,7 +624,16 @@ class Layouts:
                          topics.TEMPERATURE: self.temperature, topics.BATTERY: self.battery,
                          topics.SUN_VECTOR: self.sun, topics.STATE: self.state, topics.TORQUE_DES: self.torque,
                          topics.TORQUE_CMD: self.torque, topics.TORQUE_APPLIED: self.torque, topics.CLOCK: self.clock}
-        """The layout of each of the loop's fixed-layout topics."""
+        """The layout of each of the loop's fixed-layout topics (joint_states: the paper's wheel names)."""
+
+    def wheels_named(self, names: Sequence[str]) -> CdrLayout:
+        """The joint_states layout of wheels with these names (`Spacecraft.wheel_names`), made at first use."""
+        key = tuple(names)
+        if key not in self._wheels:
+            f, zero = np.zeros(FIELD_SIZE), np.zeros(3)
+            self._wheels[key] = CdrLayout(lambda: wheels_msg(f, 0, zero, key), {
+                "velocity": ("3d", _seq("velocity")), "effort": ("3d", _seq("effort"))})
+        return self._wheels[key]
 
 
 _LAYOUTS: list[Layouts] = []

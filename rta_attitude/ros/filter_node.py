@@ -20,7 +20,7 @@ per episode, faults.FaultLog):
   (use_sim_time) is stale and dropped. The plant then misses that command and applies its own
   deadline fallback;
 - a state whose values are unusable (a value not finite, a frame other than hill / body as its topic
-  says, wheel joints other than `topics.WHEEL_JOINTS`, quaternion norm off by more than
+  says, wheel joints other than the configured wheels (`Spacecraft.wheel_names`), quaternion norm off by more than
   `quaternion_tolerance`) is filtered as an invalid state: the core answers with its counted
   `invalid_state` fallback, u = 0. A quaternion off by less is renormalised (and counted);
 - a torque_des that is not finite or not in the body frame is filtered as non-finite u_des (the
@@ -147,7 +147,8 @@ class FilterNode(RtaNode):
         if not self.admit_state_stamp(t_ns, self.state_order):
             return
         try:
-            x = self.unit_state(state_from_fields(convert.state_fields(msgs), self.interface), t_ns)
+            fields = convert.state_fields(msgs, self.cfg.spacecraft.wheel_names)
+            x = self.unit_state(state_from_fields(fields, self.interface), t_ns)
         except MessageError as exc:
             self.faults.fault("state_rejected", f"{exc}; answered as an invalid state (u = 0)")
             x = np.full(STATE_SIZE, np.nan)  # the core's invalid-state fallback answers it

@@ -179,6 +179,7 @@ def load(node: Node, role: str,
     flat = dict(flatten(file_params))
     flat.update(overrides)
     cfg = config.from_parameters(nest(flat), source=str(path))  # an unknown key or a bad value fails here
+    cfg.spacecraft.require_three_wheels(f"the {role} node")  # its messages carry three wheels
     sections = topics.config_sections(role, cfg.scenario(values["scenario"]).name)  # '-' or '_' as the loader reads it
     shown = [n for n in flat if _in_sections(n, sections)]
     for name in shown:

@@ -227,7 +227,8 @@ class PlantNode(RtaNode):
         fields = message_fields(x, self.instruments.record)
         V = self.cfg.power.bus_voltage_V
         current_A = float(spacecraft.state_derivative(x, np.zeros(3), self.plant)[ENERGY]) / V
-        inputs = convert.state_messages_cdr(fields, t_ns, V, current_A, self.wheel_effort_Nm)
+        inputs = convert.state_messages_cdr(fields, t_ns, V, current_A, self.wheel_effort_Nm,
+                                           self.cfg.spacecraft.wheel_names)
         self._publish(topics.CLOCK, convert.clock_cdr(t_ns))
         self._sent_s = self.wall_now_s()
         self._progress_s = self._sent_s

@@ -233,9 +233,8 @@ def oracle_cones(cfg: Config) -> tuple[OracleCone, ...]:
 
 
 def from_config(cfg: Config) -> OracleModel:
-    """The oracle's parameters of a configuration (plant constants formed as the plant forms them).
-
-    """
+    """The oracle's parameters of a configuration (plant constants formed as the plant forms them)."""
+    cfg.spacecraft.require_three_wheels("the viability oracle")
     p = plant_record(cfg)[0]
     L = cfg.limits
     return OracleModel(
