@@ -151,8 +151,10 @@ class Spacecraft:
     """The simulated plant (PLANT_MODELS): `gyrostat` (the wheels' gyroscopic torque included) or `paper`
     (dropped). The filter's own model is `filter.model`."""
     inertia_uncertainty: float = 0.0
-    """How far each principal moment of the vehicle may be from inertia_kgm2, a fraction (0.01: +-1 %): the
-    robust preset's rows stay safe for any inertia within it (docs/conventions.md, "Inertia")."""
+    """How far the vehicle's inertia may be from the configured, a fraction (0.01: +-1 %): on principal axes each
+    principal moment; with products of inertia the tensor in every direction (-delta J <= J' - J <= delta J, its
+    axes uncertain too). The robust preset's rows stay safe for any inertia within it (docs/conventions.md,
+    "Inertia")."""
     transport_delay_s: float = 0.0
     """From a command to the wheels (the flight computer's compute and bus), s: the wheels hold sample k's
     command over [t_k + delay, t_k+1 + delay), the previous command before. Part of the plant and of the
@@ -186,9 +188,6 @@ class Spacecraft:
         if self.torque_sign not in (1.0, -1.0):
             raise ConfigError(f"spacecraft.torque_sign must be 1.0 or -1.0, got {self.torque_sign!r}")
         check_inertia(self.inertia_matrix, "spacecraft.inertia_kgm2 with spacecraft.products_of_inertia_kgm2")
-        if not self.principal and self.inertia_uncertainty > 0.0:
-            raise ConfigError("spacecraft.inertia_uncertainty is for principal moments: set it to 0 with "
-                              "spacecraft.products_of_inertia_kgm2 (docs/conventions.md, \"Inertia\")")
         n = len(self.wheel_axes_body)
         if n < 3:
             raise ConfigError(f"spacecraft.wheel_spin_axes_body must give at least 3 wheels, got {n}")
@@ -213,9 +212,6 @@ class Spacecraft:
                                   f"{', '.join(self.wheel_names)}")
         if len(set(self.failed_wheels)) != len(self.failed_wheels):
             raise ConfigError(f"spacecraft.failed_wheels names a wheel twice: {list(self.failed_wheels)!r}")
-        if not self.wheels_on_body_axes and self.inertia_uncertainty > 0.0:
-            raise ConfigError("spacecraft.inertia_uncertainty is for wheels on the body axes: set it to 0 with "
-                              "spacecraft.wheel_spin_axes_body (docs/conventions.md, \"Inertia\")")
 
     def require_three_wheels(self, what: str) -> None:
         """Raise ConfigError (one line naming `what`) for an array of more than three wheels: the plant model and

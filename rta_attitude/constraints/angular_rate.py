@@ -187,7 +187,8 @@ def _general_zoh_rows(ctx: np.void, x: NDArray[np.float64], c: np.void, p: np.vo
     k = 3.0 * p.mean_motion_rad_s * p.mean_motion_rad_s if p.gravity_gradient else 0.0
     w_rel = math.sqrt(W[0] * W[0] + W[1] * W[1] + W[2] * W[2]) + abs(p.frame_rate_rad_s)
     out = ctx.zoh_next  # scratch (no allocation; `_hold_series` reuses it after)
-    general_rate_bounds(J, Ji, G, D, W[0], W[1], W[2], P[0], P[1], P[2], U, Ub, c.accel_limit_rad_s2, k, w_rel, out)
+    general_rate_bounds(J, Ji, G, D, W[0], W[1], W[2], P[0], P[1], P[2], U, Ub, c.accel_limit_rad_s2, k, w_rel, 0.0,
+                        out)
     Bs = (out[1, 0], out[1, 1], out[1, 2])
     Ls = (out[2, 0], out[2, 1], out[2, 2])
     energy = 0.0
@@ -200,7 +201,7 @@ def _general_zoh_rows(ctx: np.void, x: NDArray[np.float64], c: np.void, p: np.vo
 @numba.njit(**LEAF)
 def general_rate_bounds(J: NDArray[np.float64], Ji: NDArray[np.float64], G: NDArray[np.float64], D: float, W0: float,
                         W1: float, W2: float, P0: float, P1: float, P2: float, U: NDArray[np.float64],
-                        Ub: NDArray[np.float64], cap: NDArray[np.float64], k: float, w_rel: float,
+                        Ub: NDArray[np.float64], cap: NDArray[np.float64], k: float, w_rel: float, dJ: float,
                         out: NDArray[np.float64]) -> None:
     """In general (products of inertia, wheels off the body axes), bounds per axis over a hold with u held in the
     box U, for |w_a| <= W_a and the wheels' speeds along the body axes |psi_b,a| <= P_a, |psi_b,a'| <= Ub_a
@@ -213,15 +214,20 @@ def general_rate_bounds(J: NDArray[np.float64], Ji: NDArray[np.float64], G: NDAr
     cap_i: the QP's angular-acceleration row |(G u)_i| <= b_i (`filter.qp.assemble`), which every command these
     bounds serve keeps. E_j, E'_j: `config.inertia.euler_bound`, `euler_rate_bound`; the gravity gradient
     k r x J r with |r_k| <= 1 (E1: the Euler bound at unit rates), its rate 2 w_rel E1 (w_rel: the body's rate
-    to the Hill frame). The
-    per-state bounds of `zoh_rows` and the worst case of `margins.axis_rate_bounds` (k = 0, every W and P at
-    the limits) both take them from here."""
+    to the Hill frame). dJ > 0: for every inertia J + dJ with |dJ| <= dJ (its Euler and gravity-gradient torques
+    grow by at most dJ |w|^2 and k dJ, their rates by 2 dJ |w| |w_dot| and 2 k w_rel dJ; Ji and G are then bounds on
+    every such vehicle's |J^-1| and |G|, `margins.axis_rate_bounds`). The
+    per-state bounds of `zoh_rows` (dJ = 0) and the worst case of `margins.axis_rate_bounds` (k = 0, every W and P
+    at the limits) both take them from here."""
     W = (W0, W1, W2)
     P = (P0, P1, P2)
+    w2 = W0 * W0 + W1 * W1 + W2 * W2
     for j in range(3):  # the torques' bounds, body axes, N m (out[2] as scratch)
         b, d = (j + 1) % 3, (j + 2) % 3
         out[2, j] = (euler_bound(J, W0, W1, W2, j) + D * (W[b] * P[d] + W[d] * P[b])
                      + k * euler_bound(J, 1.0, 1.0, 1.0, j))
+        if dJ > 0.0:
+            out[2, j] += dJ * (w2 + k)
     for i in range(3):
         a_i = 0.0
         g_i = 0.0
@@ -233,6 +239,8 @@ def general_rate_bounds(J: NDArray[np.float64], Ji: NDArray[np.float64], G: NDAr
     for j in range(3):  # the torques' rates: with the wheel term (out[1]) and without its frozen part (out[2])
         b, d = (j + 1) % 3, (j + 2) % 3
         eul = euler_rate_bound(J, W0, W1, W2, A[0], A[1], A[2], j) + 2.0 * k * w_rel * euler_bound(J, 1.0, 1.0, 1.0, j)
+        if dJ > 0.0:
+            eul += 2.0 * dJ * (math.sqrt(w2 * (A[0] * A[0] + A[1] * A[1] + A[2] * A[2])) + k * w_rel)
         out[1, j] = eul + D * (A[b] * P[d] + W[b] * Ub[d] + A[d] * P[b] + W[d] * Ub[b])
         out[2, j] = eul + D * (W[b] * Ub[d] + W[d] * Ub[b])
     rb = (out[1, 0], out[1, 1], out[1, 2])

@@ -37,7 +37,7 @@ from numpy.typing import NDArray
 from rta_attitude.config.schema import FIXED_NAMES, MAX_POINTING, MAX_WINDOWS, Config
 from rta_attitude.dynamics.environment import target_kind
 from rta_attitude.dynamics.sensors import interface_energy_error
-from rta_attitude.dynamics.spacecraft import plant_record
+from rta_attitude.dynamics.spacecraft import control_error, plant_record
 from rta_attitude.jit import LEAF
 
 Array = NDArray[np.float64]
@@ -108,6 +108,13 @@ CONSTRAINT_DTYPE = np.dtype([
     # the vehicle's inertia within +-delta of the model's (robust preset; 0 otherwise, `inertia_errors`)
     ("inertia_error_gain", np.float64),    # delta / (1 - delta)
     ("inertia_accel_rad_s2", np.float64, (3,)),  # its bound on |omega_dot(true) - omega_dot(model)|, any state
+    ("inertia_principal", np.uint8),       # 1: principal axes, each moment within +-delta (the per-axis bound)
+    ("inertia_root", np.float64, (3, 3)),  # in general: R = L^T, J = L L^T (|R v|^2 = v^T J v)
+    ("inertia_scale", np.float64, (3,)),   # sqrt((J^-1)_aa)
+    ("inertia_spread", np.float64),        # sqrt(lambda_max / lambda_min) of J
+    ("inertia_gg", np.float64),            # 3 n^2 lambda_max / sqrt(lambda_min) with the gravity gradient, else 0
+    ("control_root", np.float64, (3,)),    # |R G_j|: wheel j's acceleration's size in J's norm
+    ("control_inverse", np.float64, (3, 3)),  # G^-1: a row's gain on omega_dot from its gain on u
     ("accel_limit_rad_s2", np.float64, (3,)),  # b: |(G u)_i| <= b_i (`Config.accel_limit_rad_s2`)
     ("accel_rows", np.uint8),              # 1: the QP keeps those three rows (G not diagonal); 0: the box is U
 ])  # fmt: skip
@@ -187,6 +194,8 @@ def constraint_record(cfg: Config) -> NDArray[np.void]:
         delta = cfg.spacecraft.inertia_uncertainty
         c["inertia_error_gain"] = delta / (1.0 - delta)
         c["inertia_accel_rad_s2"] = inertia_accel_bound(cfg, cfg.filter.model)
+        for key, value in inertia_shape(cfg).items():
+            c[key] = value
     if robust:  # the battery's reading crosses the interface as a float32 (`dynamics.sensors.encode`)
         c["err_E_J"] += interface_energy_error(cfg)
     return rec
@@ -292,22 +301,69 @@ def predicted_errors(cfg: Config, e: dict[str, Any]) -> dict[str, float]:
 @numba.njit(**LEAF)
 def inertia_error(c: np.void, p: np.void, w: Array, drift: Array, a: int) -> float:
     """Bound on |omega_dot_a(true) - omega_dot_a(model)| (rad/s^2) at body rate w (3,) and the model's
-    omega_dot at u = 0, drift (3,), for any vehicle whose principal moments are within +-delta of the model's
-    J (k = c.inertia_error_gain = delta / (1 - delta); 0: none). With J' = J + dJ, |dJ_i| <= delta J_i, the
-    truth's J' omega_dot' = N - omega x (dJ omega) (+ the gravity gradient's dJ part), N the model's right-hand
-    side (J omega_dot = N), so
+    omega_dot at u = 0, drift (3,), for any vehicle whose inertia is within +-delta of the model's J
+    (k = c.inertia_error_gain = delta / (1 - delta); 0: none). The truth's J' omega_dot' = N - omega x (dJ omega)
+    (+ the gravity gradient's dJ part), N the model's right-hand side (J omega_dot = N), J' = J + dJ.
+
+    On principal axes (each principal moment within +-delta: |dJ_i| <= delta J_i, dJ diagonal)
 
         |omega_dot'_a - omega_dot_a| <= |N_a| |1/J'_a - 1/J_a| + |(omega x dJ omega)_a| / J'_a
                                      <= k (|omega_dot_a| + |w_b w_c| (J_b + J_c) / J_a + 3 n^2 (J_b + J_c) / (2 J_a))
 
-    with |omega_dot_a| <= |drift_a| + |G_a| U_a (any u in the box) and the gravity gradient's term only where it
-    is modelled (|r_b r_c| <= 1/2). docs/conventions.md, "Inertia"."""
+    with |omega_dot_a| <= |drift_a| + sum_j |G_aj| U_j (any u in the box) and the gravity gradient's term only
+    where it is modelled (|r_b r_c| <= 1/2). With products of inertia, `_general_inertia_error`. docs/conventions.md,
+    "Inertia"."""
     k = c.inertia_error_gain
     if k == 0.0:
         return 0.0
+    if not c.inertia_principal:
+        return _general_inertia_error(c, w, drift, a)
     b, d = (a + 1) % 3, (a + 2) % 3
-    return inertia_error_bound(k, abs(drift[a]) + abs(p.control_gain[a]) * c.u_max_rad_s2[a], abs(w[b] * w[d]),
+    return inertia_error_bound(k, abs(drift[a]) + control_error(p, c.u_max_rad_s2, a), abs(w[b] * w[d]),
                                p.mean_motion_rad_s, p.gravity_gradient != 0, p.inertia_kgm2, a)
+
+
+@numba.njit(**LEAF)
+def _general_inertia_error(c: np.void, w: Array, drift: Array, a: int) -> float:
+    """`inertia_error` for a tensor known to within +-delta in every direction (-delta J <= dJ <= delta J: principal
+    moments and axes both uncertain). With S = J^-1/2, M = S dJ S (|M| <= delta) and J' = S^-1 (I + M) S^-1, the
+    error -J'^-1 (dJ omega_dot + omega x dJ omega - 3 n^2 r x dJ r) has, on axis a (|S e_a| = sqrt((J^-1)_aa)),
+
+        |e_a| <= k sqrt((J^-1)_aa) (|R omega_dot| + sqrt(kappa) |omega| |R omega| + 3 n^2 lambda_max / sqrt(lambda_min))
+
+    (R = L^T, J = L L^T; kappa = lambda_max / lambda_min of J; |(I + M)^-1 M| <= k), with |R omega_dot| <=
+    |R drift| + sum_j |R G_j| U_j for any u in the box."""
+    R = c.inertia_root
+    rf = rw = nw = 0.0
+    for i in range(3):
+        vf = R[i, 0] * drift[0] + R[i, 1] * drift[1] + R[i, 2] * drift[2]
+        vw = R[i, 0] * w[0] + R[i, 1] * w[1] + R[i, 2] * w[2]
+        rf += vf * vf
+        rw += vw * vw
+        nw += w[i] * w[i]
+    acc = math.sqrt(rf)
+    for j in range(c.control_root.shape[0]):
+        acc += c.control_root[j] * c.u_max_rad_s2[j]
+    return c.inertia_error_gain * c.inertia_scale[a] * (acc + c.inertia_spread * math.sqrt(nw * rw) + c.inertia_gg)
+
+
+def inertia_shape(cfg: Config) -> dict[str, Any]:
+    """The CONSTRAINT_DTYPE fields `inertia_error` reads of the filter's model J: principal or not, and for a
+    tensor R = L^T (Cholesky), sqrt((J^-1)_aa), sqrt(kappa), the gravity gradient's term, |R G_j|, and G^-1 (the
+    rows' gains on omega_dot, `rows.robust_to_inertia`)."""
+    sc, env = cfg.spacecraft, cfg.environment
+    J = sc.inertia_matrix
+    lam = np.linalg.eigvalsh(J)
+    R = np.linalg.cholesky(J).T
+    return {
+        "inertia_principal": sc.principal,
+        "inertia_root": R,
+        "inertia_scale": np.sqrt(np.diag(sc.inertia_inverse)),
+        "inertia_spread": math.sqrt(lam[-1] / lam[0]),
+        "inertia_gg": 3.0 * env.mean_motion_rad_s**2 * lam[-1] / math.sqrt(lam[0]) if env.gravity_gradient else 0.0,
+        "control_root": np.linalg.norm(R @ sc.control_matrix, axis=0),
+        "control_inverse": np.linalg.inv(sc.control_matrix),
+    }
 
 
 @numba.njit(**LEAF)

@@ -32,7 +32,7 @@ from numpy.typing import NDArray
 
 from rta_attitude.config.schema import Config, PointingConstraint
 from rta_attitude.constraints.angular_rate import general_rate_bounds
-from rta_attitude.constraints.base import inertia_error_bound
+from rta_attitude.constraints.base import inertia_error_bound, inertia_shape
 
 
 def axis_rate_bounds(cfg: Config, model: str, delta: float = 0.0) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
@@ -42,7 +42,7 @@ def axis_rate_bounds(cfg: Config, model: str, delta: float = 0.0) -> tuple[NDArr
     J_i and G_i, so the worst case takes |J_j - J_k| + delta (J_j + J_k), (1 - delta) J_i and G_i / (1 - delta))."""
     sc, L = cfg.spacecraft, cfg.limits
     if not sc.diagonal:
-        return _general_axis_rate_bounds(cfg, model)
+        return _general_axis_rate_bounds(cfg, model, delta)
     J = sc.J * (1.0 - delta)
     D = sc.wheel_inertia_kgm2
     G = np.abs(sc.control_gain) / (1.0 - delta)
@@ -63,20 +63,31 @@ def axis_rate_bounds(cfg: Config, model: str, delta: float = 0.0) -> tuple[NDArr
     return A, B
 
 
-def _general_axis_rate_bounds(cfg: Config, model: str) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """`axis_rate_bounds` in general (products of inertia, wheels off the body axes; no uncertainty): the torques'
-    bounds (Euler's, `config.inertia.euler_bound` and its rate; the wheels' D |w x A psi|) through |J^-1|, as
-    `angular_rate.zoh_rows` bounds them per state."""
+def _general_axis_rate_bounds(cfg: Config, model: str, delta: float = 0.0
+                              ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:  # fmt: skip
+    """`axis_rate_bounds` in general (products of inertia, wheels off the body axes): the torques' bounds (Euler's,
+    `config.inertia.euler_bound` and its rate; the wheels' D |w x A psi|) through |J^-1|, as `angular_rate.zoh_rows`
+    bounds them per state. For every inertia J + dJ with -delta J <= dJ <= delta J (k = delta / (1 - delta),
+    s_i = sqrt((J^-1)_ii)): |dJ| <= delta lambda_max, |J'^-1 - J^-1|_ij <= k s_i s_j, so |G' - G|_ij <= k |s D| s_i
+    sum_l s_l |A_lj|, and the QP's cap on (G u)_i leaves (G' u)_i up to that much more."""
     sc, L = cfg.spacecraft, cfg.limits
     gyrostat = model == "gyrostat"
     w = L.omega_max_rad_s
     reach = np.abs(sc.wheel_axes)
     P = reach @ np.full(3, L.psi_max_rad_s if gyrostat else 0.0)
     U = cfg.u_max_rad_s2
+    Ji, G, cap, dJ = sc.inertia_inverse, sc.control_matrix, cfg.accel_limit_rad_s2, 0.0
+    if delta > 0.0:
+        k = delta / (1.0 - delta)
+        s = np.sqrt(np.diag(Ji))
+        Ji = np.abs(Ji) + k * np.outer(s, s)
+        dG = k * abs(sc.torque_sign * sc.wheel_inertia_kgm2) * np.outer(s, s @ reach)
+        G = np.abs(G) + dG
+        cap = cap + dG @ U
+        dJ = delta * float(np.linalg.eigvalsh(sc.inertia_matrix)[-1])
     out = np.empty((3, 3))
-    general_rate_bounds(sc.inertia_matrix, sc.inertia_inverse, sc.control_matrix,
-                        sc.wheel_inertia_kgm2 if gyrostat else 0.0, w, w, w, P[0], P[1], P[2], U, reach @ U,
-                        cfg.accel_limit_rad_s2, 0.0, 0.0, out)
+    general_rate_bounds(sc.inertia_matrix, Ji, G, sc.wheel_inertia_kgm2 if gyrostat else 0.0, w, w, w,
+                        P[0], P[1], P[2], U, reach @ U, cap, 0.0, 0.0, dJ, out)
     return out[0].copy(), out[1].copy()
 
 
@@ -100,7 +111,14 @@ def inertia_accel_bound(cfg: Config, model: str) -> NDArray[np.float64]:
     J, env = cfg.spacecraft.J, cfg.environment
     A, _ = axis_rate_bounds(cfg, model)
     w2 = cfg.limits.omega_max_rad_s**2
-    return np.array([inertia_error_bound(delta / (1.0 - delta), float(A[a]), w2, env.mean_motion_rad_s,
+    k = delta / (1.0 - delta)
+    if not cfg.spacecraft.principal:  # `base._general_inertia_error` with |omega| <= sqrt(3) omega_max, |R v| <=
+        # sqrt(lambda_max) |v|
+        shape = inertia_shape(cfg)
+        root = math.sqrt(float(np.linalg.eigvalsh(cfg.spacecraft.inertia_matrix)[-1]))
+        return k * shape["inertia_scale"] * (root * float(np.linalg.norm(A))
+                                             + shape["inertia_spread"] * 3.0 * w2 * root + shape["inertia_gg"])
+    return np.array([inertia_error_bound(k, float(A[a]), w2, env.mean_motion_rad_s,
                                          env.gravity_gradient, J, a) for a in range(3)])
 
 

@@ -60,17 +60,21 @@ def rows(x: Array, t_s: float, p: np.void, c: np.void, ctx: np.void, t: np.void,
 def robust_to_inertia(ctx: np.void, c: np.void, t: np.void) -> None:
     """With an inertia uncertainty (`base.inertia_error`): each row that u reaches through omega_dot (all but
     the wheel speeds', psi_dot = u whatever J is) keeps its condition for every omega_dot within ctx.inertia_err
-    of the model's: its drift less sum_a |dBC/d omega_dot_a| e_a = sum_a |gain_a / G_a| e_a (a robust CBF
-    for a bounded disturbance of the highest derivative)."""
+    of the model's: its drift less sum_a |dBC/d omega_dot_a| e_a (a robust CBF for a bounded disturbance of the
+    highest derivative), dBC/d omega_dot = G^-T gain (gain_a / G_a where G is diagonal)."""
     if c.inertia_error_gain == 0.0:
         return
-    e, G = ctx.inertia_err, ctx.control_gain
+    e, G, Gi = ctx.inertia_err, ctx.control_gain, c.control_inverse
     for i in range(c.n_rows):
         if c.row_psi <= i < c.row_psi + 3:
             continue
         worst = 0.0
-        for a in range(3):
-            worst += abs(t.gain[i, a] / G[a]) * e[a]
+        if ctx.diagonal:
+            for a in range(3):
+                worst += abs(t.gain[i, a] / G[a]) * e[a]
+        else:
+            for a in range(3):
+                worst += abs(Gi[0, a] * t.gain[i, 0] + Gi[1, a] * t.gain[i, 1] + Gi[2, a] * t.gain[i, 2]) * e[a]
         t.drift[i] -= worst
 
 
