@@ -168,3 +168,25 @@ def turned_with_wheels(cfg: Config, angle_deg: float, axis: tuple[float, float, 
     Returns (the configuration, R)."""
     turned, R = turned_vehicle(cfg, angle_deg, axis)
     return with_wheels(turned, R.T), R
+
+
+def against_basilisk(cfg: Config, x0: np.ndarray, us: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The substep states of cfg's vehicle from x0 under the commands us (held one sample each): on the compiled
+    plant, on it with twice the substeps (every other substep: on the same grid), and on Basilisk."""
+    import dataclasses
+
+    from rta_attitude.dynamics.plant import make_plant
+
+    def run(c: Config, simulator: str) -> np.ndarray:
+        with make_plant(c.with_simulator(simulator), x0) as plant:
+            return np.concatenate([plant.step(u)[1] for u in us])
+
+    fine = run(dataclasses.replace(cfg, substeps=2 * cfg.substeps), "compiled")[1::2]
+    return run(cfg, "compiled"), fine, run(cfg, "basilisk")
+
+
+def max_angle(qa: np.ndarray, qb: np.ndarray) -> float:
+    """The largest rotation angle (rad) between two quaternion series (..., 4)."""
+    from rta_attitude.dynamics import quaternion as quat
+
+    return float((2.0 * np.arcsin(np.minimum(1.0, np.linalg.norm(quat.error_vectors(qa, qb), axis=-1)))).max())

@@ -22,7 +22,7 @@ import math
 
 import numpy as np
 import pytest
-from helpers import SKEWED_AXES, turned_vehicle, with_wheels
+from helpers import SKEWED_AXES, against_basilisk, max_angle, turned_vehicle, with_wheels
 
 from rta_attitude import config
 from rta_attitude.constraints import ConstraintSet
@@ -30,7 +30,6 @@ from rta_attitude.constraints.angular_rate import ZOH_TIMES
 from rta_attitude.constraints.base import ZOH_ROWS
 from rta_attitude.dynamics import quaternion as quat
 from rta_attitude.dynamics import spacecraft
-from rta_attitude.dynamics.plant import make_plant
 from rta_attitude.dynamics.state import OMEGA, PSI, Q, make_state
 from rta_attitude.errors import ConfigError
 from rta_attitude.filter.asif import AsifFilter
@@ -226,19 +225,10 @@ def test_basilisk_hub_with_the_tensor_agrees_over_2000_s(vehicle: str) -> None:
     us = rng.uniform(-1.0, 1.0, (2000, 3)) * 0.2 * box
     us -= 0.002 * np.cumsum(us, axis=0)  # a pull-back that keeps the wheels within a few hundred rad/s
 
-    def run(c: config.Config, simulator: str) -> np.ndarray:
-        with make_plant(c.with_simulator(simulator), x0) as plant:
-            return np.concatenate([plant.step(u)[1] for u in us])
-
-    ours = run(cfg, "compiled")
-    fine = run(dataclasses.replace(cfg, substeps=2 * cfg.substeps), "compiled")[1::2]
-    bsk = run(cfg, "basilisk")
-
-    def angle(a: np.ndarray, b: np.ndarray) -> float:
-        return float((2.0 * np.arcsin(np.minimum(1.0, np.linalg.norm(quat.error_vectors(a, b), axis=-1)))).max())
+    ours, fine, bsk = against_basilisk(cfg, x0, us)
 
     assert np.abs(ours[:, PSI] - x0[PSI]).max() > 50.0  # the wheels exchanged momentum
-    att, truncation = angle(bsk[:, Q], ours[:, Q]), angle(fine[:, Q], ours[:, Q])
+    att, truncation = max_angle(bsk[:, Q], ours[:, Q]), max_angle(fine[:, Q], ours[:, Q])
     assert att < 0.1 * truncation, (att, truncation)  # measured 3.7e-8 rad against 8.2e-7
     assert np.abs(bsk[:, OMEGA] - ours[:, OMEGA]).max() < 1e-10
     assert np.abs(bsk[:, PSI] - ours[:, PSI]).max() < 1e-10

@@ -25,11 +25,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import against_basilisk, max_angle
 
 from rta_attitude import config
 from rta_attitude.dynamics import quaternion as quat
 from rta_attitude.dynamics import spacecraft
-from rta_attitude.dynamics.plant import make_plant
 from rta_attitude.dynamics.state import OMEGA, PSI, STATE_SIZE, Q, make_state, state_size, wheel_columns
 from rta_attitude.errors import ConfigError
 from rta_attitude.filter.asif import AsifFilter
@@ -184,19 +184,10 @@ def test_basilisk_with_the_pyramid_agrees_over_2000_s(pyramid: config.Config, fa
     us = rng.uniform(-1.0, 1.0, (2000, 4)) * 0.2 * cfg.limits.wheel_accel_max_rad_s2
     us -= 0.002 * np.cumsum(us, axis=0)  # a pull-back that keeps the wheels within a few hundred rad/s
 
-    def run(c: config.Config, simulator: str) -> np.ndarray:
-        with make_plant(c.with_simulator(simulator), x0) as plant:
-            return np.concatenate([plant.step(u)[1] for u in us])
-
-    ours = run(cfg, "compiled")
-    fine = run(dataclasses.replace(cfg, substeps=2 * cfg.substeps), "compiled")[1::2]
-    bsk = run(cfg, "basilisk")
-
-    def angle(a: np.ndarray, b: np.ndarray) -> float:
-        return float((2.0 * np.arcsin(np.minimum(1.0, np.linalg.norm(quat.error_vectors(a, b), axis=-1)))).max())
+    ours, fine, bsk = against_basilisk(cfg, x0, us)
 
     assert np.abs(ours[:, wheels] - x0[wheels]).max() > 50.0  # the wheels exchanged momentum
-    att, truncation = angle(bsk[:, Q], ours[:, Q]), angle(fine[:, Q], ours[:, Q])
+    att, truncation = max_angle(bsk[:, Q], ours[:, Q]), max_angle(fine[:, Q], ours[:, Q])
     assert att < 0.1 * truncation, (att, truncation)
     assert np.abs(bsk[:, OMEGA] - ours[:, OMEGA]).max() < 1e-10
     assert np.abs(bsk[:, wheels] - ours[:, wheels]).max() < 1e-10
