@@ -10,8 +10,8 @@ against independent computations.
   to RK4's order;
 - the torque interface: a body torque reaches the wheels as the smallest (2-norm) split, numpy's least squares;
 - Basilisk's rwFactory with the pyramid, the tensor and a failed wheel agrees over 2,000 s;
-- what takes three wheels so far (the filter, the nodes, the Monte Carlo, the viability oracle, check-config) says
-  so in one line and runs nothing.
+- what takes three wheels so far (the filter, the nodes and the launcher, the Monte Carlo, the viability oracle,
+  check-config) says so in one line and runs nothing.
 """
 
 from __future__ import annotations
@@ -197,8 +197,8 @@ def test_basilisk_with_the_pyramid_agrees_over_2000_s(pyramid: config.Config, fa
 
 
 def test_what_takes_three_wheels_says_so(pyramid: config.Config, tmp_path: Path) -> None:
-    """The filter and the viability oracle raise one ConfigError line naming the array; the CLI's commands exit 1
-    with it, before writing anything."""
+    """The filter and the viability oracle raise one ConfigError line naming the array; the CLI's commands (the
+    launcher too) and a node exit 1 with it, before writing anything."""
     line = "takes three reaction wheels; spacecraft.wheel_spin_axes_body gives 4 (rw1, rw2, rw3, rw4)"
     with pytest.raises(ConfigError, match=r"the filter takes three reaction wheels; .* gives 4 \(rw1"):
         AsifFilter(pyramid)
@@ -206,13 +206,18 @@ def test_what_takes_three_wheels_says_so(pyramid: config.Config, tmp_path: Path)
         from_config(pyramid)
     path = tmp_path / "pyramid.yaml"
     path.write_text(TWELVE_U + "".join(f"        {k}: {v}\n" for k, v in PYRAMID.items()))
-    out = tmp_path / "mc"
-    for command in (["check-config"], ["simulate"], ["montecarlo", "--runs", "2", "--no-plot", "--out", str(out)]):
+    out = tmp_path / "out"
+    for command in (["check-config"], ["simulate"], ["montecarlo", "--runs", "2", "--no-plot", "--out", str(out)],
+                    ["launch", "--bag", str(tmp_path / "run.mcap"), "--out", str(out)]):
         done = subprocess.run([sys.executable, "-m", "rta_attitude.cli", *command, "--config", str(path)],
                               capture_output=True, text=True, timeout=600)
         assert done.returncode == 1, (command, done.stdout, done.stderr)
         assert line in done.stderr and len(done.stderr.strip().splitlines()) == 1, (command, done.stderr)
-    assert not out.exists()
+    assert not out.exists() and not (tmp_path / "run.mcap").exists()
+    node = subprocess.run([sys.executable, "-m", "rta_attitude.ros.plant_node", "--ros-args", "-p",
+                           f"config_file:={path}", "-p", "record:=false"], capture_output=True, text=True, timeout=600)
+    errors = [ln for ln in (node.stdout + node.stderr).splitlines() if "ERROR" in ln]
+    assert node.returncode == 1 and len(errors) == 1 and "the plant node takes three reaction wheels" in errors[0]
 
 
 def test_joint_states_carry_the_configured_names() -> None:

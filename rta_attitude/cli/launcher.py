@@ -165,6 +165,7 @@ def plan(args: argparse.Namespace) -> Plan:
     core = {k: v for k, v in overrides.items() if k not in knob_names}
     flat.update(core)
     cfg = config_module.from_parameters(nest(flat), source=str(path))
+    cfg.spacecraft.require_three_wheels("rta-attitude launch")  # before any output is made
     scenario = cfg.scenario(key)
     if args.realtime is not None and not args.realtime > 0:
         raise ConfigError(f"--realtime must be > 0, got {args.realtime}")
