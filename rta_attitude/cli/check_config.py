@@ -25,7 +25,7 @@ def run(args: argparse.Namespace) -> int:
     import numpy as np
 
     from rta_attitude.cli.options import load
-    from rta_attitude.config.schema import EARTH_RADIUS_M
+    from rta_attitude.config.schema import EARTH_RADIUS_M, spanning
     from rta_attitude.constraints import ConstraintSet
     from rta_attitude.constraints.margins import (
         derived_margin,
@@ -50,7 +50,7 @@ def run(args: argparse.Namespace) -> int:
               f"{', '.join(f'{a:.3g}' for a in off)} deg from the nearest body axes; every wheel turns every axis")
     if not sc.wheels_on_body_axes:
         off = np.degrees(np.arccos(np.minimum(1.0, np.abs(sc.wheel_axes).max(axis=0))))
-        smallest = np.linalg.svd(sc.wheel_axes, compute_uv=False)[-1]
+        smallest = spanning(sc.wheel_axes)
         print(f"  wheels' spin axes {', '.join(f'{a:.3g}' for a in off)} deg from the nearest body axes (the axes' "
               f"smallest singular value {smallest:.3g}); every wheel turns every axis")
     if sc.control_lost:

@@ -105,7 +105,8 @@ CONSTRAINT_DTYPE = np.dtype([
     ("err_T_K", np.float64),
     ("err_E_J", np.float64),
     ("target_rate_rad_s", np.float64),     # sun and Earth directions turn at the mean motion
-    # the vehicle's inertia within +-delta of the model's (robust preset; 0 otherwise, `inertia_errors`)
+    # the vehicle's inertia within +-delta of the model's (robust preset; 0 otherwise, `constraint_record`,
+    # `inertia_shape`)
     ("inertia_error_gain", np.float64),    # delta / (1 - delta)
     ("inertia_accel_rad_s2", np.float64, (3,)),  # its bound on |omega_dot(true) - omega_dot(model)|, any state
     ("inertia_principal", np.uint8),       # 1: principal axes, each moment within +-delta (the per-axis bound)
@@ -344,7 +345,17 @@ def _general_inertia_error(c: np.void, w: Array, drift: Array, a: int) -> float:
     acc = math.sqrt(rf)
     for j in range(c.control_root.shape[0]):
         acc += c.control_root[j] * c.u_max_rad_s2[j]
-    return c.inertia_error_gain * c.inertia_scale[a] * (acc + c.inertia_spread * math.sqrt(nw * rw) + c.inertia_gg)
+    return general_inertia_error_bound(c.inertia_error_gain, c.inertia_scale[a], acc, math.sqrt(nw * rw),
+                                       c.inertia_spread, c.inertia_gg)
+
+
+@numba.njit(**LEAF)
+def general_inertia_error_bound(k: float, scale: float, accel: float, rates: float, spread: float,
+                                gg: float) -> float:
+    """`_general_inertia_error`'s formula, k sqrt((J^-1)_aa) (|R omega_dot| + sqrt(kappa) |w| |R w| + gg), from
+    scale = sqrt((J^-1)_aa), a bound accel on |R omega_dot| and one rates on |w| |R w|: at a state
+    (`_general_inertia_error`) or at the worst the rows allow (`margins.inertia_accel_bound`)."""
+    return k * scale * (accel + spread * rates + gg)
 
 
 def inertia_shape(cfg: Config) -> dict[str, Any]:
@@ -352,15 +363,14 @@ def inertia_shape(cfg: Config) -> dict[str, Any]:
     tensor R = L^T (Cholesky), sqrt((J^-1)_aa), sqrt(kappa), the gravity gradient's term, |R G_j|, and G^-1 (the
     rows' gains on omega_dot, `rows.robust_to_inertia`)."""
     sc, env = cfg.spacecraft, cfg.environment
-    J = sc.inertia_matrix
-    lam = np.linalg.eigvalsh(J)
-    R = np.linalg.cholesky(J).T
+    lam_min, lam_max = float(np.min(sc.principal_moments)), float(np.max(sc.principal_moments))
+    R = np.linalg.cholesky(sc.inertia_matrix).T
     return {
         "inertia_principal": sc.principal,
         "inertia_root": R,
         "inertia_scale": np.sqrt(np.diag(sc.inertia_inverse)),
-        "inertia_spread": math.sqrt(lam[-1] / lam[0]),
-        "inertia_gg": 3.0 * env.mean_motion_rad_s**2 * lam[-1] / math.sqrt(lam[0]) if env.gravity_gradient else 0.0,
+        "inertia_spread": math.sqrt(lam_max / lam_min),
+        "inertia_gg": 3.0 * env.mean_motion_rad_s**2 * lam_max / math.sqrt(lam_min) if env.gravity_gradient else 0.0,
         "control_root": np.linalg.norm(R @ sc.control_matrix, axis=0),
         "control_inverse": np.linalg.inv(sc.control_matrix),
     }
@@ -455,5 +465,6 @@ def nan_min(a: float, b: float) -> float:
 __all__ = [
     "CONE_DTYPE", "CONSTRAINT_DTYPE", "GAIN_DTYPE", "MAX_CONES", "MAX_ROWS", "TABLE_DTYPE", "ZOH_CHECKS", "ZOH_ROWS",
     "angle_rate_error", "constraint_record", "drive_lag", "hard", "lag_response", "measurement_errors", "nan_max",
-    "inertia_error", "inertia_error_bound", "nan_min", "predicted_errors", "second_order", "speed_limit_row",
+    "general_inertia_error_bound", "inertia_error", "inertia_error_bound", "inertia_shape", "nan_min",
+    "predicted_errors", "second_order", "speed_limit_row",
 ]  # fmt: skip

@@ -32,7 +32,7 @@ from numpy.typing import NDArray
 
 from rta_attitude.config.schema import Config, PointingConstraint
 from rta_attitude.constraints.angular_rate import general_rate_bounds
-from rta_attitude.constraints.base import inertia_error_bound, inertia_shape
+from rta_attitude.constraints.base import general_inertia_error_bound, inertia_error_bound, inertia_shape
 
 
 def axis_rate_bounds(cfg: Config, model: str, delta: float = 0.0) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
@@ -84,7 +84,7 @@ def _general_axis_rate_bounds(cfg: Config, model: str, delta: float = 0.0
         dG = k * abs(sc.torque_sign * sc.wheel_inertia_kgm2) * np.outer(s, s @ reach)
         G = np.abs(G) + dG
         cap = cap + dG @ U
-        dJ = delta * float(np.linalg.eigvalsh(sc.inertia_matrix)[-1])
+        dJ = delta * float(np.max(sc.principal_moments))
     out = np.empty((3, 3))
     general_rate_bounds(sc.inertia_matrix, Ji, G, sc.wheel_inertia_kgm2 if gyrostat else 0.0, w, w, w,
                         P[0], P[1], P[2], U, reach @ U, cap, 0.0, 0.0, dJ, out)
@@ -112,12 +112,12 @@ def inertia_accel_bound(cfg: Config, model: str) -> NDArray[np.float64]:
     A, _ = axis_rate_bounds(cfg, model)
     w2 = cfg.limits.omega_max_rad_s**2
     k = delta / (1.0 - delta)
-    if not cfg.spacecraft.principal:  # `base._general_inertia_error` with |omega| <= sqrt(3) omega_max, |R v| <=
-        # sqrt(lambda_max) |v|
+    if not cfg.spacecraft.principal:  # |omega| <= sqrt(3) omega_max, |R v| <= sqrt(lambda_max) |v|
         shape = inertia_shape(cfg)
-        root = math.sqrt(float(np.linalg.eigvalsh(cfg.spacecraft.inertia_matrix)[-1]))
-        return k * shape["inertia_scale"] * (root * float(np.linalg.norm(A))
-                                             + shape["inertia_spread"] * 3.0 * w2 * root + shape["inertia_gg"])
+        root = math.sqrt(float(np.max(cfg.spacecraft.principal_moments)))
+        accel = root * float(np.linalg.norm(A))
+        return np.array([general_inertia_error_bound(k, float(shape["inertia_scale"][a]), accel, 3.0 * w2 * root,
+                                                     shape["inertia_spread"], shape["inertia_gg"]) for a in range(3)])
     return np.array([inertia_error_bound(k, float(A[a]), w2, env.mean_motion_rad_s,
                                          env.gravity_gradient, J, a) for a in range(3)])
 

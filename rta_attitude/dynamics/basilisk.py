@@ -142,8 +142,7 @@ def _follow(x0: Array, sigma: Array, w: Array, Omega: Array, t0_s: float, h_s: f
         else:  # psi_i = -(Omega_i + a_i . omega), a_i wheel i's spin axis
             A = p.wheel_axes
             for i in range(A.shape[1]):
-                col = 7 + i if i < 3 else 16 + i  # `state.wheel_column`
-                row[col] = -(Omega[j, i] + (A[0, i] * w[j, 0] + A[1, i] * w[j, 1] + A[2, i] * w[j, 2]))
+                row[wheel_column(i)] = -(Omega[j, i] + (A[0, i] * w[j, 0] + A[1, i] * w[j, 1] + A[2, i] * w[j, 2]))
         prev = row
 
 

@@ -33,6 +33,7 @@ paper model's arithmetic is kept operation for operation from the first implemen
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import replace
 from typing import Any
@@ -45,12 +46,13 @@ from rta_attitude.config import inertia
 from rta_attitude.config.schema import Config
 from rta_attitude.dynamics.environment import EARTH_HILL, sun_hill, sunlit
 from rta_attitude.dynamics.quaternion import attitude_matrix
-from rta_attitude.dynamics.state import STATE_SIZE, state_size
+from rta_attitude.dynamics.state import STATE_SIZE, state_size, wheel_column
 from rta_attitude.jit import LEAF
 
 Array = NDArray[np.float64]
 
 
+@functools.cache
 def plant_dtype(n_wheels: int) -> np.dtype:
     """The PLANT_DTYPE of an array of n_wheels wheels (its wheel fields sized N; compiled code is specialised per
     dtype, so the three-wheel kernels are the paper's as they were)."""
@@ -108,7 +110,7 @@ def plant_record(cfg: Config, model: str | None = None) -> NDArray[np.void]:
             where set). The filter's model of the plant is `plant_record(cfg, cfg.filter.model)`.
     """
     sc, th, env, pw = cfg.spacecraft, cfg.thermal, cfg.environment, cfg.power
-    rec = np.zeros(1, PLANT_DTYPE if sc.n_wheels == 3 else plant_dtype(sc.n_wheels))
+    rec = np.zeros(1, plant_dtype(sc.n_wheels))
     p = rec[0]
     true_J = cfg.plant.inertia_kgm2 if model is None else None  # the simulated vehicle's, where it differs
     p["inertia_kgm2"] = sc.inertia_kgm2 if true_J is None else true_J
@@ -304,8 +306,8 @@ def wheel_vector(p: np.void, x: Array, a: int) -> float:
     -s D (A psi)_a); psi_a where wheel a is on body axis a."""
     A = p.wheel_axes
     v = A[a, 0] * x[7] + A[a, 1] * x[8] + A[a, 2] * x[9]
-    for i in range(3, A.shape[1]):  # wheels past the third, after z_dot (`state.wheel_column`)
-        v += A[a, i] * x[16 + i]
+    for i in range(3, A.shape[1]):  # wheels past the third, after z_dot
+        v += A[a, i] * x[wheel_column(i)]
     return v
 
 
@@ -422,8 +424,8 @@ def derivative(x: Array, u: Array, p: np.void, A: Array, wd: Array, f: Array) ->
     f[7] = 0.0 + u[0]
     f[8] = 0.0 + u[1]
     f[9] = 0.0 + u[2]
-    for i in range(3, p.wheel_failed.shape[0]):  # wheels past the third, after z_dot (`state.wheel_column`)
-        f[16 + i] = 0.0 + u[i]
+    for i in range(3, p.wheel_failed.shape[0]):  # wheels past the third, after z_dot
+        f[wheel_column(i)] = 0.0 + u[i]
     lit = sunlit(sx, p.shadow_sx)
     f[10] = thermal_rate(cos_sun, cos_earth, x[10], lit, p)
     f[11] = net_power(c_panel, lit, p)
@@ -584,24 +586,24 @@ def demand_round_trip(v: Array, p: np.void, out: Array) -> None:
 
 
 def wheels_to_torque(u: Array, p: NDArray[np.void]) -> Array:
-    """The body torque tau = D A u (..., 3), N m, of wheel accelerations u (..., 3): what the filter sends as
+    """The body torque tau = D A u (..., 3), N m, of wheel accelerations u (..., N): what the filter sends as
     torque_cmd (`torque_round_trip`'s first half, the same kernel; p: a PLANT_DTYPE record)."""
-    return _convert(u, p, wheel_accel_to_torque, _to_torque_all)
+    return _convert(u, p, wheel_accel_to_torque, _to_torque_all, record_wheels(p), 3)
 
 
 def torque_to_wheels(tau: Array, p: NDArray[np.void]) -> Array:
-    """The wheel accelerations u = A^-1 tau / D (..., 3), rad/s^2, whose body torque is tau (..., 3): how torque_des
-    reaches the filter and torque_cmd the plant (`torque_round_trip`'s second half, the same kernel)."""
-    return _convert(tau, p, torque_to_wheel_accel, _to_wheels_all)
+    """The wheel accelerations u = A^-1 tau / D (..., N), rad/s^2, whose body torque is tau (..., 3), the smallest
+    where N > 3: how torque_des reaches the filter and torque_cmd the plant (`torque_round_trip`'s second half, the
+    same kernel)."""
+    return _convert(tau, p, torque_to_wheel_accel, _to_wheels_all, 3, record_wheels(p))
 
 
-def _convert(v: Array, p: NDArray[np.void], per_axis: Any, kernel: Any) -> Array:
-    """v (..., 3) through the torque interface: per axis (a ufunc with D) where the wheels are on the body axes,
-    else the compiled kernel row by row."""
+def _convert(v: Array, p: NDArray[np.void], per_axis: Any, kernel: Any, n_in: int, n_out: int) -> Array:
+    """v (..., n_in) through the torque interface into (..., n_out): per axis (a ufunc with D) where the wheels are
+    on the body axes, else the compiled kernel row by row."""
     v = np.asarray(v, dtype=float)
     if p[0]["wheels_on_axes"]:
         return per_axis(v, float(p[0]["wheel_inertia_kgm2"]))
-    n_in, n_out = (record_wheels(p), 3) if kernel is _to_torque_all else (3, record_wheels(p))
     V = np.ascontiguousarray(v.reshape(-1, n_in))
     out = np.empty((V.shape[0], n_out))
     kernel(V, p, out)

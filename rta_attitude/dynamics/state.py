@@ -24,8 +24,11 @@ its messages and its bags are one case of the general one.
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+
+from rta_attitude.jit import LEAF
 
 STATE_NAMES: tuple[str, ...] = (
     "q1", "q2", "q3", "q4",
@@ -67,9 +70,11 @@ def state_size(n_wheels: int) -> int:
     return STATE_SIZE + n_wheels - 3
 
 
+@numba.njit(**LEAF, inline="always")
 def wheel_column(i: int) -> int:
-    """The state entry of wheel i's speed: 7 + i for the first three, 16 + i after (appended after z_dot)."""
-    return PSI.start + i if i < 3 else STATE_SIZE + i - 3
+    """The state entry of wheel i's speed: 7 + i for the first three, 16 + i after (appended after z_dot); compiled,
+    so the kernels index the wheels past the third by it."""
+    return 7 + i if i < 3 else STATE_SIZE + i - 3
 
 
 def wheel_columns(n_wheels: int) -> tuple[int, ...]:
