@@ -16,7 +16,7 @@ setup(
         ("share/" + package_name + "/config", glob("config/*.yaml") + glob("config/*.json")),
         ("share/" + package_name + "/launch", glob("launch/*.launch.py")),
     ],
-    package_data={package_name: ["py.typed"]},
+    package_data={package_name: ["py.typed", "ros/fastdds_profile.xml"]},
     install_requires=["setuptools", "numpy", "numba", "pyyaml"],
     # plant.simulator: basilisk (docs/basilisk.md); the version whose behaviour the tests pin
     extras_require={"basilisk": ["bsk==2.12.1"]},

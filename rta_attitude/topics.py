@@ -83,7 +83,7 @@ COMMAND_QOS = QosSpec(history="keep_last", depth=10)
 VIEW_QOS = QosSpec(reliability="best_effort", history="keep_last", depth=1000)
 """The scene node's readers of the loop's topics: best effort, keep last 1000. A view never holds back the loop:
 a writer does not wait for a best-effort reader's acknowledgements (reliable readers acknowledge the last
-samples of a burst only at the writer's next periodic heartbeat, seconds later), and a view that falls more
+samples of a burst only at the writer's next periodic heartbeat), and a view that falls more
 than 1000 states behind, or loses a sample under load, skips states (its counters say how many it drew)."""
 DIAGNOSTICS = "/diagnostics"
 """The standard status topic (rqt_robot_monitor, the diagnostic aggregator); `ros.diagnostics` publishes a

@@ -222,7 +222,7 @@ def test_controller_killed_the_filter_keeps_the_spacecraft_safe_with_u_des_zero(
 
     steps = STEPS_LONG
     # the recorder's drain may take the default 10 s here (not the fixture's 3 s): under load a lost reliable
-    # filter_status is repaired only at the filter's next periodic heartbeat, ~3 s on (found by the flake hunt:
+    # filter_status is repaired only at the filter's next periodic heartbeat (found by the flake hunt, at 3 s:
     # the bag closed with 1,908 of 2,001 after 3 s); a run whose samples all arrive closes at once either way
     lp = loop_factory("desired_timeout_s=0.2", "command_timeout_s=3.0", "stop_timeout_s=1.0", "drain_timeout_s=10",
                       duration=steps)
@@ -333,7 +333,7 @@ def test_sigkill_of_the_recorder_leaves_a_bag_readable_to_its_last_chunk(loop_fa
 STEPS_LONG = 2000
 """Lockstep runs in which a fault is injected mid-run, after the bag shows some progress: long enough that
 the fault lands before the end even when the bag lags the loop by seconds (a reliable sample to the
-recorder that needs a repair waits for the writer's next heartbeat, up to Fast DDS's 3 s period, and the
+recorder that needs a repair waits for the writer's next heartbeat (`ros.transport`), and the
 later ones wait behind it; the flake hunt saw a 400-step run end before its bag showed 25 torque_des)."""
 
 

@@ -439,7 +439,7 @@ class PlantNode(RtaNode):
         interrupted = state.startswith(topics.RUN_INTERRUPTED)
         if self.knobs["exit_when_done"] or interrupted:
             # the final status is what the recorder closes on: under load a lost reliable sample is repaired
-            # only at the writer's next heartbeat (seconds), and a writer that has exited repairs nothing
+            # only at the writer's next heartbeat (`ros.transport`), and a writer that has exited repairs nothing
             # (found by the flake hunt: a bag ended with run_status `running`); it waits only if an ack is owed
             # the other streams only while the recorder is there: it closes the bag once it holds every
             # message, and no other reader needs them after the run (found: with the scene node reading

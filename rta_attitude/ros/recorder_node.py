@@ -16,7 +16,7 @@ for topics without one (real-time runs, runs with faults), until no message came
 `drain_quiet_s`; the chain's per-step answers (torque_des, torque_cmd, filter_status: one per state
 in a run without faults) are waited for while they are behind the state count and their writer is
 still there (a reliable sample lost under load is repaired only at the writer's next heartbeat,
-seconds later, and every later sample of that writer waits behind it: found by the flake hunt, the
+`ros.transport`, and every later sample of that writer waits behind it: found by the flake hunt, the
 recorder closed 0.3 s after `done` with half of torque_des and torque_cmd still owed); a topic whose
 publisher has gone (a killed node) is not waited for beyond that quiet time; at most
 `drain_timeout_s` in all. Then it closes the bag and, with `exit_when_done`,
