@@ -124,6 +124,34 @@ def test_two_wheels_on_one_axis_move_the_body_as_one() -> None:
     assert x4[PSI.start + 2] == pytest.approx(x4[19], rel=1e-12)
 
 
+def test_any_array_moves_the_body_as_three_orthogonal_wheels_holding_its_momentum(pyramid: config.Config) -> None:
+    """The reduction a filter over N wheels can stand on: the body sees an array only through the wheels' momentum
+    along the body axes, psi_b = A psi, and its rate, u_b = A u (one wheel inertia D). The 12U with the pyramid and
+    products of inertia, driven by 300 random held commands u (4), and the same 12U with three wheels on the body
+    axes driven by A u from psi_b = A psi: the attitude, rates, temperature, battery and orbit agree, and A psi
+    stays the three wheels' speeds (the gyrostat's wheel term, the gravity gradient, the rotating Hill frame)."""
+    cfg = dataclasses.replace(pyramid, environment=dataclasses.replace(pyramid.environment, gravity_gradient=True,
+                                                                       rotating_hill=True))
+    orth = _with(cfg, wheel_axes_body=((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0)),
+                 wheel_names=("wheel_x", "wheel_y", "wheel_z"))
+    A = cfg.spacecraft.wheel_axes
+    wheels = list(wheel_columns(4))
+    rng = np.random.default_rng(43)
+    x4 = np.concatenate([make_state(quat.normalize(rng.normal(size=4)), math.radians(0.5) * rng.uniform(-1, 1, 3),
+                                    [0.0, 0.0, 0.0]), [0.0]])
+    x4[wheels] = rng.uniform(-300.0, 300.0, 4)
+    x3 = x4[:STATE_SIZE].copy()
+    x3[PSI] = A @ x4[wheels]
+    p4, p3 = spacecraft.plant_record(cfg), spacecraft.plant_record(orth)
+    for u in rng.uniform(-20.0, 20.0, (300, 4)):
+        x4 = spacecraft.integrate(x4, u, 1.0, p4, 10)[0]
+        x3 = spacecraft.integrate(x3, A @ u, 1.0, p3, 10)[0]
+    assert max_angle(x4[Q], x3[Q]) < 1e-9 and np.max(np.abs(x4[OMEGA])) > 1e-3  # the body moved
+    body = [i for i in range(STATE_SIZE) if i not in range(PSI.start, PSI.stop)]
+    np.testing.assert_allclose(x4[body], x3[body], rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(A @ x4[wheels], x3[PSI], rtol=1e-9, atol=1e-9)
+
+
 @pytest.mark.parametrize("torque_sign", [1.0, -1.0])
 def test_inertial_momentum_is_conserved_with_a_pyramid(pyramid: config.Config, torque_sign: float) -> None:
     """No external torque: A^T (J omega - s D A psi) of the 12U with the pyramid and products of inertia stays

@@ -149,3 +149,49 @@ def test_the_default_filter_keeps_a_vehicle_with_skewed_wheels_safe_below_a_larg
     assert 0 < large.sum() < len(large)  # both kinds are in the draw
     assert not np.any(failed & ~large), np.flatnonzero(failed)
     assert np.sum(large & ~failed) > np.sum(failed)
+
+
+TILTED_AXES = ((0.9397, 0.2418, 0.2418), (0.2418, 0.9397, 0.2418), (0.2418, 0.2418, 0.9397))
+"""config/examples/skewed_wheels.yaml's array: each wheel 20 deg off its body axis toward [1, 1, 1]."""
+
+
+@pytest.mark.parametrize("axes", [SKEWED_AXES, TILTED_AXES], ids=["generic", "tilted"])
+def test_the_momentum_modes_place_holds_every_momentum_some_direction_holds(axes: tuple) -> None:
+    """With the wheels off the body axes the momentum mode puts H_body on a vertex of the array (`law._vertex`):
+    for |H| from small to past what any direction holds and H_body in every direction, where a direction of a fine
+    grid over the sphere holds |H| at rest with the rates' share (an independent search), the chosen one does too
+    (each wheel within psi_limit); where none does, the chosen one holds the most any does. Below what every
+    direction holds, the vertex of the wheels' own pattern."""
+    from rta_attitude.dynamics.spacecraft import wheel_rate_momentum
+    from rta_attitude.filter.gatekeeper.law import _vertex
+
+    cfg = with_wheels(BASE, axes)
+    b = backup_record(cfg)[0]
+    p = b["law_plant"]
+    Ai, D = p["wheel_axes_inverse"], float(p["wheel_inertia_kgm2"])
+    rates = np.array([wheel_rate_momentum(p, i) for i in range(3)]) * float(b["omega_max_rad_s"])
+    limit = float(b["psi_limit_rad_s"])
+
+    def load(d: np.ndarray, hn: float) -> np.ndarray:  # (..., 3) unit directions: the most loaded wheel less its limit
+        return np.max((np.abs(d @ Ai.T) * hn + rates) / D, axis=-1) - limit
+
+    rng = np.random.default_rng(44)
+    grid = rng.normal(size=(200_000, 3))
+    grid /= np.linalg.norm(grid, axis=1, keepdims=True)
+    most = float(np.max(1.0 / np.max(np.abs(grid @ Ai.T), axis=1)))  # |H| per unit of the best wheel's share
+    everywhere = float(np.min(1.0 / np.max(np.abs(grid @ Ai.T), axis=1)))
+    top = (limit * D - rates.max()) * most
+    checked = 0
+    for hn in np.linspace(0.05, 1.1, 12) * top:
+        for h in rng.normal(size=(40, 3)):
+            h = h / np.linalg.norm(h)
+            d = np.array(_vertex(*(hn * h), hn, 1.0, p, b))
+            assert np.linalg.norm(d) == pytest.approx(1.0, abs=1e-12)
+            if np.min(load(grid, hn)) <= 0.0:
+                assert load(d, hn) <= 1e-9
+                checked += 1
+            else:
+                assert load(d, hn) <= np.min(load(grid, hn)) + 1e-9
+            if hn * 1.001 < (limit * D - rates.max()) * everywhere:  # every vertex holds it: the wheels' own
+                assert np.all(np.sign(Ai @ d) == np.sign(Ai @ h))
+    assert checked > 300

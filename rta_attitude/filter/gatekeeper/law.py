@@ -156,6 +156,47 @@ def _general_wheel_load(T: Array, Hh: Array, p: np.void, b: np.void, share: floa
 
 
 @numba.njit(**LEAF)
+def _vertex(Hb0: float, Hb1: float, Hb2: float, hn: float, share: float, p: np.void, b: np.void
+            ) -> tuple[float, float, float]:
+    """The momentum mode's place for H_body (unit, body axes) with the wheels off the body axes: a vertex of the
+    momentum the wheels hold at rest, {H : |(A^-1 H)_i| <= c_i}, c_i = psi_limit D less wheel i's rates' share
+    (`_wheel_load`'s test): d = A (s c) / |A (s c)| for a sign s_i per wheel, which holds |H| (hn, N m s) up to
+    |A (s c)|, every wheel at its limit together. On the body axes the vertices are the diagonals (the paper's
+    choice, the nearest); a skewed array's differ (three wheels tilted 20 deg toward [1, 1, 1]: |A s| = 2.46 along
+    the diagonal, 1.40 for a mixed pattern), so the nearest may not hold |H| where another does. The vertex of the
+    wheels' own pattern s = sign(A^-1 H_body) where it holds |H|, else the one of those that do nearest H_body,
+    else the one that holds the most."""
+    A, Ai, D = p.wheel_axes, p.wheel_axes_inverse, p.wheel_inertia_kgm2
+    top = b.psi_limit_rad_s * D
+    w = share * b.omega_max_rad_s
+    c0 = max(top - wheel_rate_momentum(p, 0) * w, 1e-12 * top)
+    c1 = max(top - wheel_rate_momentum(p, 1) * w, 1e-12 * top)
+    c2 = max(top - wheel_rate_momentum(p, 2) * w, 1e-12 * top)
+    own0 = Ai[0, 0] * Hb0 + Ai[0, 1] * Hb1 + Ai[0, 2] * Hb2
+    own1 = Ai[1, 0] * Hb0 + Ai[1, 1] * Hb1 + Ai[1, 2] * Hb2
+    own2 = Ai[2, 0] * Hb0 + Ai[2, 1] * Hb1 + Ai[2, 2] * Hb2
+    hb = math.sqrt(Hb0 * Hb0 + Hb1 * Hb1 + Hb2 * Hb2)
+    best = -np.inf
+    out0 = out1 = out2 = 0.0
+    for pattern in range(8):
+        s0 = 1.0 if pattern & 1 else -1.0
+        s1 = 1.0 if pattern & 2 else -1.0
+        s2 = 1.0 if pattern & 4 else -1.0
+        v0 = A[0, 0] * s0 * c0 + A[0, 1] * s1 * c1 + A[0, 2] * s2 * c2
+        v1 = A[1, 0] * s0 * c0 + A[1, 1] * s1 * c1 + A[1, 2] * s2 * c2
+        v2 = A[2, 0] * s0 * c0 + A[2, 1] * s1 * c1 + A[2, 2] * s2 * c2
+        n = math.sqrt(v0 * v0 + v1 * v1 + v2 * v2)
+        if hn <= n:  # it holds |H|: the wheels' own pattern first, then the nearest
+            own = s0 * own0 >= 0.0 and s1 * own1 >= 0.0 and s2 * own2 >= 0.0
+            score = (4.0 if own else 2.0) + (v0 * Hb0 + v1 * Hb1 + v2 * Hb2) / (n * hb)
+        else:
+            score = (n - hn) / hn  # < 0: the one that holds the most
+        if score > best:
+            best, out0, out1, out2 = score, v0 / n, v1 / n, v2 / n
+    return out0, out1, out2
+
+
+@numba.njit(**LEAF)
 def _sun_across(hx: float, hy: float, hz: float, sx: float, sy: float, sz: float, sh: float
                 ) -> tuple[float, float, float]:
     """The unit part of r_S = (sx, sy, sz) perpendicular to the unit vector h (sh = h . r_S); where r_S
@@ -348,8 +389,9 @@ def sun_safe_error(x: Array, p: np.void, b: np.void, g: np.void) -> float:
     and H_body goes straight to its place at that target first (`_h_first`, as below); if the wheels
     could not hold H at any panel angle, or with the
     MOMENTUM variant (g.law), the momentum mode (g.momentum_mode = 1): the attitude with H on the body
-    diagonal d = sign(H_body) / sqrt(3) (each wheel takes |H| / sqrt(3)) turned about H to bring k_B
-    nearest the sun (k_B . H / |H| = d_3: k_B in the plane of H and r_S). While H_body is more than
+    diagonal d = sign(H_body) / sqrt(3) (each wheel takes |H| / sqrt(3); with the wheels off the body axes the
+    array's vertex that holds H, `_vertex`) turned about H to bring k_B nearest the sun (k_B . H / |H| = d_3:
+    k_B in the plane of H and r_S). While H_body is more than
     SETTLED_ANGLE_RAD from d, dq_v := (h x d) / 2 (h = H_body / |H_body|) instead: the rate command
     then turns the body about an axis perpendicular to H, which moves H_body straight towards d (first
     stage), then about H to the panel's roll. The EARTH_SIDE variant aims at the Earth-side attitude as it
@@ -412,8 +454,11 @@ def sun_safe_error(x: Array, p: np.void, b: np.void, g: np.void) -> float:
         hn = math.sqrt(Hh[0] * Hh[0] + Hh[1] * Hh[1] + Hh[2] * Hh[2])
         if hn > 0.0:
             hx, hy, hz = Hh[0] / hn, Hh[1] / hn, Hh[2] / hn
-            r3 = 1.0 / math.sqrt(3.0)
-            d0, d1, d2 = math.copysign(r3, Hb0), math.copysign(r3, Hb1), math.copysign(r3, Hb2)
+            if p.wheels_on_axes:
+                r3 = 1.0 / math.sqrt(3.0)
+                d0, d1, d2 = math.copysign(r3, Hb0), math.copysign(r3, Hb1), math.copysign(r3, Hb2)
+            else:
+                d0, d1, d2 = _vertex(Hb0, Hb1, Hb2, hn, share, p, b)
             hb = math.sqrt(Hb0 * Hb0 + Hb1 * Hb1 + Hb2 * Hb2)
             b0, b1, b2 = Hb0 / hb, Hb1 / hb, Hb2 / hb
             dq4 = _h_first(b0, b1, b2, d0, d1, d2, b, g)  # first stage: H_body straight to d
