@@ -151,12 +151,12 @@ def test_the_default_filter_keeps_a_vehicle_with_skewed_wheels_safe_below_a_larg
     assert np.sum(large & ~failed) > np.sum(failed)
 
 
-TILTED_AXES = ((0.9397, 0.2418, 0.2418), (0.2418, 0.9397, 0.2418), (0.2418, 0.2418, 0.9397))
-"""config/examples/skewed_wheels.yaml's array: each wheel 20 deg off its body axis toward [1, 1, 1]."""
+TILTED = config.load(ROOT / "config" / "examples" / "skewed_wheels.yaml")
+"""The shipped example's array: each wheel 20 deg off its body axis toward [1, 1, 1]."""
 
 
-@pytest.mark.parametrize("axes", [SKEWED_AXES, TILTED_AXES], ids=["generic", "tilted"])
-def test_the_momentum_modes_place_holds_every_momentum_some_direction_holds(axes: tuple) -> None:
+@pytest.mark.parametrize("cfg", [SKEWED, TILTED], ids=["generic", "tilted"])
+def test_the_momentum_modes_place_holds_every_momentum_some_direction_holds(cfg: config.Config) -> None:
     """With the wheels off the body axes the momentum mode puts H_body on a vertex of the array (`law._vertex`):
     for |H| from small to past what any direction holds and H_body in every direction, where a direction of a fine
     grid over the sphere holds |H| at rest with the rates' share (an independent search), the chosen one does too
@@ -165,7 +165,6 @@ def test_the_momentum_modes_place_holds_every_momentum_some_direction_holds(axes
     from rta_attitude.dynamics.spacecraft import wheel_rate_momentum
     from rta_attitude.filter.gatekeeper.law import _vertex
 
-    cfg = with_wheels(BASE, axes)
     b = backup_record(cfg)[0]
     p = b["law_plant"]
     Ai, D = p["wheel_axes_inverse"], float(p["wheel_inertia_kgm2"])
