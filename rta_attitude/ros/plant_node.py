@@ -188,8 +188,12 @@ class PlantNode(RtaNode):
                     self.startup_extensions += 1
                     return
                 self.destroy_timer(self._startup)
+                torque_des = self.resolve_topic_name(topics.TORQUE_DES)
+                if self.knobs["external_controller"] and not self._controller_readers():
+                    # no controller in the graph is the cause to name, whichever of the run's readers is also late
+                    missing = [(torque_des, 0, 1)]
                 name, have, want = missing[0]
-                if name == self.resolve_topic_name(topics.TORQUE_DES):
+                if name == torque_des:
                     self._end(topics.RUN_FAILED + f": no node publishes {name} and reads the state after "
                               f"{self.knobs['startup_timeout_s']:g} s (external_controller: start your "
                               "controller node on this namespace)")
