@@ -21,9 +21,9 @@ ROOT = Path(__file__).resolve().parents[1]
 EXAMPLES = sorted((ROOT / "config" / "examples").glob("*.yaml"))
 
 
-def test_there_are_the_seven_examples() -> None:
+def test_there_are_the_eight_examples() -> None:
     assert [p.stem for p in EXAMPLES] == ["eclipse", "ground_passes", "payload_inertial", "products_of_inertia",
-                                          "skewed_wheels", "star_tracker", "sun_beta_30"]
+                                          "pyramid_12u", "skewed_wheels", "star_tracker", "sun_beta_30"]
 
 
 @pytest.mark.parametrize("path", EXAMPLES, ids=lambda p: p.stem)

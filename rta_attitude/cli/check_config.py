@@ -36,12 +36,22 @@ def run(args: argparse.Namespace) -> int:
     from rta_attitude.constraints.windows import ramp_start
 
     cfg = load(args)
-    cfg.spacecraft.require_three_wheels("the filter")  # what follows derives the filter's margins
+    array = cfg.spacecraft.n_wheels != 3
+    if array:  # the filter over the array (`filter.wheel_array`): its margins are its virtual vehicle's
+        from rta_attitude.filter.wheel_array import check_array, virtual_config
+
+        check_array(cfg)
+    model = virtual_config(cfg) if array else cfg
     print(f"{cfg.source}: ok")
     print(f"  preset {cfg.filter.preset}, fallback {cfg.filter.fallback}, dt {cfg.filter.sample_time_s} s, "
           f"{cfg.substeps} RK4 substeps")
     print(f"  plant model {cfg.spacecraft.model}, filter model {cfg.filter.model}, gatekeeper {cfg.filter.backup_law}")
-    print(f"  admissible |u| <= {np.array2string(cfg.u_max_rad_s2, precision=2)} rad/s^2 (x, y, z)")
+    print(f"  admissible |u| <= {np.array2string(cfg.u_max_rad_s2, precision=2)} rad/s^2 "
+          f"({', '.join(cfg.spacecraft.wheel_names)})")
+    if array:
+        print(f"  {cfg.spacecraft.n_wheels} wheels: the filter's QP is over their accelerations, the body's rows "
+              f"through A; its margins take the body acceleration they can give, |A| U <= "
+              f"{model.limits.wheel_accel_max_rad_s2:.4g} rad/s^2 on an axis")
     sc = cfg.spacecraft
     if not sc.principal:
         moments, axes = np.linalg.eigh(sc.inertia_matrix)
@@ -55,9 +65,9 @@ def run(args: argparse.Namespace) -> int:
               f"smallest singular value {smallest:.3g}); every wheel turns every axis")
     if sc.control_lost:
         print(f"  WARNING: {sc.control_lost}: the filter keeps u = 0 on the failed wheel and holds what the others can")
-    delta = robust_inertia_uncertainty(cfg)
+    delta = robust_inertia_uncertainty(model)
     if delta > 0.0:
-        worst = inertia_accel_bound(cfg, cfg.filter.model)
+        worst = inertia_accel_bound(model, cfg.filter.model)
         print(f"  inertia within +-{100 * delta:g} % of the configured: the rows allow up to "
               f"{', '.join(f'{v:.2g}' for v in worst)} rad/s^2 of angular acceleration error (x, y, z; at the "
               f"rate and wheel limits)")
@@ -79,12 +89,12 @@ def run(args: argparse.Namespace) -> int:
         target = c.target if c.target_vector is None else f"{c.target} [{', '.join(f'{v:g}' for v in c.target_vector)}]"
         slack = f", slack weight {c.gains.slack_weight:g}" if c.gains.slack_weight else ""
         print(f"    {c.name}: {c.kind} [{b}] from {target}, half-angle {math.degrees(c.half_angle_rad):g} deg{slack}")
-        bound = derived_margin(cfg, c, cfg.filter.model)
+        bound = derived_margin(model, c, cfg.filter.model)
         if c.gains.sampled_data_margin(cfg.filter.model) is None:
-            print(f"      sampled-data margin {sampled_data_margin(cfg, c.name):.3g} rad (derived from the vehicle, "
+            print(f"      sampled-data margin {sampled_data_margin(model, c.name):.3g} rad (derived from the vehicle, "
                   f"{cfg.filter.model} model)")
         else:
-            print(f"      sampled-data margin {sampled_data_margin(cfg, c.name):.3g} rad (configured; the derived "
+            print(f"      sampled-data margin {sampled_data_margin(model, c.name):.3g} rad (configured; the derived "
                   f"bound is {bound:.3g} rad)")
         for start, end in c.windows_s:
             t_on = ramp_start(cfg, c, start)
@@ -107,14 +117,20 @@ def run(args: argparse.Namespace) -> int:
     print(f"  priority levels: {' > '.join('+'.join(level) for level in cfg.priority_levels)}")
     print(f"  slacked: {', '.join(cfg.slacked_constraints) or 'none'}")
     print(f"  scenarios: {', '.join(s.replace('_', '-') for s in cfg.scenarios)}")
-    constraints = ConstraintSet(cfg)
+    units = {c.name: c.unit for c in ConstraintSet(model).registry}
     for name, scenario in cfg.scenarios.items():
         run_cfg = cfg.for_scenario(scenario)
-        h = ConstraintSet(run_cfg).safety_values(scenario.x0, 0.0) if run_cfg is not cfg else \
-            constraints.safety_values(scenario.x0, 0.0)
-        for i, c in enumerate(constraints.registry):
+        if array:
+            from rta_attitude.filter.wheel_array import ArraySafety
+            from rta_attitude.simulation.array_loop import array_state
+
+            h = ArraySafety(run_cfg).values(array_state(run_cfg, scenario.x0), 0.0)
+        else:
+            h = ConstraintSet(run_cfg).safety_values(scenario.x0, 0.0)
+        for i, c in enumerate(cfg.constraint_names):
             if h[i] < 0:
-                print(f"WARNING: scenario {name}: the initial state violates {c.name} (h = {h[i]:.4g} {c.unit})",
+                unit = units.get(c, units["psi_x"])
+                print(f"WARNING: scenario {name}: the initial state violates {c} (h = {h[i]:.4g} {unit})",
                       file=sys.stderr)
     if cfg.filter.backup_law != "none":
         from rta_attitude.filter.gatekeeper.law import backup_attitude_conflicts

@@ -451,6 +451,9 @@ def from_parameters(params: Mapping[str, Any], source: str = "<memory>") -> Conf
         backup_horizon_at_rest=fi.flag("backup_horizon_at_rest", False),
         actuator_lag=fi.text("actuator_lag", "compensate"),
         window_slew_fraction=fi.number("window_slew_fraction", 0.5),
+        null_space_gain_1_s=fi.number("null_space_gain_1_s", FilterOptions.null_space_gain_1_s),
+        null_space_bias=fi.number("null_space_bias", FilterOptions.null_space_bias),
+        null_space_accel_fraction=fi.number("null_space_accel_fraction", FilterOptions.null_space_accel_fraction),
         backup_sun_axis_body=fi.vector("backup_sun_axis_body", 3) if "backup_sun_axis_body" in fi.data
         else (0.0, 0.0, 1.0),  # type: ignore[arg-type]
         backup_secondary_axis_body=fi.vector("backup_secondary_axis_body", 3) if "backup_secondary_axis_body" in fi.data

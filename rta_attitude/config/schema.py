@@ -71,9 +71,19 @@ BASILISK_MISSING = "plant.simulator basilisk needs the optional extra: pip insta
 
 
 def group_of(name: str) -> str:
-    """The group (a section of `constraints:`) of a constraint: omega_y -> omega, psi_x -> psi, else itself."""
+    """The group (a section of `constraints:`) of a constraint: omega_y -> omega, psi_x or psi_<wheel> -> psi, else
+    itself."""
+    head, _, axis = name.partition("_")
+    if head == "psi" and WHEEL_NAME.fullmatch(axis):
+        return head
     head, _, axis = name.rpartition("_")
     return head if head in PER_AXIS_GROUPS and axis in AXIS_NAMES else name
+
+
+def wheel_constraint_name(wheel: str) -> str:
+    """The speed constraint of the wheel with joint name `wheel`: psi_<name> less a leading 'wheel_' (the paper's
+    wheel_x: psi_x)."""
+    return "psi_" + wheel.removeprefix("wheel_")
 
 
 def _positive(where: str, value: float) -> None:
@@ -622,7 +632,7 @@ class PointingConstraint:
         if not (self.name and set(self.name) <= NAME_CHARACTERS and self.name[0].isalpha()):
             raise ConfigError(f"{where}: a constraint's name must be lower-case letters, digits and '_', starting "
                               f"with a letter, got {self.name!r}")
-        if self.name in FIXED_NAMES or self.name in FIXED_GROUPS:
+        if self.name in FIXED_NAMES or self.name in FIXED_GROUPS or group_of(self.name) != self.name:
             raise ConfigError(f"{where}: {self.name!r} is the name of another constraint; choose another name")
         _choice(f"{where}.kind", self.kind, POINTING_KINDS)
         _choice(f"{where}.target", self.target, TARGET_NAMES)
@@ -726,6 +736,15 @@ class FilterOptions:
     """A scheduled window's barrier tightens at this fraction of the rate the vehicle can turn a boresight at
     ((1 - zoh_margin) omega_max less the target's motion), leaving the rest to the approach and the other
     constraints (`constraints.windows`)."""
+    null_space_gain_1_s: float = 0.01
+    """More than three wheels: the rate at which the null-space law (`filter.wheel_array`) drives the array's
+    null-space speeds toward their bias, 1/s."""
+    null_space_bias: float = 0.1
+    """More than three wheels: the null-space law spins the wheels as far from zero speed as it can with none beyond
+    this fraction of the speed the rows keep (`Config.psi_keep_rad_s`); 0: no law (`filter.wheel_array`)."""
+    null_space_accel_fraction: float = 0.05
+    """More than three wheels: the most the null-space law asks of any wheel, a fraction of its acceleration limit
+    (the primary's command keeps the rest)."""
     priorities: tuple[tuple[str, ...], ...] = ()
     """Levels of constraint groups (`Config.groups`: the pointing constraints by name, temperature, battery,
     omega, psi), most important first: with `fallback: prioritize`, an infeasible QP is answered by letting the
@@ -748,6 +767,10 @@ class FilterOptions:
         _choice("filter.backup_secondary_target", self.backup_secondary_target, BACKUP_SECONDARY_TARGETS)
         if not (math.isfinite(self.window_slew_fraction) and 0.0 < self.window_slew_fraction <= 1.0):
             raise ConfigError(f"filter.window_slew_fraction must be in (0, 1], got {self.window_slew_fraction!r}")
+        for name in ("null_space_gain_1_s", "null_space_bias", "null_space_accel_fraction"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and 0.0 <= v <= 1.0):
+                raise ConfigError(f"filter.{name} must be in [0, 1], got {v!r}")
         _positive("filter.backup_horizon_s", self.backup_horizon_s)
         if not (math.isfinite(self.backup_energy_lookahead_s) and 0.0 <= self.backup_energy_lookahead_s <= 1e6):
             raise ConfigError(f"filter.backup_energy_lookahead_s must be between 0 (off) and 1e6 s, got "
@@ -953,8 +976,10 @@ class Config:
 
     @property
     def constraint_names(self) -> tuple[str, ...]:
-        """Every safety constraint by name, in row order: the pointing constraints, then FIXED_NAMES."""
-        return (*(c.name for c in self.pointing), *FIXED_NAMES)
+        """Every safety constraint by name, in row order: the pointing constraints, then FIXED_NAMES but the wheels',
+        one per configured wheel (`wheel_constraint_name`: the paper's psi_x, psi_y, psi_z)."""
+        wheels = (wheel_constraint_name(w) for w in self.spacecraft.wheel_names)
+        return (*(c.name for c in self.pointing), *FIXED_NAMES[:-3], *wheels)
 
     @property
     def groups(self) -> tuple[str, ...]:

@@ -338,6 +338,10 @@ def simulate(cfg: Config, scenario: str | Scenario, rta: bool = True, preset: st
     scen = cfg.scenario(scenario) if isinstance(scenario, str) else scenario
     if duration_s is not None:
         scen = replace(scen, duration_s=float(duration_s))
+    if cfg.spacecraft.n_wheels != 3:  # an array of more wheels: the filter over the array, stepped in Python
+        from rta_attitude.simulation.array_loop import simulate_array
+
+        return simulate_array(cfg, scen, rta)
     return ClosedLoop(cfg, scen, rta).run()
 
 
