@@ -38,10 +38,10 @@ def run(args: argparse.Namespace) -> int:
     cfg = load(args)
     array = cfg.spacecraft.n_wheels != 3
     if array:  # the filter over the array (`filter.wheel_array`): its margins are its virtual vehicle's
-        from rta_attitude.filter.wheel_array import check_array, virtual_config
+        from rta_attitude.filter.wheel_array import check_array
 
         check_array(cfg)
-    model = virtual_config(cfg) if array else cfg
+    model = cfg.body_model
     print(f"{cfg.source}: ok")
     print(f"  preset {cfg.filter.preset}, fallback {cfg.filter.fallback}, dt {cfg.filter.sample_time_s} s, "
           f"{cfg.substeps} RK4 substeps")

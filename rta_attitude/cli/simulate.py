@@ -60,7 +60,7 @@ def run(args: argparse.Namespace) -> int:
     """`rta-attitude simulate`."""
     from rta_attitude.cli.options import load
     from rta_attitude.files import output_folder, write_text
-    from rta_attitude.simulation.closed_loop import ClosedLoop
+    from rta_attitude.simulation.closed_loop import closed_loop
     from rta_attitude.simulation.metrics import format_summary, summarize_trajectory
 
     cfg = load(args, preset=args.preset)
@@ -80,7 +80,7 @@ def run(args: argparse.Namespace) -> int:
             raise RtaError(f"--duration must be > 0 s, got {args.duration}")
         scenario = replace(scenario, duration_s=float(args.duration))
     with output_folder(args.out) as out:  # a failed run leaves no empty folder
-        loop = ClosedLoop(cfg, scenario, rta=not args.no_rta)
+        loop = closed_loop(cfg, scenario, rta=not args.no_rta)
         t0 = time.perf_counter()
         traj = loop.run()
         wall = time.perf_counter() - t0

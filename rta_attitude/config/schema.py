@@ -1076,6 +1076,24 @@ class Config:
         return np.where(sc.wheel_failed, 0.0, box)
 
     @property
+    def virtual_vehicle(self) -> Config:
+        """The vehicle with three wheels on its body axes that moves as this one's array does (the same body; the
+        wheels' momentum A psi on the body axes, their acceleration A u): its actuator bound is the most any body
+        axis gets from the working wheels, max_a sum_i |A_ai| U_i, and it has no failed wheel. The filter over an
+        array (`filter.wheel_array`) evaluates the body's constraints on it."""
+        sc = self.spacecraft
+        reach = np.abs(sc.wheel_axes) @ self.u_max_rad_s2
+        return replace(self, spacecraft=replace(sc, wheel_axes_body=BODY_AXES, wheel_names=WHEEL_JOINTS,
+                                                failed_wheels=()),
+                       limits=replace(self.limits, wheel_accel_max_rad_s2=float(reach.max())))
+
+    @property
+    def body_model(self) -> Config:
+        """What the body's constraints, angles and margins are computed on: this configuration with three wheels,
+        its `virtual_vehicle` with more (their first 19 state entries then stand for the body)."""
+        return self if self.spacecraft.n_wheels == 3 else self.virtual_vehicle
+
+    @property
     def slacked_constraints(self) -> tuple[str, ...]:
         """Names of the enabled constraints that carry a slack (reported, not counted as failures)."""
         return tuple(n for n in self.slackable if self.gains(n).enabled and self.gains(n).slack_weight > 0)

@@ -1,8 +1,8 @@
 """The registry: a configuration's constraints as one ordered table that every consumer reads.
 
 Rows (`Config.constraint_names`): the pointing constraints, in the order the configuration lists them, then
-temperature, battery, omega_x/y/z, psi_x/y/z. Per constraint: its name, group (a section of
-`constraints:`, the name `filter.priorities` uses), kind, row, the unit of its h, whether it is enabled and
+temperature, battery, omega_x/y/z, a psi_ per wheel (the paper's psi_x/y/z). Per constraint: its name, group
+(a section of `constraints:`, the name `filter.priorities` uses), kind, row, the unit of its h, whether it is enabled and
 slacked, its priority level, and how its h reads in an engineer's units (`display`). The QP's rows, the safety
 values, the gatekeeper's rollout margins, the Monte Carlo's columns and classification, filter_status and
 /diagnostics keys, bag analysis, figures and the scene all take names and units from here; a new pointing
@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from rta_attitude.config.schema import AXIS_NAMES, Config, group_of
+from rta_attitude.config.schema import AXIS_NAMES, Config, group_of, wheel_constraint_name
 
 KINDS: tuple[str, ...] = ("keep_out", "keep_in", "temperature", "battery", "rate", "wheel_speed")
 """What a constraint is: a pointing cone (keep_out, keep_in), the thermal node's temperature, the battery's
@@ -137,7 +137,7 @@ def registry(cfg: Config) -> Registry:
                                   bool(cone.windows_s)))
     fixed = [("temperature", "temperature", L.temperature_max_K), ("battery", "battery", L.energy_min_J)]
     fixed += [(f"omega_{a}", "rate", L.omega_max_rad_s) for a in AXIS_NAMES]
-    fixed += [(f"psi_{a}", "wheel_speed", L.psi_max_rad_s) for a in AXIS_NAMES]
+    fixed += [(wheel_constraint_name(w), "wheel_speed", L.psi_max_rad_s) for w in cfg.spacecraft.wheel_names]
     for name, kind, limit in fixed:
         g = cfg.gains(name)
         group = group_of(name)

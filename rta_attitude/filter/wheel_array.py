@@ -3,8 +3,8 @@
 Any array moves the body as three wheels on the body axes would, holding the momentum A psi and driven by A u
 (A (3, N): the spin axes as columns; `spacecraft.wheel_spin_axes_body`). So every constraint of the body (the
 pointing cones, temperature, battery, the rates, the angular-acceleration limit) is the three-wheel filter's row
-evaluated at the *virtual* state (psi_virtual = A psi) of the *virtual* vehicle (`virtual_config`: the same body
-with three wheels on its axes), and its gain in u is that row's gain times A. The wheels' own constraints are
+evaluated at the *virtual* state (psi_virtual = A psi) of the *virtual* vehicle (`Config.virtual_vehicle`: the same
+body with three wheels on its axes), and its gain in u is that row's gain times A. The wheels' own constraints are
 per wheel: |psi_i| <= psi_keep (psi_dot_i = u_i, the rows of `constraints.wheel_speed`), the box |u_i| <= U_i (0
 for a failed wheel), and in the `robust` preset each wheel's one-step zero-order-hold interval. Then
 
@@ -34,13 +34,12 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import replace
 
 import numba
 import numpy as np
 from numpy.typing import NDArray
 
-from rta_attitude.config.schema import BODY_AXES, WHEEL_JOINTS, Config
+from rta_attitude.config.schema import Config
 from rta_attitude.constraints.base import GAIN_DTYPE, MAX_ROWS
 from rta_attitude.constraints.geometry import CONTEXT_DTYPE
 from rta_attitude.constraints.rows import safety_values
@@ -143,16 +142,6 @@ ARRAY_RESULT_DTYPE = np.dtype([
 """What one call over an array did: RESULT_DTYPE's fields by name, per wheel and per constraint of the array."""
 
 
-def virtual_config(cfg: Config) -> Config:
-    """The vehicle with three wheels on its body axes that moves as cfg's array does (the same body, the momentum
-    A psi, the acceleration A u): its actuator bound is the most any body axis gets from the working wheels,
-    max_a sum_i |A_ai| U_i, and it has no failed wheel (a failed wheel's U_i is 0 in that sum)."""
-    sc = cfg.spacecraft
-    reach = np.abs(sc.wheel_axes) @ cfg.u_max_rad_s2
-    return replace(cfg, spacecraft=replace(sc, wheel_axes_body=BODY_AXES, wheel_names=WHEEL_JOINTS, failed_wheels=()),
-                   limits=replace(cfg.limits, wheel_accel_max_rad_s2=float(reach.max())))
-
-
 def null_basis(axes: Array, failed: NDArray[np.bool_]) -> Array:
     """An orthonormal basis (N, k) of the working wheels' null space: accelerations that do not turn the body
     (0 on a failed wheel), each column's sign such that its largest entry is positive (deterministic)."""
@@ -170,7 +159,7 @@ def null_basis(axes: Array, failed: NDArray[np.bool_]) -> Array:
 def array_records(cfg: Config) -> tuple[NDArray[np.void], NDArray[np.void]]:
     """The records (1,) of the filter over cfg's array: the virtual vehicle's FILTER_DTYPE record (its three wheel
     rows off: the array's wheels have their own) and the array's ARRAY_DTYPE record."""
-    body = filter_record(virtual_config(cfg))
+    body = filter_record(cfg.virtual_vehicle)
     sc = cfg.spacecraft
     n = sc.n_wheels
     rec = np.zeros(1, ARRAY_DTYPE)
@@ -832,4 +821,4 @@ class ArrayFilter:
 
 __all__ = ["ARRAY_DTYPE", "ARRAY_RESULT_DTYPE", "MAX_WHEELS", "ArrayFilter", "ArrayResult", "ArraySafety",
            "array_call",
-           "array_records", "check_array", "null_basis", "virtual_config"]
+           "array_records", "check_array", "null_basis"]

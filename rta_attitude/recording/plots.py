@@ -23,11 +23,11 @@ from typing import Any, Protocol
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from rta_attitude.config.schema import Config, PointingConstraint
+from rta_attitude.config.schema import Config, PointingConstraint, wheel_constraint_name
 from rta_attitude.constraints import ConstraintSet
 from rta_attitude.dynamics import quaternion as quat
 from rta_attitude.dynamics.environment import sun_direction, target_direction, target_kind
-from rta_attitude.dynamics.state import ENERGY, OMEGA, PSI, TEMP, THETA_S, Q
+from rta_attitude.dynamics.state import ENERGY, OMEGA, STATE_SIZE, TEMP, THETA_S, Q, wheel_columns
 from rta_attitude.errors import RtaError
 from rta_attitude.files import atomic
 
@@ -208,8 +208,10 @@ def plot_runs(runs: Sequence[tuple[str, RunSeries]], cfg: Config, path: str | Pa
     ax = axes.ravel()
     w_lim = np.degrees(L.omega_max_rad_s)
     wd_lim = np.degrees(L.omega_dot_max_rad_s2)
-    constraints = ConstraintSet(cfg)
-    angles = [constraints.angles(np.asarray(run.x)) for _, run in runs]
+    constraints = ConstraintSet(cfg.body_model)
+    n_wheels = cfg.spacecraft.n_wheels
+    wheels = [wheel_constraint_name(w).removeprefix("psi_") for w in cfg.spacecraft.wheel_names]  # the paper's x y z
+    angles = [constraints.angles(np.asarray(run.x)[:, :STATE_SIZE]) for _, run in runs]  # (q and t alone)
     _first_cone_panel(ax[0], plt, runs, cfg)
     for slot, cone in zip(slots, cfg.pointing, strict=True):
         _cone_panel(ax[slot], chr(ord("a") + slot), cone, runs, [a[cone.name] for a in angles])
@@ -225,8 +227,11 @@ def plot_runs(runs: Sequence[tuple[str, RunSeries]], cfg: Config, path: str | Pa
             lab = f"{'xyz'[i]} {label}" if len(runs) > 1 else "xyz"[i]
             ax[4].plot(t, np.degrees(x[:, OMEGA.start + i]), ls=ls, color=AXIS_COLORS[i], label=lab)
             ax[5].plot(tu, np.degrees(np.asarray(run.omega_dot)[:, i]), ls=ls, color=AXIS_COLORS[i], label=lab)
-            ax[6].plot(t, x[:, PSI.start + i], ls=ls, color=AXIS_COLORS[i], label=lab)
-            ax[7].plot(tu, np.asarray(run.u)[:, i], ls=ls, color=AXIS_COLORS[i], label=lab)
+        for i, (col, wheel) in enumerate(zip(wheel_columns(n_wheels), wheels, strict=True)):
+            lab = f"{wheel} {label}" if len(runs) > 1 else wheel
+            color = AXIS_COLORS[i] if n_wheels == 3 else None
+            ax[6].plot(t, x[:, col], ls=ls, color=color, label=lab)
+            ax[7].plot(tu, np.asarray(run.u)[:, i], ls=ls, color=color, label=lab)
         ax[8].plot(t, x[:, ENERGY] / 1000.0, ls=ls, label=label)
     T_max = L.temperature_max_K - CELSIUS_OFFSET_K
     ax[3].set(title=f"(d) temperature, {body_label(cfg.thermal.face_normal_body)} face", ylabel="T [degC]")

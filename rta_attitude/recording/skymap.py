@@ -64,7 +64,7 @@ from rta_attitude.config.schema import Config, PointingConstraint
 from rta_attitude.constraints import ConstraintSet
 from rta_attitude.dynamics import quaternion as quat
 from rta_attitude.dynamics.environment import EARTH_HILL, sun_direction
-from rta_attitude.dynamics.state import THETA_S, Q
+from rta_attitude.dynamics.state import STATE_SIZE, THETA_S, Q
 from rta_attitude.recording.plots import _pyplot, _save, body_label, cone_targets, limit_text, target_label
 
 Array = NDArray[np.float64]
@@ -255,9 +255,10 @@ def sky_track(run: SkyRun, cfg: Config, constraints: ConstraintSet | None = None
     A = quat.attitude_matrices(x[:, Q])
     inter = np.zeros(len(t), dtype=bool)
     inter[: len(run.u)] = intervened_steps(run)
-    cs = constraints or ConstraintSet(cfg)
-    angles = cs.angles(x)
-    h = cs.safety_values(x, t)
+    cs = constraints or ConstraintSet(cfg.body_model)
+    body = x[:, :STATE_SIZE]  # (an array's first three wheels stand in at 7..9: a cone reads q and t alone)
+    angles = cs.angles(body)
+    h = cs.safety_values(body, t)
     beta = cfg.environment.sun_beta_rad
     return SkyTrack(t_s=t, intervened=inter,
                     cones=tuple(cone_track(c, A, x, angles[c.name], h[:, cs.registry.index(c.name)], beta)
@@ -363,7 +364,7 @@ def plot_skymap(runs: Sequence[tuple[str, SkyRun]], cfg: Config, path: str | Pat
         The path written.
     """
     plt = _pyplot()
-    constraints = ConstraintSet(cfg)
+    constraints = ConstraintSet(cfg.body_model)
     tracks = [(label, sky_track(run, cfg, constraints)) for label, run in runs]
     n_cones = len(cfg.pointing)
     columns = max(1, min(n_cones, MAP_COLUMNS))

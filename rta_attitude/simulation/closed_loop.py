@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING
 
 import numba
 import numpy as np
@@ -69,6 +70,9 @@ from rta_attitude.filter.pipeline import filter_state
 from rta_attitude.filter.records import FILTER_DTYPE, RESULT_DTYPE, WORKSPACE_DTYPE, WORKSPACES, filter_record
 from rta_attitude.jit import JIT, LEAF
 from rta_attitude.simulation.trajectory import Trajectory, substep_minima
+
+if TYPE_CHECKING:
+    from rta_attitude.simulation.array_loop import ArrayLoop
 
 Array = NDArray[np.float64]
 log = logging.getLogger(__name__)
@@ -338,11 +342,17 @@ def simulate(cfg: Config, scenario: str | Scenario, rta: bool = True, preset: st
     scen = cfg.scenario(scenario) if isinstance(scenario, str) else scenario
     if duration_s is not None:
         scen = replace(scen, duration_s=float(duration_s))
-    if cfg.spacecraft.n_wheels != 3:  # an array of more wheels: the filter over the array, stepped in Python
-        from rta_attitude.simulation.array_loop import simulate_array
+    return closed_loop(cfg, scen, rta).run()
 
-        return simulate_array(cfg, scen, rta)
-    return ClosedLoop(cfg, scen, rta).run()
+
+def closed_loop(cfg: Config, scenario: Scenario, rta: bool = True) -> ClosedLoop | ArrayLoop:
+    """The closed loop of cfg's wheels: `ClosedLoop` (compiled) for three, `array_loop.ArrayLoop` (the filter over
+    the array, stepped in Python) for more."""
+    if cfg.spacecraft.n_wheels != 3:
+        from rta_attitude.simulation.array_loop import ArrayLoop
+
+        return ArrayLoop(cfg, scenario, rta)
+    return ClosedLoop(cfg, scenario, rta)
 
 
 def compile_kernels(cfg: Config) -> float:
@@ -360,5 +370,6 @@ def compile_kernels(cfg: Config) -> float:
     return time.perf_counter() - t0
 
 
-__all__ = ["LOOP_DTYPE", "ClosedLoop", "StepArrays", "Trajectory", "advance", "command_row", "compile_kernels",
+__all__ = ["LOOP_DTYPE", "ClosedLoop", "StepArrays", "Trajectory", "advance", "closed_loop", "command_row",
+           "compile_kernels",
            "loop_record", "run_scenario", "run_stepped", "simulate"]
