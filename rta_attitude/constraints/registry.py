@@ -1,13 +1,12 @@
 """The registry: a configuration's constraints as one ordered table that every consumer reads.
 
 Rows (`Config.constraint_names`): the pointing constraints, in the order the configuration lists them, then
-temperature, battery, omega_x/y/z, a psi_ per wheel (the paper's psi_x/y/z). Per constraint: its name, group
-(a section of `constraints:`, the name `filter.priorities` uses), kind, row, the unit of its h, whether it is
-enabled and slacked, its priority level, and how its h reads in an engineer's units (`display`). The QP's rows, the safety
+temperature, battery, omega_x/y/z, a psi_ per wheel (the paper's psi_x/y/z). Per constraint: its name, group (a
+section of `constraints:`, the name `filter.priorities` uses), kind, row, the unit of its h, whether it is enabled
+and slacked, its priority level, and how its h reads in an engineer's units (`display`). The QP's rows, the safety
 values, the gatekeeper's rollout margins, the Monte Carlo's columns and classification, filter_status and
-/diagnostics keys, bag analysis, figures and the scene all take names and units from here; a new pointing
-constraint is a configuration entry, and nothing else names it.
-"""
+/diagnostics keys, bag analysis, figures and the scene all take names and units from here; a new pointing constraint
+is a configuration entry, and nothing else names it. """
 
 from __future__ import annotations
 
