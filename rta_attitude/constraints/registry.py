@@ -6,7 +6,8 @@ section of `constraints:`, the name `filter.priorities` uses), kind, row, the un
 and slacked, its priority level, and how its h reads in an engineer's units (`display`). The QP's rows, the safety
 values, the gatekeeper's rollout margins, the Monte Carlo's columns and classification, filter_status and
 /diagnostics keys, bag analysis, figures and the scene all take names and units from here; a new pointing constraint
-is a configuration entry, and nothing else names it. """
+is a configuration entry, and nothing else names it.
+"""
 
 from __future__ import annotations
 
