@@ -45,12 +45,15 @@ class ArrayLoop:
         ConfigError: rta and the array's filter does not take the configuration (`wheel_array.check_array`).
     """
 
-    def __init__(self, cfg: Config, scenario: Scenario, rta: bool = True) -> None:
+    def __init__(self, cfg: Config, scenario: Scenario, rta: bool = True, filt: ArrayFilter | None = None,
+                 safety: ArraySafety | None = None) -> None:
+        """filt, safety: the filter and safety values of cfg for this scenario, made once by a caller that runs
+        many states (the filter over an array keeps no memory from one run to the next)."""
         self.cfg = cfg.for_scenario(scenario)
         self.scenario = scenario
         self.rta = rta
-        self.filter = ArrayFilter(self.cfg) if rta else None
-        self.safety = ArraySafety(self.cfg)
+        self.filter = (filt or ArrayFilter(self.cfg)) if rta else None
+        self.safety = safety or ArraySafety(self.cfg)
 
     def run(self) -> Trajectory:
         """Simulate the whole scenario (see the module docstring)."""
