@@ -227,8 +227,8 @@ def test_basilisk_with_the_pyramid_agrees_over_2000_s(pyramid: config.Config, fa
 def test_what_takes_three_wheels_says_so(pyramid: config.Config, tmp_path: Path) -> None:
     """The three-wheel filter and the viability oracle raise one ConfigError line naming the array; the CLI's
     commands (the launcher too) and a node exit 1 with one line, before writing anything: the Monte Carlo and the
-    launcher that they take three wheels, check-config and simulate (the filter over the array) what that filter
-    does not take (here the default's gatekeeper)."""
+    launcher that they take three wheels, check-config (the filter over the array) what that filter does not take
+    (here the default's gatekeeper). simulate runs the paper's example, whose scenario turns the gatekeeper off."""
     line = "takes three reaction wheels; spacecraft.wheel_spin_axes_body gives 4 (rw1, rw2, rw3, rw4)"
     array_line = "the filter over 4 wheels (rw1, rw2, rw3, rw4) does not take the gatekeeper"
     with pytest.raises(ConfigError, match=r"the filter takes three reaction wheels; .* gives 4 \(rw1"):
@@ -238,14 +238,19 @@ def test_what_takes_three_wheels_says_so(pyramid: config.Config, tmp_path: Path)
     path = tmp_path / "pyramid.yaml"
     path.write_text(TWELVE_U + "".join(f"        {k}: {v}\n" for k, v in PYRAMID.items()))
     out = tmp_path / "out"
-    for command in (["check-config"], ["simulate"], ["montecarlo", "--runs", "2", "--no-plot", "--out", str(out)],
+    for command in (["check-config"], ["montecarlo", "--runs", "2", "--no-plot", "--out", str(out)],
                     ["launch", "--bag", str(tmp_path / "run.mcap"), "--out", str(out)]):
         done = subprocess.run([sys.executable, "-m", "rta_attitude.cli", *command, "--config", str(path)],
                               capture_output=True, text=True, timeout=600)
         assert done.returncode == 1, (command, done.stdout, done.stderr)
-        expected = array_line if command[0] in ("check-config", "simulate") else line
+        expected = array_line if command[0] == "check-config" else line
         assert expected in done.stderr and len(done.stderr.strip().splitlines()) == 1, (command, done.stderr)
     assert not out.exists() and not (tmp_path / "run.mcap").exists()
+    sim = tmp_path / "sim"
+    done = subprocess.run([sys.executable, "-m", "rta_attitude.cli", "simulate", "--scenario", "paper-example",
+                           "--no-plot", "--out", str(sim), "--config", str(path)], capture_output=True, text=True,
+                          timeout=600)
+    assert done.returncode == 0 and "psi_rw4" in done.stdout, (done.stdout, done.stderr)
     node = subprocess.run([sys.executable, "-m", "rta_attitude.ros.plant_node", "--ros-args", "-p",
                            f"config_file:={path}", "-p", "record:=false"], capture_output=True, text=True, timeout=600)
     errors = [ln for ln in (node.stdout + node.stderr).splitlines() if "ERROR" in ln]
