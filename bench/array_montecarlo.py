@@ -58,8 +58,8 @@ def _array_chunk(args):
         loop = ArrayLoop(cfg, scen, filt=filt, safety=safety)
         filt, safety = loop.filter, loop.safety
         run = loop.run()
-        bad = run.h_substep_min[:, hard].min(axis=0) < 0
-        out.append([cfg.constraint_names[hard[i]] for i in np.flatnonzero(bad)])
+        worst = run.h_substep_min[:, hard].min(axis=0)
+        out.append({cfg.constraint_names[hard[i]]: float(worst[i]) for i in np.flatnonzero(worst < 0)})
     return out
 
 
@@ -71,8 +71,9 @@ def main() -> None:
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--fail", default="", help="wheels failed from the start, comma-separated joint names")
     args = ap.parse_args()
-    cfg = load(args.config)
     failed = [w.strip() for w in args.fail.split(",") if w.strip()]
+    cfg = load(args.config)
+    cfg = replace(cfg, spacecraft=replace(cfg.spacecraft, failed_wheels=tuple(failed)))
     ref = three_wheels(cfg)
     X, _ = sample_initial_states(args.runs, args.seed, ref)
     cols = list(wheel_columns(cfg.spacecraft.n_wheels))
@@ -85,6 +86,7 @@ def main() -> None:
         parts = pool.map(_array_chunk, [(args.config, failed, X[c], int(c[0]) if len(c) else 0) for c in chunks])
     wall_array = time.perf_counter() - t0
     lost = [v for part in parts for v in part]
+    index = np.flatnonzero(fits)  # each kept state's run number in the sampled campaign
     t0 = time.perf_counter()
     outcome = run_runs(ref, X, DURATION_S)
     wall_ref = time.perf_counter() - t0
@@ -99,10 +101,13 @@ def main() -> None:
     for v in lost:
         for name in v:
             row["array_violated"][name] = row["array_violated"].get(name, 0) + 1
+    row["array_failed_runs"] = {int(index[k]): v for k, v in enumerate(lost) if v}
+    row["three_wheels_failed_runs"] = [int(index[k]) for k in np.flatnonzero(ref_bad)]
     print(f"{args.config} (failed: {', '.join(failed) or 'none'}), seed {args.seed}, {n} of {args.runs} states "
           f"({args.runs - n} left out: a wheel of the split past its limit)")
     print(f"  array:        {row['array_safe']} safe = {100 * row['array_safe'] / n:.2f} % "
-          f"({row['array_wall_s']} s, {args.workers} workers); violated: {row['array_violated']}")
+          f"({row['array_wall_s']} s, {args.workers} workers); violated: {row['array_violated']}; failed runs (h): "
+          f"{row['array_failed_runs']}")
     print(f"  three wheels: {row['three_wheels_safe']} safe = {100 * row['three_wheels_safe'] / n:.2f} % "
           f"({row['three_wheels_wall_s']} s, 1 process)")
     machine.append("array_montecarlo", row)

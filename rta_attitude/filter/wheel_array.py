@@ -306,11 +306,14 @@ def _lift(g: Array, a: np.void, out: Array) -> float:
 def array_table(x: Array, f: np.void, a: np.void, ws: np.void, r: np.void
                 ) -> tuple[Array, Array, Array, NDArray[np.int64], int, Array, Array]:
     """The rows of the array's QP at the prepared state (ws.table: the virtual vehicle's rows): (G (K, N), lo, hi
-    (K,), con (K,) each row's constraint or -1 (hard: the virtual box and acceleration rows), K, box lo and hi
-    (N,)); h, psi0, psi1 and uncontrollable of every constraint into r."""
+    (K,), con (K,) each row's constraint, or -1 for a hard row (the virtual box, the acceleration rows, the rates'
+    ZOH intervals on the virtual box), or -2 - i for a hard row of rate constraint i (a ZOH interval: hard as the
+    three-wheel filter's box, which it is where the wheels are the paper's; `prioritize` lets it give way with
+    its rate where the array cannot meet every hard row), K, box lo and hi (N,)); h, psi0, psi1 and
+    uncontrollable of every constraint into r."""
     t, c = ws.table, f.constraints
     n = a.n
-    cap = c.n_rows + t.zoh_rows + 6 + n
+    cap = c.n_rows + t.zoh_rows + 9 + n
     G = np.zeros((cap, n))
     lo = np.full(cap, -BIG)
     hi = np.full(cap, BIG)
@@ -331,12 +334,17 @@ def array_table(x: Array, f: np.void, a: np.void, ws: np.void, r: np.void
             con[k] = c.row_omega + t.zoh_axis[q]
             k += 1
     e = np.zeros(3)
-    for b in range(3):  # the virtual vehicle's box (its rate intervals in the robust preset)
+    for b in range(3):  # the virtual vehicle's box, then its rate's ZOH interval where that is narrower
         e[b] = 1.0
         _lift(e, a, G[k])
-        e[b] = 0.0
-        lo[k], hi[k] = t.lo[b], t.hi[b]
+        lo[k], hi[k] = ws.lo0[b], ws.hi0[b]
         k += 1
+        if t.lo[b] > ws.lo0[b] or t.hi[b] < ws.hi0[b]:
+            _lift(e, a, G[k])
+            lo[k], hi[k] = t.lo[b], t.hi[b]
+            con[k] = -2 - (c.row_omega + b)
+            k += 1
+        e[b] = 0.0
     if c.accel_rows:  # |(G_virtual A u)_b| <= b_b
         Gv, lim = f.plant.control_matrix, c.accel_limit_rad_s2
         for b in range(3):
@@ -373,6 +381,15 @@ def array_table(x: Array, f: np.void, a: np.void, ws: np.void, r: np.void
     return G, lo, hi, con, k, blo, bhi
 
 
+@numba.njit(**LEAF, inline="always")
+def _owner(con: NDArray[np.int64], k: int, soft_zoh: bool) -> int:
+    """The constraint whose mode row k takes: its own, or with soft_zoh a rate's ZOH interval's rate (-1: hard)."""
+    i = con[k]
+    if i <= -2:
+        return -2 - i if soft_zoh else -1
+    return i
+
+
 @numba.njit(**LEAF)
 def _row_value(G: Array, k: int, u: Array) -> float:
     v = 0.0
@@ -398,20 +415,21 @@ def _row_norm(G: Array, k: int) -> float:
 
 @numba.njit(**JIT)
 def assemble(G: Array, lo: Array, hi: Array, con: NDArray[np.int64], K: int, blo: Array, bhi: Array,
-             target: Array, mode: NDArray[np.int8], relax: Array, a: np.void, soften_weight: float
+             target: Array, mode: NDArray[np.int8], relax: Array, a: np.void, soften_weight: float, soft_zoh: bool
              ) -> tuple[Array, Array, Array, Array, NDArray[np.int64], NDArray[np.int64], Array]:
-    """The QP over z = [u (N); s]: each table row k whose constraint's mode is not OFF (hard rows, con -1,
-    always), normalised, slacked where its mode says (SLACKED: weight p, its configured or soften_weight;
-    DISTANCE: soften_weight on the relaxation as a distance in u), relaxed by relax[k] (both sides); then the box.
-    Returns (C, lower, upper, z0, row_of (r,) the table row of each QP row, var (r,) its slack variable or -1,
-    scale (n,) delta = scale * s)."""
+    """The QP over z = [u (N); s]: each table row k whose constraint's mode is not OFF (hard rows always; with
+    soft_zoh the rates' ZOH rows take their rate's mode, `_owner`), normalised, slacked where its mode says
+    (SLACKED: weight p, its configured or soften_weight; DISTANCE: soften_weight on the relaxation as a distance
+    in u), relaxed by relax[k] (both sides); then the box. Returns (C, lower, upper, z0, row_of (r,) the table row
+    of each QP row, var (r,) its slack variable or -1, scale (n,) delta = scale * s)."""
     n = a.n
     r = 0
     ns = 0
     for k in range(K):
-        if con[k] < 0 or mode[con[k]] != OFF:
+        i = _owner(con, k, soft_zoh)
+        if i < 0 or mode[i] != OFF:
             r += 1
-            if con[k] >= 0 and mode[con[k]] >= SLACKED:
+            if i >= 0 and mode[i] >= SLACKED:
                 ns += 1
     nz = n + ns
     C = np.zeros((r + n, nz))
@@ -423,13 +441,13 @@ def assemble(G: Array, lo: Array, hi: Array, con: NDArray[np.int64], K: int, blo
     q = 0
     v = n
     for k in range(K):
-        if not (con[k] < 0 or mode[con[k]] != OFF):
+        i = _owner(con, k, soft_zoh)
+        if not (i < 0 or mode[i] != OFF):
             continue
         row_of[q] = k
         for j in range(n):
             C[q, j] = G[k, j]
-        if con[k] >= 0 and mode[con[k]] >= SLACKED:
-            i = con[k]
+        if i >= 0 and mode[i] >= SLACKED:
             if mode[i] == DISTANCE:
                 scale[v] = _row_norm(G, k) / math.sqrt(soften_weight)
             else:
@@ -477,13 +495,14 @@ def _clip_u(z: Array, blo: Array, bhi: Array, u: Array) -> None:
 
 @numba.njit(**JIT)
 def prioritize(G: Array, lo: Array, hi: Array, con: NDArray[np.int64], K: int, blo: Array, bhi: Array,
-               target: Array, f: np.void, a: np.void, rb: np.void, r: np.void
+               target: Array, f: np.void, a: np.void, rb: np.void, r: np.void, soft_zoh: bool
                ) -> tuple[bool, Array, Array, NDArray[np.int64], NDArray[np.int64], Array, Array]:
     """`filter.qp.prioritize` over the array's rows: for each level, most important first, the least violation
     of its rows as distances in u (the more important hard as relaxed so far, the less important left out, the
     box and the hard rows kept), which fixes how far each gives way; then the filter's QP with every row
-    relaxed by that much. r.gave_way: the most important level relaxed. Returns (ok, z, mult, row_of, var,
-    scale, relax) of the last QP solved."""
+    relaxed by that much. r.gave_way: the most important level relaxed; r.soft_result: the last QP. soft_zoh: the
+    rates' ZOH rows give way with their rate (`array_table`) instead of staying hard. Returns (ok, z, mult,
+    row_of, var, scale, relax) of the last QP solved."""
     n = a.n
     mode = np.zeros(MAX_ARRAY_ROWS, dtype=np.int8)
     relax = np.zeros(K)
@@ -504,30 +523,34 @@ def prioritize(G: Array, lo: Array, hi: Array, con: NDArray[np.int64], K: int, b
             else:
                 mode[i] = HARD
         for k in range(K):
-            if con[k] >= 0 and mode[con[k]] == DISTANCE:
+            i = _owner(con, k, soft_zoh)
+            if i >= 0 and mode[i] == DISTANCE:
                 rows_here = True
         if not rows_here:
             continue
         C, lower, upper, z0, ro, vr, sc = assemble(G, lo, hi, con, K, blo, bhi, target, mode, relax, a,
-                                                   f.soften_weight)
+                                                   f.soften_weight, soft_zoh)
         zl, ml, code, backup = solve(C, lower, upper, z0, f, rb)
         if not (code == SOLVE_OK or backup == SOLVE_OK):
             break
         _clip_u(zl, blo, bhi, u)
         z, mult, row_of, var, scale, have = zl, ml, ro, vr, sc, True
         for k in range(K):
-            if con[k] >= 0 and mode[con[k]] == DISTANCE:
+            i = _owner(con, k, soft_zoh)
+            if i >= 0 and mode[i] == DISTANCE:
                 v = _violation(G, lo, hi, k, u)
                 if v > 0.0:
                     relax[k] = v + f.check_tolerance * _row_norm(G, k)
     tol2 = 2.0 * f.check_tolerance
     top = f.n_levels
     for k in range(K):
-        if con[k] >= 0 and relax[k] > tol2 * _row_norm(G, k):
-            top = min(top, a.level[con[k]])
+        i = _owner(con, k, soft_zoh)
+        if i >= 0 and relax[k] > tol2 * _row_norm(G, k):
+            top = min(top, a.level[i])
     r.gave_way = top if top < f.n_levels else NO_LEVEL
     _modes(a, False, mode)
-    C, lower, upper, z0, ro, vr, sc = assemble(G, lo, hi, con, K, blo, bhi, target, mode, relax, a, f.soften_weight)
+    C, lower, upper, z0, ro, vr, sc = assemble(G, lo, hi, con, K, blo, bhi, target, mode, relax, a, f.soften_weight,
+                                               soft_zoh)
     zl, ml, code, backup = solve(C, lower, upper, z0, f, rb)
     r.soft_result = code if backup == NOT_SOLVED or code == SOLVE_OK else backup
     if code == SOLVE_OK or backup == SOLVE_OK:
@@ -592,12 +615,13 @@ def array_call(x: Array, u_des: Array, t_s: float, f: np.void, a: np.void, ws: n
         if _violation(G, lo, hi, k, r.u[:n]) > tol * max(1.0, _row_norm(G, k)):
             need = True
     reason = NO_FALLBACK if finite_des else NON_FINITE_U_DES
+    soft_zoh = False
     if need:
         mode = np.empty(MAX_ARRAY_ROWS, dtype=np.int8)
         _modes(a, False, mode)
         relax = np.zeros(K)
         C, lower, upper, z0, row_of, var, scale = assemble(G, lo, hi, con, K, blo, bhi, target, mode, relax, a,
-                                                           f.soften_weight)
+                                                           f.soften_weight, False)
         z, mult, code, backup = solve(C, lower, upper, z0, f, rb)
         r.solve_result, r.backup_result = code, backup
         ok = code == SOLVE_OK or backup == SOLVE_OK
@@ -607,14 +631,21 @@ def array_call(x: Array, u_des: Array, t_s: float, f: np.void, a: np.void, ws: n
             if f.policy == RAISE:
                 r.raise_error = 1
             elif f.policy == SOFTEN:
+                soft_zoh = True
                 _modes(a, True, mode)
                 C, lower, upper, z0, row_of, var, scale = assemble(G, lo, hi, con, K, blo, bhi, target, mode, relax,
-                                                                   a, f.soften_weight)
+                                                                   a, f.soften_weight, True)
                 z, mult, soft, soft_backup = solve(C, lower, upper, z0, f, rb)
                 ok = soft == SOLVE_OK or soft_backup == SOLVE_OK
                 r.soft_result = SOLVE_OK if ok else soft
             elif f.policy == PRIORITIZE:
-                ok, z, mult, row_of, var, scale, relax = prioritize(G, lo, hi, con, K, blo, bhi, target, f, a, rb, r)
+                ok, z, mult, row_of, var, scale, relax = prioritize(G, lo, hi, con, K, blo, bhi, target, f, a, rb, r,
+                                                                    False)
+                if r.soft_result != SOLVE_OK:  # a hard row the array cannot meet with the rest: the rates' ZOH
+                    soft_zoh = True            # rows give way with their rate (the paper's wheels never come here)
+                    ok2, z2, m2, ro2, v2, s2, rx2 = prioritize(G, lo, hi, con, K, blo, bhi, target, f, a, rb, r, True)
+                    if ok2:
+                        ok, z, mult, row_of, var, scale, relax = ok2, z2, m2, ro2, v2, s2, rx2
             if not ok and f.policy == HOLD:
                 for j in range(n):
                     r.u[j] = min(max(0.0, blo[j]), bhi[j])
@@ -622,7 +653,7 @@ def array_call(x: Array, u_des: Array, t_s: float, f: np.void, a: np.void, ws: n
             _clip_u(z, blo, bhi, r.u[:n])
             for q in range(row_of.shape[0]):
                 k = row_of[q]
-                i = con[k]
+                i = _owner(con, k, soft_zoh)
                 if i < 0:
                     continue
                 if abs(mult[q]) > ACTIVE_MULTIPLIER:
@@ -631,8 +662,9 @@ def array_call(x: Array, u_des: Array, t_s: float, f: np.void, a: np.void, ws: n
                     r.slack[i] = max(r.slack[i], scale[var[q]] * z[var[q]])
             if f.policy == PRIORITIZE and r.qp_failed:
                 for k in range(K):
-                    if con[k] >= 0 and relax[k] > 0.0:
-                        r.slack[con[k]] = max(r.slack[con[k]], relax[k])
+                    i = _owner(con, k, soft_zoh)
+                    if i >= 0 and relax[k] > 0.0:
+                        r.slack[i] = max(r.slack[i], relax[k])
         r.status = FALLBACK if reason != NO_FALLBACK else SOLVED
     else:
         r.status = PASS

@@ -4,7 +4,8 @@ the torque interface does), the filter over the array (`filter.wheel_array`), th
 hold, and the safety values of every substep. What `simulate` runs where the wheels are not three (`ArrayLoop`).
 
 A scenario states three wheel speeds (the paper's wheels on the body axes): an array starts holding the same
-momentum, D psi on the body axes, split by its minimum-norm split (psi = A^+ psi_3).
+momentum, D psi on the body axes, split by its working wheels' minimum-norm split (psi = A^+ psi_3; a failed
+wheel starts at rest: it spun down before the run).
 """
 
 from __future__ import annotations
@@ -26,14 +27,17 @@ Array = NDArray[np.float64]
 
 def array_state(cfg: Config, x0: Array) -> Array:
     """The array's state (16 + N,) holding the momentum of a three-wheel state x0 (19,): the body entries of x0,
-    the wheel speeds A^+ psi (x0's wheels on the body axes)."""
+    the working wheels' speeds A_w^+ psi (x0's wheels on the body axes), a failed wheel's 0."""
     x0 = np.asarray(x0, dtype=float)
     n = cfg.spacecraft.n_wheels
     if x0.shape == (state_size(n),) and n != 3:
         return x0.copy()
     x = np.zeros(state_size(n))
     x[:STATE_SIZE] = x0
-    x[list(wheel_columns(n))] = np.linalg.pinv(cfg.spacecraft.wheel_axes) @ x0[PSI]
+    work = ~cfg.spacecraft.wheel_failed  # a failed wheel starts at rest (it spun down before the run)
+    cols = np.array(wheel_columns(n))
+    x[cols] = 0.0
+    x[cols[work]] = np.linalg.pinv(cfg.spacecraft.wheel_axes[:, work]) @ x0[PSI]
     return x
 
 
