@@ -33,6 +33,7 @@ def run(args: argparse.Namespace) -> int:
         robust_inertia_uncertainty,
         sampled_data_margin,
     )
+    from rta_attitude.constraints.registry import registry
     from rta_attitude.constraints.windows import ramp_start
 
     cfg = load(args)
@@ -117,7 +118,7 @@ def run(args: argparse.Namespace) -> int:
     print(f"  priority levels: {' > '.join('+'.join(level) for level in cfg.priority_levels)}")
     print(f"  slacked: {', '.join(cfg.slacked_constraints) or 'none'}")
     print(f"  scenarios: {', '.join(s.replace('_', '-') for s in cfg.scenarios)}")
-    units = {c.name: c.unit for c in ConstraintSet(model).registry}
+    constraints = registry(cfg)  # (names and units: any number of wheels)
     for name, scenario in cfg.scenarios.items():
         run_cfg = cfg.for_scenario(scenario)
         if array:
@@ -127,10 +128,9 @@ def run(args: argparse.Namespace) -> int:
             h = ArraySafety(run_cfg).values(array_state(run_cfg, scenario.x0), 0.0)
         else:
             h = ConstraintSet(run_cfg).safety_values(scenario.x0, 0.0)
-        for i, c in enumerate(cfg.constraint_names):
+        for i, c in enumerate(constraints):
             if h[i] < 0:
-                unit = units.get(c, units["psi_x"])
-                print(f"WARNING: scenario {name}: the initial state violates {c} (h = {h[i]:.4g} {unit})",
+                print(f"WARNING: scenario {name}: the initial state violates {c.name} (h = {h[i]:.4g} {c.unit})",
                       file=sys.stderr)
     if cfg.filter.backup_law != "none":
         from rta_attitude.filter.gatekeeper.law import backup_attitude_conflicts

@@ -446,6 +446,18 @@ def speed_limit_row(t: np.void, i: int, axis: int, v: float, v_max: float, err: 
     t.drift[i] = -2.0 * v * v_drift + g.k1 * hv + g.bias
 
 
+@numba.njit(**LEAF, inline="always")
+def hold_interval(lo: float, hi: float, zlo: float, zhi: float) -> tuple[float, float]:
+    """[lo, hi] (what the drive can hold) narrowed to a one-step zero-order-hold interval [zlo, zhi]; where that
+    interval misses [lo, hi] entirely (a state already past a limit by more than one step can undo), the edge of
+    [lo, hi] nearest to it."""
+    new_lo, new_hi = nan_max(lo, zlo), nan_min(hi, zhi)
+    if new_lo > new_hi:
+        edge = lo if zhi < lo else hi
+        return edge, edge
+    return new_lo, new_hi
+
+
 @numba.njit(**LEAF)
 def nan_max(a: float, b: float) -> float:
     """numpy.maximum of two floats (NaN propagates)."""

@@ -21,7 +21,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from rta_attitude.constraints import angular_rate, battery, cones, temperature, wheel_speed
-from rta_attitude.constraints.base import inertia_error, nan_max, nan_min
+from rta_attitude.constraints.base import hold_interval, inertia_error, nan_max, nan_min
 from rta_attitude.constraints.geometry import angle, context
 from rta_attitude.jit import LEAF
 
@@ -95,12 +95,7 @@ def box(ctx: np.void, x: Array, c: np.void, t: np.void, lo0: Array, hi0: Array) 
             if wheel_on:
                 plo, phi = wheel_speed.zoh_interval(ctx, x, c, a)
                 zlo, zhi = nan_max(zlo, plo), nan_min(zhi, phi)
-            new_lo, new_hi = nan_max(lo_a, zlo), nan_min(hi_a, zhi)
-            if new_lo > new_hi:  # the ZOH interval misses U: the edge of U nearest to it
-                edge = lo_a if zhi < lo_a else hi_a
-                lo_a, hi_a = edge, edge
-            else:
-                lo_a, hi_a = new_lo, new_hi
+            lo_a, hi_a = hold_interval(lo_a, hi_a, zlo, zhi)
         t.lo[a] = lo_a
         t.hi[a] = hi_a
 

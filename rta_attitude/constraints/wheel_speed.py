@@ -57,5 +57,15 @@ def wheel_speed_error(c: np.void, axis: int) -> float:
 def zoh_interval(ctx: np.void, x: NDArray[np.float64], c: np.void, axis: int) -> tuple[float, float]:
     """(lower, upper) on u_axis, rad/s^2, keeping |psi_axis(t + dt)| <= (1 - zoh_margin) psi_max."""
     # measurement-robust (0 without sensor errors): the tachometer's error now, the actuator's over the hold
-    limit = (1.0 - c.zoh_margin) * c.psi_max_rad_s - c.err_psi_rad_s - c.dt_s * c.err_u_rad_s2[axis]
-    return (-limit - x[7 + axis]) / c.dt_s, (limit - x[7 + axis]) / c.dt_s
+    return hold_bounds(x[7 + axis], c.psi_max_rad_s, c.zoh_margin, c.err_psi_rad_s, c.dt_s * c.err_u_rad_s2[axis],
+                       c.dt_s)
+
+
+@numba.njit(**LEAF, inline="always")
+def hold_bounds(psi: float, psi_max: float, zoh_margin: float, err_psi: float, err_hold: float, dt: float
+                ) -> tuple[float, float]:
+    """(lower, upper) on a wheel's acceleration, rad/s^2, keeping its speed psi within (1 - zoh_margin) psi_max
+    after a hold of dt (psi is exactly linear over it), err_psi and err_hold (rad/s) clear of it: the tachometer's
+    error now and the actuator's over the hold (0 without sensor errors)."""
+    limit = (1.0 - zoh_margin) * psi_max - err_psi - err_hold
+    return (-limit - psi) / dt, (limit - psi) / dt

@@ -40,9 +40,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from rta_attitude.config.schema import Config
-from rta_attitude.constraints.base import GAIN_DTYPE, MAX_ROWS
+from rta_attitude.constraints.base import GAIN_DTYPE, MAX_ROWS, hold_interval
 from rta_attitude.constraints.geometry import CONTEXT_DTYPE
 from rta_attitude.constraints.rows import safety_values
+from rta_attitude.constraints.wheel_speed import hold_bounds
 from rta_attitude.dynamics.state import STATE_SIZE, state_size, wheel_column
 from rta_attitude.errors import ConfigError, SolverError
 from rta_attitude.filter.active_set import BIG
@@ -368,15 +369,9 @@ def array_table(x: Array, f: np.void, a: np.void, ws: np.void, r: np.void
         elif a.enabled[i] and g.k1 * hv + g.bias < 0.0:
             r.uncontrollable[i] = 1
         lo_j, hi_j = -a.u_max[j], a.u_max[j]
-        if a.robust and a.enabled[i]:
-            limit = (1.0 - a.zoh_margin) * a.psi_keep
-            zlo, zhi = (-limit - psi) / a.dt_s, (limit - psi) / a.dt_s
-            new_lo, new_hi = max(lo_j, zlo), min(hi_j, zhi)
-            if new_lo > new_hi:  # the ZOH interval misses U: the edge of U nearest to it
-                edge = lo_j if zhi < lo_j else hi_j
-                lo_j, hi_j = edge, edge
-            else:
-                lo_j, hi_j = new_lo, new_hi
+        if a.robust and a.enabled[i]:  # (no sensor errors on this path: ArrayFilter refuses them)
+            zlo, zhi = hold_bounds(psi, a.psi_keep, a.zoh_margin, 0.0, 0.0, a.dt_s)
+            lo_j, hi_j = hold_interval(lo_j, hi_j, zlo, zhi)
         blo[j], bhi[j] = lo_j, hi_j
     return G, lo, hi, con, k, blo, bhi
 
